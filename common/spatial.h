@@ -1,0 +1,56 @@
+#pragma once
+// Spatial queries on a triangle mesh, backed by CGAL's AABB tree. CGAL is an
+// implementation detail (pimpl): this header never includes it.
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "common/mesh.h"
+
+namespace arthrosim::common {
+
+struct RayHit {
+  int triangle = -1;        ///< index into the mesh's F
+  Vec3 point;               ///< hit point [m]
+  Vec3 barycentric;         ///< weights of F(triangle, 0..2)
+  double distance = 0.0;    ///< along the ray, in units of |direction| = 1 [m]
+};
+
+struct ClosestPoint {
+  int triangle = -1;
+  Vec3 point;
+  Vec3 barycentric;
+  double distance = 0.0;    ///< |query - point| [m]
+};
+
+/// Immutable AABB tree over a triangle mesh (the mesh is copied in).
+class TriangleTree {
+ public:
+  explicit TriangleTree(const TriangleMesh& mesh);
+  ~TriangleTree();
+  TriangleTree(TriangleTree&&) noexcept;
+  TriangleTree& operator=(TriangleTree&&) noexcept;
+
+  const TriangleMesh& mesh() const;
+
+  /// First intersection of the ray origin + t * direction, 0 <= t <= max_distance
+  /// (direction need not be unit; distance is reported in metres).
+  std::optional<RayHit> first_hit(const Vec3& origin, const Vec3& direction,
+                                  double max_distance = 1e30) const;
+  /// Closest point on the surface to p.
+  ClosestPoint closest_point(const Vec3& p) const;
+  /// Triangles whose bounding boxes overlap the axis-aligned box [lo, hi] and
+  /// that truly intersect it, sorted ascending.
+  std::vector<int> triangles_in_box(const Vec3& lo, const Vec3& hi) const;
+
+  /// Exact ray/triangle test on one triangle (Moller-Trumbore, no tree); used
+  /// to test a cached guess before a tree query.
+  std::optional<RayHit> hit_triangle(int triangle, const Vec3& origin, const Vec3& direction,
+                                     double max_distance = 1e30) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace arthrosim::common

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package arthrosim needs to build, test and run.
+# Idempotent: packages already present are left alone, and apt-get update runs
+# only when something is missing. Must run as root (or with sudo available).
+set -euo pipefail
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config git
+  coinor-libipopt-dev libeigen3-dev liburdfdom-dev libcgal-dev
+  libsuitesparse-dev libhdf5-dev libyaml-cpp-dev libcli11-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  hdf5-tools python3 python3-numpy python3-h5py
+)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+echo "install-deps: installing ${missing[*]}"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
