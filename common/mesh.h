@@ -9,6 +9,8 @@
 //    (normal of the bilinear surface at the centre).
 //  - Indices are 0-based ints.
 #include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -68,5 +70,33 @@ struct MeshTopology {
   std::vector<int> boundary_vertices;
 };
 MeshTopology build_topology(const TriangleMesh& mesh);
+
+/// Axis-aligned bounding box [m]. An empty point set gives lo = +inf, hi = -inf
+/// (empty() is true).
+struct BoundingBox {
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity());
+  Vec3 hi = Vec3::Constant(-std::numeric_limits<double>::infinity());
+  bool empty() const { return (lo.array() > hi.array()).any(); }
+  Vec3 size() const { return hi - lo; }
+  Vec3 center() const { return 0.5 * (lo + hi); }
+  double diagonal() const { return empty() ? 0.0 : (hi - lo).norm(); }
+};
+BoundingBox bounding_box(const Points3& points);
+inline BoundingBox bounding_box(const TriangleMesh& mesh) { return bounding_box(mesh.V); }
+inline BoundingBox bounding_box(const QuadMesh& mesh) { return bounding_box(mesh.V); }
+
+/// Each triangle (a,b,c) becomes 3 quads through its edge midpoints and its
+/// centroid g: (a, m_ab, g, m_ca), (b, m_bc, g, m_ab), (c, m_ca, g, m_bc),
+/// same orientation as the triangle. Output nodes: the n input vertices first
+/// (same indices), then one midpoint per unique undirected edge (in the order of
+/// build_topology(mesh).edges, so shared edges give one node and the quad mesh
+/// is conforming), then one centroid per triangle (node n + n_edges + t).
+/// Quad 3t+k starts at vertex F(t,k).
+QuadMesh split_triangles_to_quads(const TriangleMesh& mesh);
+
+/// The mesh with every vertex mapped by X (p -> X * p); F and name unchanged.
+/// X is a rigid transform, so orientation (and normals' sense) is preserved.
+TriangleMesh transformed(const TriangleMesh& mesh, const Eigen::Isometry3d& X);
+QuadMesh transformed(const QuadMesh& mesh, const Eigen::Isometry3d& X);
 
 }  // namespace arthrosim::common
