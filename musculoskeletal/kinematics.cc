@@ -1,0 +1,116 @@
+#include "musculoskeletal/kinematics.h"
+
+#include <Eigen/Geometry>
+
+#include "common/error.h"
+
+namespace arthrosim::musculoskeletal {
+
+int KinematicTree::body_index(const std::string& name) const {
+  for (size_t i = 0; i < bodies.size(); ++i)
+    if (bodies[i].name == name) return static_cast<int>(i);
+  return -1;
+}
+
+int KinematicTree::coordinate_index(const std::string& name) const {
+  for (size_t i = 0; i < coordinates.size(); ++i)
+    if (coordinates[i] == name) return static_cast<int>(i);
+  return -1;
+}
+
+int KinematicTree::add_root(const std::string& name, double mass) {
+  if (!bodies.empty()) throw common::InputError("kinematic tree: root '" + name + "' added twice");
+  bodies.push_back({name, -1, mass});
+  return 0;
+}
+
+int KinematicTree::add_body(const std::string& name, double mass, const Joint& j_in) {
+  if (body_index(name) >= 0)
+    throw common::InputError("kinematic tree: duplicate body '" + name + "'");
+  if (j_in.parent < 0 || j_in.parent >= static_cast<int>(bodies.size()))
+    throw common::InputError("kinematic tree: body '" + name + "' has an unknown parent body");
+  Joint j = j_in;
+  j.child = static_cast<int>(bodies.size());
+  if (j.type != JointType::kFixed) {
+    const double n = j.axis_J.norm();
+    if (!(n > 0.0))
+      throw common::InputError("kinematic tree: joint '" + j.name + "' has a zero axis");
+    j.axis_J /= n;
+    j.coordinate = static_cast<int>(coordinates.size());
+    coordinates.push_back(j.name);
+  } else {
+    j.coordinate = -1;
+  }
+  bodies.push_back({name, static_cast<int>(joints.size()), mass});
+  joints.push_back(j);
+  return j.child;
+}
+
+void forward_kinematics(const KinematicTree& tree, const Eigen::VectorXd& q, KinematicsData& d,
+                        const Pose& X_W0) {
+  if (q.size() != tree.num_coordinates())
+    throw common::InputError("forward kinematics: expected " +
+                             std::to_string(tree.num_coordinates()) + " coordinates, found " +
+                             std::to_string(q.size()));
+  d.X_WB.resize(tree.bodies.size());
+  d.joint_origin_W.resize(tree.joints.size());
+  d.joint_axis_W.resize(tree.joints.size());
+  d.X_WB[0] = X_W0;
+  for (size_t b = 1; b < tree.bodies.size(); ++b) {
+    const Joint& j = tree.joints[tree.bodies[b].parent_joint];
+    const Pose X_WJ = d.X_WB[j.parent] * j.X_PJ;
+    d.joint_origin_W[tree.bodies[b].parent_joint] = X_WJ.translation();
+    d.joint_axis_W[tree.bodies[b].parent_joint] = X_WJ.linear() * j.axis_J;
+    Pose M = Pose::Identity();
+    if (j.type == JointType::kRevolute)
+      M.linear() = Eigen::AngleAxisd(q[j.coordinate], j.axis_J).toRotationMatrix();
+    else if (j.type == JointType::kPrismatic)
+      M.translation() = q[j.coordinate] * j.axis_J;
+    d.X_WB[b] = X_WJ * M;
+  }
+}
+
+namespace {
+template <class F>
+void for_each_joint_to_root(const KinematicTree& tree, int body, F&& f) {
+  while (body > 0) {
+    const int ji = tree.bodies[body].parent_joint;
+    const Joint& j = tree.joints[ji];
+    if (j.coordinate >= 0) f(ji, j);
+    body = j.parent;
+  }
+}
+}  // namespace
+
+void add_point_force(const KinematicTree& tree, const KinematicsData& d, int body,
+                     const Vec3& x_W, const Vec3& f_W, Eigen::VectorXd& Q) {
+  for_each_joint_to_root(tree, body, [&](int ji, const Joint& j) {
+    const Vec3& a = d.joint_axis_W[ji];
+    if (j.type == JointType::kRevolute)
+      Q[j.coordinate] += a.cross(x_W - d.joint_origin_W[ji]).dot(f_W);
+    else
+      Q[j.coordinate] += a.dot(f_W);
+  });
+}
+
+void add_body_couple(const KinematicTree& tree, const KinematicsData& d, int body,
+                     const Vec3& tau_W, Eigen::VectorXd& Q) {
+  for_each_joint_to_root(tree, body, [&](int ji, const Joint& j) {
+    if (j.type == JointType::kRevolute) Q[j.coordinate] += d.joint_axis_W[ji].dot(tau_W);
+  });
+}
+
+Eigen::Matrix<double, 3, Eigen::Dynamic> point_jacobian(const KinematicTree& tree,
+                                                        const KinematicsData& d, int body,
+                                                        const Vec3& x_W) {
+  Eigen::Matrix<double, 3, Eigen::Dynamic> J =
+      Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, tree.num_coordinates());
+  for_each_joint_to_root(tree, body, [&](int ji, const Joint& j) {
+    const Vec3& a = d.joint_axis_W[ji];
+    J.col(j.coordinate) =
+        j.type == JointType::kRevolute ? Vec3(a.cross(x_W - d.joint_origin_W[ji])) : a;
+  });
+  return J;
+}
+
+}  // namespace arthrosim::musculoskeletal
