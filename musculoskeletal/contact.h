@@ -1,0 +1,144 @@
+#pragma once
+// Elastic-foundation cartilage contact (Bei & Fregly 2004; Smith et al. 2016b;
+// the contact of the lenhart2015 knee, seeds/002_3ffcc11eb7a447d9.txt).
+//
+// Two surfaces: the casting mesh (on body A; the smaller one, tibial or
+// patellar cartilage) and the target mesh (on body B, femoral cartilage). For
+// every casting triangle i with centre c_i, unit outward normal n_i (pointing
+// towards the target) and area A_i, a ray from c_i along -n_i is intersected
+// with the target mesh (in B's frame, so the AABB tree is built once). If the
+// first hit lies at distance d_i <= d_max on a target triangle facing the
+// caster (m . n_i < 0), the surfaces overlap by d_i and
+//   linear     p_i = K d_i / h_i
+//   nonlinear  p_i = -K ln(1 - d_i / h_i)        (requires d_i < h_i)
+//   K = (1 - nu) E / ((1 + nu)(1 - 2 nu)),   h_i = t_A(i) + t_B(hit)
+// (two layers of the same material in series: p = d / (h_1/K + h_2/K)).
+// The caster receives f_i = -p_i A_i n_i at c_i, the target +p_i A_i n_i at
+// the same point (equal and opposite, so the pair exerts no net wrench).
+//
+// Search acceleration (results are the same as a full tree query per triangle):
+//  1. the last hit triangle of i and its edge neighbours are tried first with
+//     an exact ray/triangle test (TriangleTree::hit_triangle);
+//  2. for a triangle that had no hit, the distance D from its centre to the
+//     target surface is cached with the centre position c0 (target frame);
+//     while |c - c0| + d_max < D no target point can be within d_max of c, so
+//     the ray cannot hit and the query is skipped (a rigorous bound: the
+//     segment of length d_max from c stays inside the ball of radius D about c0).
+//  3. otherwise a full first_hit query (and a closest-point refresh on a miss).
+#include <Eigen/Geometry>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/mesh.h"
+
+namespace arthrosim::common {
+class TriangleTree;
+}
+
+namespace arthrosim::musculoskeletal {
+
+using common::Vec3;
+using Pose = Eigen::Isometry3d;
+
+enum class FoundationLaw { kLinear, kNonlinear };
+
+struct ElasticFoundationParameters {
+  /// Young's modulus E of the cartilage [Pa], > 0. lenhart2015: 10 MPa.
+  double youngs_modulus = 10e6;
+  /// Poisson ratio nu [-], 0 <= nu < 0.5. lenhart2015: 0.45.
+  double poisson_ratio = 0.45;
+  FoundationLaw law = FoundationLaw::kLinear;
+  /// Rays are cast up to d_max = factor x (max casting thickness + max target
+  /// thickness) [-], > 0. Deeper overlaps are not detected (they are beyond the
+  /// layer thickness, where the foundation model has no meaning anyway).
+  double max_overlap_factor = 1.0;
+};
+
+/// K = (1 - nu) E / ((1 + nu)(1 - 2 nu)) [Pa].
+double foundation_modulus(const ElasticFoundationParameters& p);
+
+/// One cartilage surface: mesh in its body's frame [m], thickness per triangle [m].
+struct ContactSurface {
+  int body = -1;
+  common::TriangleMesh mesh;
+  Eigen::VectorXd thickness;  ///< one entry per triangle, >= 0 (0 = rigid)
+};
+
+/// Constant part of a contact pair (geometry precomputed, tree built once).
+class ContactPair {
+ public:
+  /// Throws common::InputError (naming the pair) on empty meshes, thickness
+  /// arrays of the wrong size, negative thickness or bad material values.
+  ContactPair(std::string name, ContactSurface casting, ContactSurface target,
+              ElasticFoundationParameters material);
+  ~ContactPair();
+  ContactPair(ContactPair&&) noexcept;
+  ContactPair& operator=(ContactPair&&) noexcept;
+
+  const std::string& name() const { return name_; }
+  const ContactSurface& casting() const { return casting_; }
+  const ContactSurface& target() const { return target_; }
+  const ElasticFoundationParameters& material() const { return material_; }
+  double modulus() const { return K_; }
+  /// Longest ray: the largest possible combined thickness [m].
+  double max_overlap() const { return d_max_; }
+
+  // Precomputed geometry (casting: body-A frame; target: body-B frame).
+  const common::Points3& casting_centres() const { return c_A_; }
+  const common::Points3& casting_normals() const { return n_A_; }
+  const Eigen::VectorXd& casting_areas() const { return area_A_; }
+  const common::Points3& target_normals() const { return m_B_; }
+  const common::Triangles& target_neighbours() const { return nbr_B_; }
+  const common::TriangleTree& target_tree() const { return *tree_; }
+
+ private:
+  std::string name_;
+  ContactSurface casting_, target_;
+  ElasticFoundationParameters material_;
+  double K_ = 0.0, d_max_ = 0.0;
+  common::Points3 c_A_, n_A_, m_B_;
+  Eigen::VectorXd area_A_;
+  common::Triangles nbr_B_;
+  std::unique_ptr<common::TriangleTree> tree_;
+};
+
+struct ContactResult {
+  Vec3 force_on_target_W = Vec3::Zero();   ///< net force on the target body [N]
+  Vec3 moment_on_target_W = Vec3::Zero();  ///< about the world origin [N m]
+  Vec3 force_on_casting_W = Vec3::Zero();  ///< = -force_on_target_W
+  Vec3 moment_on_casting_W = Vec3::Zero(); ///< about the world origin = -moment_on_target_W
+  Vec3 center_of_pressure_W = Vec3::Zero();///< sum p A c / sum p A (zero if no contact)
+  double contact_area = 0.0;               ///< sum of A_i with p_i > 0 [m^2]
+  double max_pressure = 0.0;               ///< [Pa]
+  double mean_pressure = 0.0;              ///< over the contact area [Pa]
+  int num_contacting = 0;                  ///< triangles with p_i > 0
+  Eigen::VectorXd pressure;                ///< per casting triangle [Pa]
+  Eigen::VectorXd overlap;                 ///< per casting triangle [m]
+};
+
+/// Search statistics of one evaluation.
+struct ContactSearchStats {
+  int guess_hits = 0;       ///< found via the cached triangle or its neighbours
+  int skipped = 0;          ///< proven clear by the distance bound
+  int tree_queries = 0;     ///< full ray queries
+};
+
+/// Workspace of one pair (cached guesses and results).
+struct ContactPairData {
+  std::vector<int> last_hit;           ///< per casting triangle, -1 none
+  std::vector<double> clearance;       ///< cached distance D (NaN = unknown)
+  common::Points3 clearance_centre_B;  ///< c0 of the cached distance
+  ContactResult result;
+  ContactSearchStats stats;
+  /// Forget cached guesses (results are unchanged by this; only speed).
+  void reset();
+};
+
+/// Evaluates the pair at body poses X_WA (casting body) and X_WB (target body).
+/// Throws common::NumericalError naming the pair and triangle if the nonlinear
+/// law is asked for an overlap >= the combined thickness.
+void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_WB,
+                      ContactPairData& data);
+
+}  // namespace arthrosim::musculoskeletal
