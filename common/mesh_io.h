@@ -10,8 +10,10 @@
 //        binary_little_endian; vertex x,y,z as float or double; face list with
 //        uchar/char/ushort/short/int/uint counts and int/uint/short/ushort/char/
 //        uchar indices; other elements and properties are skipped).
-// Write: STL (binary or ASCII), OBJ, legacy VTK ASCII polydata (with optional
-//        point/cell data fields); OBJ and VTK for quad meshes too.
+//        Legacy VTK ASCII polydata (see read_vtk).
+// Write: STL (binary or ASCII), OBJ, PLY (binary or ASCII), legacy VTK ASCII
+//        polydata (with optional point/cell data fields); OBJ and VTK for quad
+//        meshes too.
 //
 // Errors throw InputError: "file:line: error: expected ..., found ..." for text
 // formats; for binary content the message names the byte offset and the
@@ -59,7 +61,8 @@ enum class MeshFormat { kStl, kObj, kPly, kVtk };
 /// throws InputError naming the file and the supported extensions otherwise.
 MeshFormat format_from_extension(const std::string& path);
 
-/// Reads a triangle mesh (format from the extension). The mesh name is the path.
+/// Reads a triangle mesh (format from the extension: .stl .obj .ply .vtk).
+/// The mesh name is the path.
 TriangleMesh read_mesh(const std::string& path, const MeshReadOptions& options = {});
 TriangleMesh read_stl(const std::string& path, const MeshReadOptions& options = {});
 TriangleMesh read_obj(const std::string& path, const MeshReadOptions& options = {});
@@ -75,6 +78,7 @@ TriangleMesh parse_ply(const std::string& content, const std::string& name,
                        const MeshReadOptions& options = {});
 
 enum class StlEncoding { kBinary, kAscii };
+enum class PlyEncoding { kBinaryLittleEndian, kAscii };
 
 /// A named field for VTK output: values has one row per point (or per cell)
 /// and 1 column (scalars) or 3 columns (vectors).
@@ -84,6 +88,16 @@ struct VtkField {
   Eigen::MatrixXd values;
   Location location = Location::kPoint;
 };
+
+/// Legacy VTK reader for what write_vtk writes (and similar files): ASCII,
+/// DATASET POLYDATA, POINTS + POLYGONS (fan triangulated; VERTICES/LINES
+/// skipped), POINT_DATA/CELL_DATA with SCALARS (1 component), VECTORS and
+/// NORMALS. Field values are not unit-converted; cell fields refer to the
+/// file's polygons (before triangulation). `fields` may be null.
+TriangleMesh read_vtk(const std::string& path, const MeshReadOptions& options = {},
+                      std::vector<VtkField>* fields = nullptr);
+TriangleMesh parse_vtk(const std::string& content, const std::string& name,
+                       const MeshReadOptions& options = {}, std::vector<VtkField>* fields = nullptr);
 
 /// Writers throw InputError if the file cannot be written, and if a mesh has
 /// non-finite coordinates or out-of-range indices (a writer never produces a
@@ -99,7 +113,9 @@ void write_vtk(const TriangleMesh& mesh, const std::string& path,
                const std::vector<VtkField>& fields = {}, const MeshWriteOptions& options = {});
 void write_vtk(const QuadMesh& mesh, const std::string& path,
                const std::vector<VtkField>& fields = {}, const MeshWriteOptions& options = {});
-/// Writes by extension: .stl (binary), .obj, .vtk.
+void write_ply(const TriangleMesh& mesh, const std::string& path,
+               PlyEncoding encoding = PlyEncoding::kBinaryLittleEndian, const MeshWriteOptions& options = {});
+/// Writes by extension: .stl (binary), .obj, .ply (binary), .vtk.
 void write_mesh(const TriangleMesh& mesh, const std::string& path, const MeshWriteOptions& options = {});
 
 }  // namespace arthrosim::common
