@@ -1,0 +1,145 @@
+#include "musculoskeletal/model.h"
+
+#include <cmath>
+
+#include "common/error.h"
+
+namespace arthrosim::musculoskeletal {
+
+int Model::num_bundles() const {
+  int n = 0;
+  for (const auto& l : ligaments) n += static_cast<int>(l.bundles.size());
+  return n;
+}
+
+int Model::ligament_index(const std::string& n) const {
+  for (size_t i = 0; i < ligaments.size(); ++i)
+    if (ligaments[i].name == n) return static_cast<int>(i);
+  return -1;
+}
+
+int Model::muscle_index(const std::string& n) const {
+  for (size_t i = 0; i < muscles.size(); ++i)
+    if (muscles[i].name == n) return static_cast<int>(i);
+  return -1;
+}
+
+int Model::contact_index(const std::string& n) const {
+  for (size_t i = 0; i < contacts.size(); ++i)
+    if (contacts[i].name() == n) return static_cast<int>(i);
+  return -1;
+}
+
+ModelData make_data(const Model& model) {
+  ModelData d;
+  d.ligaments.resize(model.ligaments.size());
+  for (size_t i = 0; i < model.ligaments.size(); ++i)
+    d.ligaments[i].resize(model.ligaments[i].bundles.size());
+  d.muscle_paths.resize(model.muscles.size());
+  d.muscle_forces = Eigen::VectorXd::Zero(model.muscles.size());
+  d.contacts.resize(model.contacts.size());
+  const int n = model.num_coordinates();
+  d.Q_ligaments = d.Q_muscles = d.Q_contact = d.Q = Eigen::VectorXd::Zero(n);
+  d.dQ_dq = Eigen::MatrixXd::Zero(n, n);
+  return d;
+}
+
+Eigen::VectorXd moment_arms(const Model& model, const ModelData& data, const PathState& path) {
+  Eigen::VectorXd r = Eigen::VectorXd::Zero(model.num_coordinates());
+  for (const PathApplication& a : path.applications)
+    add_point_force(model.tree, data.kinematics, a.body, a.point_W, a.direction_W, r);
+  return r;
+}
+
+namespace {
+void check_finite(const Eigen::VectorXd& v, const std::string& what) {
+  if (!v.allFinite()) throw common::NumericalError("musculoskeletal model: non-finite " + what);
+}
+}  // namespace
+
+void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
+                     const Eigen::VectorXd& qdot, const Eigen::VectorXd& activations,
+                     const ForceOptions& opt) {
+  const int n = model.num_coordinates();
+  if (q.size() != n || (qdot.size() != 0 && qdot.size() != n))
+    throw common::InputError("evaluate_forces: expected q (and qdot, or empty) of size " +
+                             std::to_string(n));
+  if (activations.size() != 0 && activations.size() != static_cast<int>(model.muscles.size()))
+    throw common::InputError("evaluate_forces: expected " + std::to_string(model.muscles.size()) +
+                             " activations (or none), found " +
+                             std::to_string(activations.size()));
+  check_finite(q, "coordinates q");
+  if (d.ligaments.size() != model.ligaments.size() || d.contacts.size() != model.contacts.size())
+    d = make_data(model);
+  forward_kinematics(model.tree, q, d.kinematics);
+  const auto& X = d.kinematics.X_WB;
+  d.Q_ligaments.setZero(n);
+  d.Q_muscles.setZero(n);
+  d.Q_contact.setZero(n);
+
+  if (opt.ligaments) {
+    for (size_t li = 0; li < model.ligaments.size(); ++li) {
+      const Ligament& lig = model.ligaments[li];
+      for (size_t bi = 0; bi < lig.bundles.size(); ++bi) {
+        BundleResult& br = d.ligaments[li][bi];
+        br.path = evaluate_path(lig.bundles[bi].path, X);
+        const Eigen::VectorXd r = moment_arms(model, d, br.path);
+        const double ldot = qdot.size() ? -r.dot(qdot) : 0.0;
+        br.force = blankevoort_force(lig.bundles[bi].parameters, br.path.length, ldot);
+        d.Q_ligaments += br.force.total * r;
+      }
+    }
+    check_finite(d.Q_ligaments, "ligament generalized forces");
+  }
+  if (opt.muscles) {
+    for (size_t mi = 0; mi < model.muscles.size(); ++mi) {
+      const Muscle& m = model.muscles[mi];
+      const double a = activations.size() ? activations[mi] : 0.0;
+      d.muscle_paths[mi] = evaluate_path(m.path, X);
+      d.muscle_forces[mi] = a * m.max_isometric_force;
+      if (a != 0.0) d.Q_muscles += d.muscle_forces[mi] * moment_arms(model, d, d.muscle_paths[mi]);
+    }
+    check_finite(d.Q_muscles, "muscle generalized forces");
+  }
+  if (opt.contact) {
+    for (size_t ci = 0; ci < model.contacts.size(); ++ci) {
+      const ContactPair& pair = model.contacts[ci];
+      const int A = pair.casting().body, B = pair.target().body;
+      evaluate_contact(pair, X[A], X[B], d.contacts[ci]);
+      const ContactResult& r = d.contacts[ci].result;
+      // Wrench about the world origin on each body: Q += J_O^T F + J_w^T M_O.
+      add_point_force(model.tree, d.kinematics, A, Vec3::Zero(), r.force_on_casting_W, d.Q_contact);
+      add_body_couple(model.tree, d.kinematics, A, r.moment_on_casting_W, d.Q_contact);
+      add_point_force(model.tree, d.kinematics, B, Vec3::Zero(), r.force_on_target_W, d.Q_contact);
+      add_body_couple(model.tree, d.kinematics, B, r.moment_on_target_W, d.Q_contact);
+    }
+    check_finite(d.Q_contact, "contact generalized forces");
+  }
+  d.Q = d.Q_ligaments + d.Q_muscles + d.Q_contact;
+}
+
+void evaluate_jacobian(const Model& model, ModelData& d, const Eigen::VectorXd& q,
+                       const Eigen::VectorXd& qdot, const Eigen::VectorXd& activations,
+                       const ForceOptions& opt, const std::vector<int>& columns) {
+  const int n = model.num_coordinates();
+  std::vector<int> cols = columns;
+  if (cols.empty())
+    for (int i = 0; i < n; ++i) cols.push_back(i);
+  ModelData work = make_data(model);
+  work.contacts = d.contacts;  // warm search caches
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(n, n);
+  const double h = opt.jacobian_step;
+  for (int c : cols) {
+    Eigen::VectorXd qp = q, qm = q;
+    qp[c] += h;
+    qm[c] -= h;
+    evaluate_forces(model, work, qp, qdot, activations, opt);
+    const Eigen::VectorXd Qp = work.Q;
+    evaluate_forces(model, work, qm, qdot, activations, opt);
+    J.col(c) = (Qp - work.Q) / (2 * h);
+  }
+  evaluate_forces(model, d, q, qdot, activations, opt);
+  d.dQ_dq = J;
+}
+
+}  // namespace arthrosim::musculoskeletal
