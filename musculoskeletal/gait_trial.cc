@@ -1,0 +1,364 @@
+#include "musculoskeletal/gait_trial.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/storage.h"
+
+namespace arthrosim::musculoskeletal {
+
+using common::InputError;
+
+const std::vector<std::string>& trial_coordinate_names() {
+  static const std::vector<std::string> names = {
+      "pelvis_tilt", "pelvis_list", "pelvis_rotation", "pelvis_tx", "pelvis_ty", "pelvis_tz",
+      "hip_flexion", "hip_adduction", "hip_rotation", "knee_flexion", "ankle_flexion"};
+  return names;
+}
+
+namespace {
+
+const std::vector<std::string> kGrfQuantities = {
+    "grf_force_x", "grf_force_y", "grf_force_z", "grf_cop_x",    "grf_cop_y",
+    "grf_cop_z",   "grf_torque_x", "grf_torque_y", "grf_torque_z"};
+const std::vector<std::string> kKneeLoadQuantities = {"knee_force_x",  "knee_force_y",
+                                                      "knee_force_z",  "knee_moment_x",
+                                                      "knee_moment_y", "knee_moment_z"};
+const std::vector<std::string> kLegKeys = {"thigh_length_m", "shank_length_m", "ankle_height_m",
+                                           "foot_length_m",  "hip_x_m",        "hip_y_m",
+                                           "hip_z_m"};
+constexpr const char* kLabFrame = "opensim_x_forward_y_up_z_right";
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r");
+  return s.substr(b, e - b + 1);
+}
+
+std::string join(const std::vector<std::string>& v) {
+  std::string out;
+  for (const auto& s : v) out += (out.empty() ? "" : ", ") + s;
+  return out;
+}
+
+bool is_angle_quantity(const std::string& q) {
+  return q.rfind("pelvis_t", 0) != 0 || q == "pelvis_tilt";
+}
+
+double parse_number(const std::string& value, const std::string& file, int line,
+                    const std::string& key) {
+  std::size_t used = 0;
+  double v = 0.0;
+  try {
+    v = std::stod(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != value.size() || !std::isfinite(v)) {
+    throw InputError(file, line, "expected a finite number for '" + key + "', found '" + value + "'");
+  }
+  return v;
+}
+
+}  // namespace
+
+TrialDescription parse_trial_description(std::istream& in, const std::string& source_name,
+                                         const std::string& directory) {
+  TrialDescription d;
+  d.path = source_name;
+  std::set<std::string> quantities(trial_coordinate_names().begin(), trial_coordinate_names().end());
+  quantities.insert(kGrfQuantities.begin(), kGrfQuantities.end());
+  quantities.insert(kKneeLoadQuantities.begin(), kKneeLoadQuantities.end());
+  const std::set<std::string> plain_keys = {"synthetic",        "description",    "subject_mass_kg",
+                                            "subject_height_m", "side",           "lab_frame",
+                                            "kinematics_file",  "grf_file",       "knee_loads_file"};
+  auto resolve = [&](const std::string& f) {
+    const std::filesystem::path p(f);
+    return (p.is_absolute() || directory.empty()) ? p.string()
+                                                  : (std::filesystem::path(directory) / p).string();
+  };
+  std::string raw;
+  int line = 0;
+  while (std::getline(in, raw)) {
+    ++line;
+    // A '#' at the start or after a blank starts a comment.
+    std::string s = raw;
+    for (std::size_t i = 0; i < s.size(); ++i) {
+      if (s[i] == '#' && (i == 0 || s[i - 1] == ' ' || s[i - 1] == '\t')) {
+        s.resize(i);
+        break;
+      }
+    }
+    if (trim(s).empty()) continue;
+    if (s[0] == ' ' || s[0] == '\t' || trim(s)[0] == '-') {
+      throw InputError(source_name, line,
+                       "expected a flat 'key: value' line (nested YAML and lists are not "
+                       "supported; write e.g. 'column.knee_flexion: knee_angle_r'), found '" +
+                           trim(raw) + "'");
+    }
+    const auto colon = s.find(':');
+    if (colon == std::string::npos) {
+      throw InputError(source_name, line, "expected 'key: value', found '" + trim(raw) + "'");
+    }
+    const std::string key = trim(s.substr(0, colon));
+    std::string value = trim(s.substr(colon + 1));
+    if (value.size() >= 2 && (value.front() == '"' || value.front() == '\'') &&
+        value.back() == value.front()) {
+      value = value.substr(1, value.size() - 2);
+    }
+    if (value.empty()) {
+      throw InputError(source_name, line,
+                       "expected a value after '" + key + ":' (nested YAML is not supported)");
+    }
+    if (d.key_lines.count(key)) {
+      throw InputError(source_name, line,
+                       "duplicate key '" + key + "' (first on line " +
+                           std::to_string(d.key_lines[key]) + ")");
+    }
+    d.key_lines[key] = line;
+    if (key.rfind("column.", 0) == 0) {
+      const std::string q = key.substr(7);
+      if (!quantities.count(q)) {
+        throw InputError(source_name, line,
+                         "unknown quantity '" + q + "' in '" + key + "'; expected one of: " +
+                             join(std::vector<std::string>(quantities.begin(), quantities.end())));
+      }
+      ColumnMapping m;
+      m.line = line;
+      m.label = value;
+      if (value[0] == '-') {
+        m.sign = -1.0;
+        m.label = trim(value.substr(1));
+      }
+      if (m.label.empty()) throw InputError(source_name, line, "expected a column label after '-'");
+      d.columns[q] = m;
+    } else if (key.rfind("leg.", 0) == 0) {
+      const std::string k = key.substr(4);
+      if (std::find(kLegKeys.begin(), kLegKeys.end(), k) == kLegKeys.end()) {
+        throw InputError(source_name, line,
+                         "unknown leg geometry key '" + key + "'; expected leg. followed by one of: " +
+                             join(kLegKeys));
+      }
+      d.leg_overrides[k] = parse_number(value, source_name, line, key);
+    } else if (!plain_keys.count(key)) {
+      throw InputError(source_name, line,
+                       "unknown key '" + key + "'; expected one of: " +
+                           join(std::vector<std::string>(plain_keys.begin(), plain_keys.end())) +
+                           ", column.<quantity>, leg.<geometry>");
+    } else if (key == "synthetic") {
+      if (value != "true" && value != "false") {
+        throw InputError(source_name, line, "expected true or false for 'synthetic', found '" + value + "'");
+      }
+      d.synthetic = value == "true";
+    } else if (key == "description") {
+      d.description = value;
+    } else if (key == "subject_mass_kg" || key == "subject_height_m") {
+      const double v = parse_number(value, source_name, line, key);
+      const bool mass = key == "subject_mass_kg";
+      if (mass ? !(v >= 10 && v <= 300) : !(v >= 0.5 && v <= 2.5)) {
+        throw InputError(source_name, line,
+                         "expected " + std::string(mass ? "10 <= mass <= 300 kg" : "0.5 <= height <= 2.5 m") +
+                             " for '" + key + "', found " + value);
+      }
+      (mass ? d.subject_mass_kg : d.subject_height_m) = v;
+    } else if (key == "side") {
+      if (value != "right" && value != "left") {
+        throw InputError(source_name, line, "expected right or left for 'side', found '" + value + "'");
+      }
+      d.side = value == "right" ? Side::kRight : Side::kLeft;
+    } else if (key == "lab_frame") {
+      if (value != kLabFrame) {
+        throw InputError(source_name, line,
+                         std::string("expected lab_frame: ") + kLabFrame +
+                             " (the only supported convention; rotate the data first), found '" +
+                             value + "'");
+      }
+    } else if (key == "kinematics_file") {
+      d.kinematics_file = resolve(value);
+    } else if (key == "grf_file") {
+      d.grf_file = resolve(value);
+    } else if (key == "knee_loads_file") {
+      d.knee_loads_file = resolve(value);
+    }
+  }
+  const int end_line = line;
+  auto require = [&](const std::string& key) {
+    if (!d.key_lines.count(key)) {
+      throw InputError(source_name, end_line, "missing required key '" + key + "'");
+    }
+  };
+  for (const char* k : {"subject_mass_kg", "subject_height_m", "side", "lab_frame", "kinematics_file"})
+    require(k);
+  if (d.grf_file.empty() && d.knee_loads_file.empty()) {
+    throw InputError(source_name, end_line, "expected grf_file or knee_loads_file, found neither");
+  }
+  for (const char* q : {"hip_flexion", "hip_adduction", "hip_rotation", "knee_flexion", "ankle_flexion"})
+    require(std::string("column.") + q);
+  int pelvis = 0;
+  for (int c = kPelvisTilt; c <= kPelvisTz; ++c) pelvis += d.columns.count(trial_coordinate_names()[c]);
+  if (pelvis != 0 && pelvis != 6) {
+    throw InputError(source_name, end_line,
+                     "expected all six pelvis columns (column.pelvis_tilt ... column.pelvis_tz) or "
+                     "none, found " + std::to_string(pelvis));
+  }
+  auto require_all = [&](const std::vector<std::string>& qs, const std::string& file_key) {
+    for (const auto& q : qs) {
+      if (!d.columns.count(q)) {
+        throw InputError(source_name, d.key_lines[file_key],
+                         "'" + file_key + "' needs column." + q + " (missing)");
+      }
+    }
+  };
+  if (!d.grf_file.empty()) require_all(kGrfQuantities, "grf_file");
+  if (!d.knee_loads_file.empty()) require_all(kKneeLoadQuantities, "knee_loads_file");
+  return d;
+}
+
+TrialDescription read_trial_description(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path, 0, "cannot open the trial description");
+  return parse_trial_description(in, path, std::filesystem::path(path).parent_path().string());
+}
+
+namespace {
+
+struct LoadedTable {
+  Eigen::VectorXd time;
+  Eigen::MatrixXd values;  // columns in the order of `quantities`, signs applied
+};
+
+LoadedTable load_columns(const TrialDescription& d, const std::string& file,
+                         const std::vector<std::string>& quantities, bool angles_possible) {
+  // Angle columns are exactly the mapped angle quantities; the rest keep the
+  // storage reader's default rule (translations, forces, ... are not angles).
+  std::set<std::string> angle_labels;
+  if (angles_possible) {
+    for (const auto& q : quantities) {
+      auto it = d.columns.find(q);
+      if (it != d.columns.end() && is_angle_quantity(q)) angle_labels.insert(it->second.label);
+    }
+  }
+  std::set<std::string> mapped;
+  for (const auto& q : quantities) {
+    auto it = d.columns.find(q);
+    if (it != d.columns.end()) mapped.insert(it->second.label);
+  }
+  common::RotationalPredicate pred = [angle_labels, mapped, angles_possible](const std::string& l) {
+    if (!angles_possible) return false;
+    if (angle_labels.count(l)) return true;
+    if (mapped.count(l)) return false;
+    return common::default_is_rotational(l);
+  };
+  const common::StorageTable table = common::read_storage(file, pred);
+  LoadedTable out;
+  out.time = table.time();
+  out.values.resize(table.num_rows(), static_cast<Eigen::Index>(quantities.size()));
+  for (std::size_t k = 0; k < quantities.size(); ++k) {
+    auto it = d.columns.find(quantities[k]);
+    if (it == d.columns.end()) {
+      out.values.col(k).setZero();
+      continue;
+    }
+    const int c = table.column_index(it->second.label);
+    if (c < 0) {
+      std::vector<std::string> labels(table.labels.begin(), table.labels.end());
+      throw InputError(d.path, it->second.line,
+                       "column '" + it->second.label + "' (for " + quantities[k] + ") not found in " +
+                           file + "; its columns are: " + join(labels));
+    }
+    out.values.col(k) = it->second.sign * table.data.col(c);
+  }
+  for (Eigen::Index r = 0; r < out.values.rows(); ++r) {
+    if (!std::isfinite(out.time(r))) {
+      throw InputError(file, 0, "non-finite time in data row " + std::to_string(r + 1));
+    }
+    for (Eigen::Index k = 0; k < out.values.cols(); ++k) {
+      if (!std::isfinite(out.values(r, k))) {
+        std::ostringstream s;
+        s << "non-finite value in column '" << d.columns.at(quantities[k]).label << "' at data row "
+          << r + 1 << " (time " << out.time(r) << " s)";
+        throw InputError(file, 0, s.str());
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& options) {
+  if (!(options.rate_hz > 0)) {
+    throw InputError(d.path, 0, "load_gait_trial: rate_hz must be > 0, found " +
+                                    std::to_string(options.rate_hz));
+  }
+  GaitTrial t;
+  t.source = d.path;
+  t.synthetic = d.synthetic;
+  t.body_mass_kg = d.subject_mass_kg;
+  t.height_m = d.subject_height_m;
+  t.side = d.side;
+  t.rate_hz = options.rate_hz;
+  t.leg_overrides = d.leg_overrides;
+  t.has_pelvis = d.columns.count("pelvis_tilt") > 0;
+
+  const LoadedTable kin = load_columns(d, d.kinematics_file, trial_coordinate_names(), true);
+  std::optional<LoadedTable> grf, loads;
+  if (!d.grf_file.empty()) grf = load_columns(d, d.grf_file, kGrfQuantities, false);
+  if (!d.knee_loads_file.empty()) loads = load_columns(d, d.knee_loads_file, kKneeLoadQuantities, false);
+
+  // Common time range.
+  double t0 = kin.time(0), t1 = kin.time(kin.time.size() - 1);
+  for (const auto* tab : {grf ? &*grf : nullptr, loads ? &*loads : nullptr}) {
+    if (!tab) continue;
+    t0 = std::max(t0, tab->time(0));
+    t1 = std::min(t1, tab->time(tab->time.size() - 1));
+  }
+  if (!(t1 > t0)) {
+    std::ostringstream s;
+    s << "the kinematics and load files share no time range (common range [" << t0 << ", " << t1
+      << "] s)";
+    throw InputError(d.path, 0, s.str());
+  }
+  t.time = uniform_grid(t0, t1, options.rate_hz);
+  if (t.time.size() < 4) {
+    throw InputError(d.path, 0, "fewer than 4 samples at " + std::to_string(options.rate_hz) +
+                                    " Hz in the common time range");
+  }
+  const double h = 1.0 / options.rate_hz;
+
+  Eigen::MatrixXd q = resample_linear(kin.time, kin.values, t.time, d.kinematics_file);
+  if (options.filter_kinematics) q = filtfilt_lowpass(q, options.rate_hz, options.lowpass, d.kinematics_file);
+  t.q = q;
+  t.qd = first_derivative(q, h);
+  t.qdd = second_derivative(q, h);
+
+  if (grf) {
+    Eigen::MatrixXd g = resample_linear(grf->time, grf->values, t.time, d.grf_file);
+    if (options.filter_grf) g = filtfilt_lowpass(g, options.rate_hz, options.lowpass, d.grf_file);
+    for (Eigen::Index i = 0; i < g.rows(); ++i) {
+      if (g(i, 1) < options.min_vertical_grf_n) g.row(i).setZero();
+    }
+    t.has_grf = true;
+    t.grf_force_W = g.leftCols(3);
+    t.grf_cop_W = g.middleCols(3, 3);
+    t.grf_torque_W = g.rightCols(3);
+  }
+  if (loads) {
+    const Eigen::MatrixXd l = resample_linear(loads->time, loads->values, t.time, d.knee_loads_file);
+    t.has_knee_loads = true;
+    t.knee_force_T = l.leftCols(3);
+    t.knee_moment_T = l.rightCols(3);
+  }
+  return t;
+}
+
+GaitTrial load_gait_trial(const std::string& trial_path, const GaitTrialOptions& options) {
+  return load_gait_trial(read_trial_description(trial_path), options);
+}
+
+}  // namespace arthrosim::musculoskeletal

@@ -1,0 +1,134 @@
+#pragma once
+// Walking trials as OpenSim users have them: joint angles from an
+// inverse-kinematics .mot/.sto, ground reactions from an ExternalLoads-style
+// .mot, subject mass and height, all described by a small trial file.
+//
+// Trial description (e.g. data/trials/synthetic_gait/trial.yaml). It is valid
+// YAML restricted to flat "key: value" lines (comments '#', blank lines), so it
+// is read line by line here with file:line errors (yaml-cpp is private to
+// arthrosim_common). Keys:
+//   subject_mass_kg: 61         subject_height_m: 1.65     (required)
+//   side: right|left            lab_frame: opensim_x_forward_y_up_z_right (required)
+//   kinematics_file: ik.mot     (required; paths relative to the trial file)
+//   grf_file: grf.mot           knee_loads_file: loads.sto  (at least one)
+//   synthetic: true|false       description: free text
+//   column.<quantity>: <label>  maps a quantity to a column; "-label" negates it.
+//   leg.thigh_length_m, leg.shank_length_m, leg.ankle_height_m,
+//   leg.foot_length_m, leg.hip_x_m, leg.hip_y_m, leg.hip_z_m: override the
+//   stature-based geometry of musculoskeletal/anthropometry.h (hip = hip joint
+//   centre in the pelvis frame) so it matches the model that produced the IK.
+// Quantities (kinematics file): pelvis_tilt, pelvis_list, pelvis_rotation,
+// pelvis_tx, pelvis_ty, pelvis_tz, hip_flexion, hip_adduction, hip_rotation,
+// knee_flexion, ankle_flexion. The five joint angles are required; the six
+// pelvis columns are needed for the inverse dynamics (all or none). Angles are
+// converted to radians when the file says inDegrees=yes. Sign conventions are
+// OpenSim's (gait2392/Rajagopal): hip flexion, adduction and internal rotation
+// positive, knee flexion positive (map "-knee_angle_r" for gait2392, whose knee
+// angle is negative in flexion), ankle dorsiflexion positive.
+// Quantities (GRF file, lab frame, on the foot from the ground): grf_force_x/y/z
+// [N], grf_cop_x/y/z [m], grf_torque_x/y/z [N m] (torque about the COP, the free
+// moment). Quantities (knee loads file, tibia frame, about the knee centre; the
+// load on the tibia from the distal segments and the ground, see knee_loads.h):
+// knee_force_x/y/z [N], knee_moment_x/y/z [N m].
+//
+// Lab frame: OpenSim's, X forward, Y up, Z to the right; gravity -Y.
+//
+// Processing (load_gait_trial): every table is resampled by linear
+// interpolation onto one uniform grid at options.rate_hz covering the time
+// range common to all files; kinematics are low-pass filtered (zero-lag
+// Butterworth, musculoskeletal/signal.h; 6 Hz, 2nd order per pass by default)
+// and differentiated by central differences to velocities and accelerations;
+// ground reactions are not filtered by default (their steps at heel strike and
+// toe-off would leak into swing) and are zeroed wherever the vertical force is
+// below options.min_vertical_grf_n (COP undefined there).
+#include <Eigen/Core>
+#include <iosfwd>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "musculoskeletal/signal.h"
+
+namespace arthrosim::musculoskeletal {
+
+enum class Side { kRight, kLeft };
+
+/// Columns of GaitTrial::q (and qd, qdd).
+enum TrialCoordinate : int {
+  kPelvisTilt = 0, kPelvisList, kPelvisRotation, kPelvisTx, kPelvisTy, kPelvisTz,
+  kHipFlexion, kHipAdduction, kHipRotation, kKneeFlexion, kAnkleFlexion,
+  kNumTrialCoordinates
+};
+/// Quantity names of the TrialCoordinate columns ("pelvis_tilt", ...).
+const std::vector<std::string>& trial_coordinate_names();
+
+struct ColumnMapping {
+  std::string label;   ///< column label in the file
+  double sign = 1.0;   ///< -1 when the mapping starts with '-'
+  int line = 0;        ///< line of the mapping in the trial file
+};
+
+struct TrialDescription {
+  std::string path;                   ///< the trial file as given
+  bool synthetic = false;
+  std::string description;
+  double subject_mass_kg = 0.0;
+  double subject_height_m = 0.0;
+  Side side = Side::kRight;
+  std::string kinematics_file;        ///< resolved against the trial file's folder
+  std::string grf_file;               ///< empty when absent
+  std::string knee_loads_file;        ///< empty when absent
+  std::map<std::string, ColumnMapping> columns;  ///< quantity -> column
+  std::map<std::string, double> leg_overrides;   ///< "thigh_length_m" -> value, ...
+  std::map<std::string, int> key_lines;          ///< key -> line (for messages)
+};
+
+/// Reads a trial description; throws common::InputError "file:line: error: ..."
+/// on unknown keys, nested YAML, bad numbers, duplicate or missing keys.
+TrialDescription read_trial_description(const std::string& path);
+/// Same from a stream; relative file names are resolved against `directory`.
+TrialDescription parse_trial_description(std::istream& in, const std::string& source_name,
+                                         const std::string& directory);
+
+struct GaitTrialOptions {
+  /// Output sampling rate [Hz], > 0. COMAK works at 100 Hz.
+  double rate_hz = 100.0;
+  /// Low-pass of the kinematics (cutoff of each pass 6 Hz, 2nd order per pass).
+  LowPassOptions lowpass;
+  bool filter_kinematics = true;
+  /// Low-pass the ground reactions with the same filter (off: see header).
+  bool filter_grf = false;
+  /// Below this vertical ground reaction [N] force, torque and COP are set to 0.
+  double min_vertical_grf_n = 10.0;
+};
+
+/// A trial on a uniform time grid, SI units, lab frame.
+struct GaitTrial {
+  std::string source;            ///< trial file
+  bool synthetic = false;
+  double body_mass_kg = 0.0;
+  double height_m = 0.0;
+  Side side = Side::kRight;
+  double rate_hz = 0.0;
+  Eigen::VectorXd time;          ///< n [s]
+  /// n x kNumTrialCoordinates: angles [rad], pelvis translations [m], and their
+  /// first and second time derivatives. Unmapped pelvis columns are zero.
+  Eigen::MatrixXd q, qd, qdd;
+  bool has_pelvis = false;
+  bool has_grf = false;
+  Eigen::MatrixXd grf_force_W;   ///< n x 3 [N] on the foot from the ground
+  Eigen::MatrixXd grf_cop_W;     ///< n x 3 [m]
+  Eigen::MatrixXd grf_torque_W;  ///< n x 3 [N m] about the COP
+  bool has_knee_loads = false;
+  Eigen::MatrixXd knee_force_T;  ///< n x 3 [N], given by the trial
+  Eigen::MatrixXd knee_moment_T; ///< n x 3 [N m], given by the trial
+  std::map<std::string, double> leg_overrides;  ///< from the description
+  int num_samples() const { return static_cast<int>(time.size()); }
+};
+
+/// Loads, resamples, filters and differentiates a described trial.
+GaitTrial load_gait_trial(const TrialDescription& description, const GaitTrialOptions& options = {});
+GaitTrial load_gait_trial(const std::string& trial_path, const GaitTrialOptions& options = {});
+
+}  // namespace arthrosim::musculoskeletal
