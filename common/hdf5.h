@@ -53,6 +53,17 @@ using Tensor3i = Tensor3<int>;
 /// Element type of a dataset, as reported by H5File::type().
 enum class H5Type { kDouble, kInt, kString, kOther };
 
+/// Options of H5File::appender.
+struct H5AppendOptions {
+  /// Frames expected in total (>= 0). Space for them is allocated at once, so
+  /// no append before that count changes the file structure (crash safety,
+  /// see H5File::Appender). 0 = unknown: start with one chunk and double.
+  std::int64_t expected_frames = 0;
+  /// Chunk size along the frame axis (>= 0). 0 = automatic: chunks of at most
+  /// 64 KiB (one frame if a frame is larger), at most 4096 frames.
+  std::int64_t frames_per_chunk = 0;
+};
+
 class H5File {
  public:
   enum class Mode {
@@ -146,18 +157,39 @@ class H5File {
   // ---- frame-by-frame appending ------------------------------------------
   /// Appends frames to a dataset whose first dimension is unlimited:
   /// dims (n_frames, frame_dims...). Frame rank is 0 (a scalar per frame),
-  /// 1 or 2, so the dataset rank is at most 3. Every append() writes one frame
-  /// and flushes the file, so a process killed at any moment leaves every
-  /// frame whose append() returned readable (not guaranteed across a power
-  /// loss: there is no fsync). If the dataset already exists with the same
-  /// element type and frame dims, appending continues after its last frame;
-  /// otherwise creation of a conflicting dataset throws InputError.
-  /// The Appender keeps a reference to its H5File, which must outlive it.
+  /// 1 or 2, so the dataset rank is at most 3.
+  ///
+  /// Crash safety. Every append() writes one frame and flushes the file, so
+  /// a process killed at any moment leaves every frame whose append()
+  /// returned readable (through the OS page cache: a killed process, not a
+  /// power loss; there is no fsync). How: HDF5 1.10 does not write its
+  /// metadata in a crash-consistent order (measured: killing a writer inside
+  /// H5Fflush sometimes left a zero-filled last frame, a lost chunk-index
+  /// entry, or an end-of-file address below a chunk), so the dataset's space
+  /// is allocated ahead (capacity, options.expected_frames) and a steady-state
+  /// append changes no file structure: it writes raw data into allocated
+  /// chunks, flushes, then bumps the int64 attribute
+  /// "arthrosim_frames_complete" and flushes again. Readers (H5File::dims and
+  /// every read_*) see only the first arthrosim_frames_complete frames.
+  /// When the capacity is exceeded it doubles (the only appends that change
+  /// the file structure; not crash-safe; log2(n) of them), so pass the
+  /// expected frame count when known. close() (or the destructor) shrinks the
+  /// dataset to the frames written, so after a normal end other tools (h5py,
+  /// ParaView) see exactly n_frames; after a kill they see the capacity with
+  /// NaN (double) or INT_MIN (int) in the frames beyond the counter.
+  ///
+  /// If the dataset already exists with the same element type and frame
+  /// dims, appending continues after its last complete frame; otherwise
+  /// creation of a conflicting dataset throws InputError.
   class Appender {
    public:
     Appender(Appender&&) noexcept;
     Appender& operator=(Appender&&) noexcept;
+    /// Calls close(), ignoring errors (call close() to see them).
     ~Appender();
+    /// Shrinks the dataset to the frames appended and flushes. Idempotent;
+    /// append() after close() throws.
+    void close();
 
     /// One frame: a scalar (frame rank 0), a vector of size d1 (rank 1), or
     /// a matrix d1 x d2 (rank 2). Throws InputError on a size mismatch.
@@ -179,16 +211,16 @@ class H5File {
   };
 
   /// Appender of double (resp. int) frames of dims `frame_dims` (size 0..2).
-  /// `frames_per_chunk` (>= 1) sets the chunk size along the frame axis; the
-  /// default keeps a chunk at or below 1 MiB.
   Appender appender(const std::string& name, const std::vector<std::int64_t>& frame_dims,
-                    std::int64_t frames_per_chunk = 0);
+                    const H5AppendOptions& options = {});
   Appender appender_int(const std::string& name, const std::vector<std::int64_t>& frame_dims,
-                        std::int64_t frames_per_chunk = 0);
+                        const H5AppendOptions& options = {});
 
  private:
   void write_raw(const std::string& name, const std::vector<std::int64_t>& dims,
                  const void* data, bool is_double);
+  Appender make_appender(const std::string& name, const std::vector<std::int64_t>& frame_dims,
+                         const H5AppendOptions& options, bool is_double);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
