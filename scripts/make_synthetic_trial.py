@@ -25,7 +25,7 @@ the curves here are shaped like them, not fitted to tabulated data):
     Knee: ~5 deg at heel strike, loading-response peak ~18 deg at ~15 % of the
     cycle, ~4 deg near 40 %, ~38 deg at toe-off (60 %), swing peak ~60 deg at
     ~72 %. Ankle (dorsiflexion +): 0 at heel strike, ~-6 deg at foot flat (7 %),
-    ~+10 deg at 45 %, ~-17 deg just after toe-off (62 %), ~+6 deg in
+    ~+10 deg at 45 %, ~-17 deg just after toe-off (62 %), ~+8 deg in
     mid-swing (see the pelvis note below).
     Vertical GRF: double peak ~1.10 BW at ~22 % and ~77 % of stance, valley
     ~0.78 BW at mid-stance. AP GRF: braking ~-0.20 BW at ~15 % of stance,
@@ -51,7 +51,9 @@ zero at heel strike and toe-off, exactly zero in swing: no overshoot, the
 vertical force never goes negative and the peaks equal the key values.
 
 Pelvis: constant anterior tilt of 10 deg (pelvis_tilt = -10 deg, OpenSim sign:
-rotation about +Z), no list or rotation. Its translation is solved so that
+rotation about +Z), obliquity (pelvis_list) a 4 deg sinusoid with the right
+side highest at 17 % (contralateral drop in loading response; Kadaba 1990:
++-4-5 deg), no pelvis rotation. Its translation is solved so that
 the stance foot rolls without slipping over its heel and then its toe (the
 lower of the two is fixed in the lab). During right swing the pelvis follows
 the left stance, taken as the right-stance solution half a cycle later,
@@ -61,8 +63,8 @@ windows (0-10 % and 50-60 %), and the result is low-pass smoothed (periodic
 Fourier truncation at 6 harmonics, < 5.3 Hz) so that velocities have no kinks.
 The script prints how far the stance foot slides after smoothing and the
 lowest point of the swing foot. The foot is rigid and flat-soled (no toes),
-so mid-swing clearance needs ~6 deg of dorsiflexion at 78 %, a little more
-than the ~0-3 deg of the normative curves. The centre of pressure is then placed on the foot
+so mid-swing clearance needs ~8 deg of dorsiflexion at 78 %, more than the
+~0-3 deg of the normative curves. The centre of pressure is then placed on the foot
 actually described by ik.mot (heel-to-toe progression along the sole,
 projected onto the floor y = 0), so that the two files are consistent with the
 forward kinematics of musculoskeletal/gait_trial.h.
@@ -85,6 +87,12 @@ CYCLE_S = 1.14          # gait cycle duration (cadence ~105 steps/min)
 RATE_HZ = 100.0
 STANCE_FRACTION = 0.60  # toe-off at 60 % of the cycle
 PELVIS_TILT_DEG = -10.0  # anterior tilt (OpenSim: rotation about +Z)
+# Pelvic obliquity (pelvis_list, rotation about +X; negative = right side up):
+# the unloaded left side drops in right stance, peak 4 deg at ~17 % of the cycle
+# (Kadaba et al. 1990 report +-4-5 deg). A sinusoid, so that list(t + T/2) =
+# -list(t) as a left-right symmetric gait requires.
+PELVIS_LIST_PEAK_DEG = 4.0
+PELVIS_LIST_PEAK_PCT = 17.0
 
 # ---- segment geometry from stature (Winter 2009 Fig. 4.1) ---------------------
 THIGH_M = 0.245 * HEIGHT_M
@@ -100,7 +108,7 @@ HIP_FLEXION = [(0, 30), (10, 27), (30, 10), (52, -10), (62, 0), (75, 25), (87, 3
 HIP_ADDUCTION = [(0, 2), (18, 8), (45, 3), (60, -3), (70, -6), (85, -2)]
 HIP_ROTATION = [(0, 2), (15, 5), (50, 0), (70, -5), (90, 0)]
 ANKLE_FLEXION = [(0, 0), (7, -6), (20, 3), (35, 8), (45, 10), (55, 0), (62, -17), (70, -5),
-                 (78, 6), (92, 2)]
+                 (78, 8), (92, 2)]
 
 # ---- ground reaction key points: (percent of stance, value) -------------------
 GRF_VERTICAL_BW = [(0, 0), (4, 0.35), (10, 0.85), (22, 1.10), (35, 0.92), (50, 0.78),
@@ -226,7 +234,8 @@ def angles_at(t):
     pct = 100.0 * np.asarray(t) / CYCLE_S
     return {
         "pelvis_tilt": np.full_like(pct, PELVIS_TILT_DEG),
-        "pelvis_list": np.zeros_like(pct),
+        "pelvis_list": -PELVIS_LIST_PEAK_DEG * np.sin(2 * np.pi * (pct - PELVIS_LIST_PEAK_PCT) / 100.0
+                                                      + np.pi / 2),
         "pelvis_rotation": np.zeros_like(pct),
         "hip_flexion_r": periodic_cubic_spline(HIP_FLEXION, 100.0, pct),
         "hip_adduction_r": periodic_cubic_spline(HIP_ADDUCTION, 100.0, pct),
