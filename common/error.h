@@ -12,19 +12,29 @@ namespace arthrosim::common {
 class InputError : public std::runtime_error {
  public:
   InputError(const std::string& file, int line, const std::string& message)
-      : std::runtime_error(format(file, line, message)), file_(file), line_(line) {}
+      : std::runtime_error(format(file, line, 0, message)), file_(file), line_(line) {}
+  /// With a column (1-based) as well: "<file>:<line>:<column>: error: ...".
+  InputError(const std::string& file, int line, int column, const std::string& message)
+      : std::runtime_error(format(file, line, column, message)),
+        file_(file),
+        line_(line),
+        column_(column) {}
   explicit InputError(const std::string& message) : std::runtime_error(message), line_(0) {}
   const std::string& file() const { return file_; }
   int line() const { return line_; }
+  int column() const { return column_; }
 
  private:
-  static std::string format(const std::string& file, int line, const std::string& message) {
+  static std::string format(const std::string& file, int line, int column,
+                            const std::string& message) {
     std::string s = file;
     if (line > 0) s += ":" + std::to_string(line);
+    if (line > 0 && column > 0) s += ":" + std::to_string(column);
     return s + ": error: " + message;
   }
   std::string file_;
   int line_;
+  int column_ = 0;
 };
 
 /// NaN/Inf, a solver that did not converge where that is fatal, etc.

@@ -1,0 +1,461 @@
+#include "pipelines/runner.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/hashing.h"
+
+namespace arthrosim::pipelines {
+namespace fs = std::filesystem;
+using common::Output;
+using common::Scene;
+
+namespace {
+
+constexpr const char* kPrepared = "prepared.h5";
+constexpr const char* kKinematics = "kinematics.h5";
+
+std::string surface_file(const std::string& scenario) { return "surface_" + scenario + ".h5"; }
+
+// Every kPath option of a block is an input of the stage that reads it.
+void add_path_inputs(const common::OptionBlock& block, StageStep& step) {
+  for (const auto& [key, v] : block.values()) {
+    if (v.spec->type == common::OptionType::kPath) {
+      step.inputs.emplace_back(block.name() + "." + key, v.path);
+    }
+  }
+}
+
+std::string short_key(const std::string& key) { return key.substr(0, 12); }
+
+// ---------------------------------------------------------------------------
+// Stamps: DIR/.stamps/<stage>.txt, tab-separated lines, written after a
+// successful run.
+// ---------------------------------------------------------------------------
+struct Stamp {
+  std::string key;
+  std::string executable;
+  std::map<std::string, std::string> inputs;   // label -> sha
+  std::map<std::string, std::string> options;  // block.key -> canonical value
+  std::map<std::string, std::string> outputs;  // file name -> sha
+};
+
+fs::path stamp_path(const fs::path& out_dir, const std::string& stage) {
+  return out_dir / ".stamps" / (stage + ".txt");
+}
+
+bool read_stamp(const fs::path& file, Stamp& stamp) {
+  std::ifstream in(file);
+  if (!in) return false;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<std::string> f;
+    std::size_t start = 0;
+    while (true) {
+      const std::size_t tab = line.find('\t', start);
+      f.push_back(line.substr(start, tab == std::string::npos ? std::string::npos : tab - start));
+      if (tab == std::string::npos) break;
+      start = tab + 1;
+    }
+    if (f[0] == "key" && f.size() == 2) stamp.key = f[1];
+    if (f[0] == "executable" && f.size() == 2) stamp.executable = f[1];
+    if (f[0] == "input" && f.size() == 3) stamp.inputs[f[1]] = f[2];
+    if (f[0] == "option" && f.size() == 3) stamp.options[f[1]] = f[2];
+    if (f[0] == "output" && f.size() == 3) stamp.outputs[f[1]] = f[2];
+  }
+  return !stamp.key.empty();
+}
+
+void write_stamp(const fs::path& file, const StageStep& step, const Stamp& stamp) {
+  fs::create_directories(file.parent_path());
+  const fs::path tmp = file.string() + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) throw common::InputError(tmp.string(), 0, "cannot write the stage stamp");
+    out << "# arthrosim stage stamp of '" << step.name
+        << "', written after its last successful run.\n"
+        << "# The runner skips the stage while these hashes still match. Delete this file to "
+           "force a rerun.\n";
+    out << "stage\t" << step.name << "\n";
+    out << "key\t" << stamp.key << "\n";
+    out << "executable\t" << stamp.executable << "\n";
+    for (const auto& [k, v] : stamp.inputs) out << "input\t" << k << "\t" << v << "\n";
+    for (const auto& [k, v] : stamp.options) out << "option\t" << k << "\t" << v << "\n";
+    for (const auto& [k, v] : stamp.outputs) out << "output\t" << k << "\t" << v << "\n";
+    if (!out) throw common::InputError(tmp.string(), 0, "cannot write the stage stamp");
+  }
+  fs::rename(tmp, file);
+}
+
+// The stage key and its parts, computed from the files as they are now.
+Stamp current_state(const StageStep& step, const fs::path& executable) {
+  Stamp s;
+  s.executable = common::sha256_file(executable);
+  for (const auto& [label, path] : step.inputs) s.inputs[label] = common::sha256_path(path);
+  for (const auto& [k, v] : step.options) s.options[k] = v;
+  std::string text = "arthrosim stage key v1\nstage\t" + step.name + "\nexecutable\t" +
+                     s.executable + "\n";
+  for (const auto& [k, v] : s.inputs) text += "input\t" + k + "\t" + v + "\n";
+  for (const auto& [k, v] : s.options) text += "option\t" + k + "\t" + v + "\n";
+  s.key = common::sha256_hex(text);
+  return s;
+}
+
+// Why the stage must run, or "" when it is up to date.
+std::string why_run(const StageStep& step, const Stamp& now, const Stamp* last) {
+  bool any_output = false;
+  for (const fs::path& o : step.outputs) any_output = any_output || fs::exists(o);
+  if (last == nullptr) {
+    return any_output ? "no record of a previous successful run" : "no previous output";
+  }
+  std::vector<std::string> why;
+  std::string changed_options;
+  for (const auto& [k, v] : now.options) {
+    auto it = last->options.find(k);
+    const std::string before = it == last->options.end() ? "(unset)" : it->second;
+    if (before != v) changed_options += (changed_options.empty() ? "" : ", ") + k + " " + before +
+                                        " -> " + v;
+  }
+  for (const auto& [k, v] : last->options) {
+    if (!now.options.count(k)) {
+      changed_options += (changed_options.empty() ? "" : ", ") + k + " " + v + " -> (unset)";
+    }
+  }
+  if (!changed_options.empty()) why.push_back("options changed: " + changed_options);
+  std::vector<std::string> changed_inputs;
+  for (const auto& [k, v] : now.inputs) {
+    auto it = last->inputs.find(k);
+    if (it == last->inputs.end()) {
+      why.push_back("new input " + k);
+    } else if (it->second != v) {
+      changed_inputs.push_back(k);
+    }
+  }
+  if (!changed_inputs.empty()) {
+    std::string list;
+    for (const std::string& k : changed_inputs) list += (list.empty() ? "" : ", ") + k;
+    why.push_back((changed_inputs.size() == 1 ? "input changed: " : "inputs changed: ") + list);
+  }
+  for (const auto& [k, v] : last->inputs) {
+    if (!now.inputs.count(k)) why.push_back("input no longer used: " + k);
+  }
+  if (now.executable != last->executable) {
+    why.push_back("code changed: " + step.executable + " is not the build that wrote the output");
+  }
+  if (why.empty() && now.key != last->key) why.push_back("stage key changed");
+  for (const fs::path& o : step.outputs) {
+    const std::string name = o.filename().string();
+    auto it = last->outputs.find(name);
+    if (!fs::exists(o)) {
+      why.push_back("output " + name + " missing");
+    } else if (it == last->outputs.end() || common::sha256_file(o) != it->second) {
+      why.push_back("output " + name + " changed since the stage wrote it");
+    }
+  }
+  std::string s;
+  for (const std::string& w : why) s += (s.empty() ? "" : "; ") + w;
+  return s;
+}
+
+std::string quote(const std::string& arg) {
+  if (!arg.empty() && arg.find_first_of(" \t\n'\"\\$`;&|<>()*?") == std::string::npos) return arg;
+  std::string q = "'";
+  for (char c : arg) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+// Runs `exe args...` with this process's stdout/stderr (so the stage's own
+// output and progress display stream through). Returns the exit code, or 128
+// + signal number when the stage was killed.
+int execute(const fs::path& exe, const std::vector<std::string>& args) {
+  std::cout.flush();
+  std::cerr.flush();
+  std::fflush(nullptr);
+  std::vector<std::string> argv_store;
+  argv_store.push_back(exe.string());
+  argv_store.insert(argv_store.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& a : argv_store) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid < 0) return 127;
+  if (pid == 0) {
+    execv(argv[0], argv.data());
+    std::fprintf(stderr, "arthrosim: cannot execute %s: %s\n", argv[0], std::strerror(errno));
+    _exit(127);
+  }
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return 127;
+  }
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
+  return 127;
+}
+
+}  // namespace
+
+std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) {
+  const bool want_report = scene.wants(Output::kReport);
+  const bool want_surface = scene.wants(Output::kSurface) || want_report;
+  bool surface_moves = false;
+  if (want_surface) {
+    for (const common::Scenario& s : scene.scenarios) {
+      surface_moves = surface_moves || s.wants("imposed_kinematics");
+    }
+  }
+  const bool want_comak = scene.wants(Output::kKinematics) || surface_moves;
+  const bool want_prepare = scene.wants(Output::kPreparedModel) || want_comak || want_surface;
+  const fs::path scene_file = scene.file;
+
+  auto first_reason = [&](Output direct, const std::string& otherwise) {
+    return scene.wants(direct) ? "output " + std::string(common::to_string(direct)) : otherwise;
+  };
+
+  std::vector<StageStep> plan;
+  if (want_prepare) {
+    StageStep s;
+    s.name = "prepare";
+    s.executable = "arthrosim-prepare";
+    s.needed_for = first_reason(Output::kPreparedModel, "the prepared model used by later stages");
+    s.inputs.emplace_back("model", scene.model);
+    s.options = scene.prepare.canonical();
+    add_path_inputs(scene.prepare, s);
+    s.outputs = {out_dir / kPrepared};
+    s.arguments = {"--model", scene.model.string(), "--edge-length-mm",
+                   scene.prepare.value("edge_length_mm").canonical, "--out",
+                   (out_dir / kPrepared).string()};
+    plan.push_back(std::move(s));
+  }
+  if (want_comak) {
+    StageStep s;
+    s.name = "comak";
+    s.executable = "arthrosim-comak";
+    s.needed_for = first_reason(Output::kKinematics, "bone motion for imposed_kinematics");
+    s.inputs.emplace_back("model", scene.model);
+    s.inputs.emplace_back("trial", *scene.trial);
+    s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
+    s.options = scene.comak->canonical();
+    add_path_inputs(*scene.comak, s);
+    s.outputs = {out_dir / kKinematics};
+    s.arguments = {"--model", scene.model.string(), "--prepared", (out_dir / kPrepared).string(),
+                   "--trial", scene.trial->string(), "--scene", scene_file.string(),
+                   "--out", (out_dir / kKinematics).string()};
+    plan.push_back(std::move(s));
+  }
+  if (want_surface) {
+    for (const common::Scenario& sc : scene.scenarios) {
+      StageStep s;
+      s.name = "surface." + sc.name;
+      s.executable = "arthrosim-surface";
+      s.needed_for = first_reason(Output::kSurface, "the report");
+      s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
+      s.arguments = {"--prepared", (out_dir / kPrepared).string()};
+      if (sc.wants("imposed_kinematics")) {
+        s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
+        s.arguments.insert(s.arguments.end(), {"--kinematics", (out_dir / kKinematics).string()});
+      }
+      s.options = sc.options.canonical();
+      add_path_inputs(sc.options, s);
+      s.outputs = {out_dir / surface_file(sc.name)};
+      s.arguments.insert(s.arguments.end(), {"--scene", scene_file.string(), "--scenario", sc.name,
+                                             "--out", (out_dir / surface_file(sc.name)).string()});
+      plan.push_back(std::move(s));
+    }
+  }
+  if (want_report) {
+    StageStep s;
+    s.name = "post";
+    s.executable = "arthrosim-post";
+    s.needed_for = "output report";
+    for (const common::Scenario& sc : scene.scenarios) {
+      s.inputs.emplace_back(surface_file(sc.name), out_dir / surface_file(sc.name));
+      s.arguments.insert(s.arguments.end(),
+                         {"--surface", (out_dir / surface_file(sc.name)).string()});
+    }
+    if (want_comak) {
+      s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
+      s.arguments.insert(s.arguments.end(), {"--kinematics", (out_dir / kKinematics).string()});
+    }
+    s.options = scene.post.canonical();
+    add_path_inputs(scene.post, s);
+    s.outputs = {out_dir / "report.html", out_dir / "summary.json"};
+    s.arguments.insert(s.arguments.end(),
+                       {"--scene", scene_file.string(), "--out-dir", out_dir.string()});
+    plan.push_back(std::move(s));
+  }
+  return plan;
+}
+
+fs::path default_stage_dir() {
+  if (const char* env = std::getenv("ARTHROSIM_STAGE_DIR"); env != nullptr && *env != '\0') {
+    return fs::path(env);
+  }
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::path() : self.parent_path();
+}
+
+RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostream& log) {
+  RunReport report;
+  const fs::path out_dir = fs::absolute(options.out_dir).lexically_normal();
+  const std::vector<StageStep> plan = plan_stages(scene, out_dir);
+
+  log << "arthrosim: scene " << scene.file.string() << "\n";
+  if (!scene.description.empty()) log << "  " << scene.description << "\n";
+  log << "arthrosim: output folder " << out_dir.string() << "\n";
+  log << "arthrosim: plan:";
+  for (const StageStep& s : plan) log << " " << s.name;
+  log << "\n";
+  for (const StageStep& s : plan) log << "  " << s.name << ": needed for " << s.needed_for << "\n";
+  // Say what the scene describes but its outputs do not ask for.
+  const auto planned = [&](const std::string& name) {
+    for (const StageStep& s : plan) {
+      if (s.name == name) return true;
+    }
+    return false;
+  };
+  if (scene.comak && !planned("comak")) {
+    log << "  not run: comak (no output needs kinematics)\n";
+  }
+  for (const common::Scenario& sc : scene.scenarios) {
+    if (!planned("surface." + sc.name)) {
+      log << "  not run: surface." << sc.name << " (outputs ask for neither surface nor report)\n";
+    }
+  }
+  for (const StageStep& s : plan) {
+    StageOutcome o;
+    o.name = s.name;
+    report.stages.push_back(o);
+  }
+
+  // Every planned executable must exist before anything runs: a stage that is
+  // not part of this build is an error, never a silent skip.
+  for (const StageStep& s : plan) {
+    const fs::path exe = options.stage_dir / s.executable;
+    if (!fs::exists(exe)) {
+      report.status = RunStatus::kMissingExecutable;
+      report.message = "stage " + s.executable + " not available in this build (looked for " +
+                       exe.string() + "); the scene needs it for " + s.name + " (" +
+                       s.needed_for + ")";
+      log << "arthrosim: error: " << report.message << "\n";
+      return report;
+    }
+  }
+
+  if (!options.dry_run) fs::create_directories(out_dir);
+  std::vector<std::string> will_change;  // dry run: outputs that would be rewritten
+  for (std::size_t i = 0; i < plan.size(); ++i) {
+    const StageStep& step = plan[i];
+    StageOutcome& outcome = report.stages[i];
+    const fs::path exe = options.stage_dir / step.executable;
+
+    // Dry run: an input that an earlier stage would (re)write cannot be
+    // hashed yet; this stage then runs after it (unless that stage reproduces
+    // identical bytes, which only a real run can tell).
+    std::string pending;
+    for (const auto& [label, path] : step.inputs) {
+      for (const std::string& w : will_change) {
+        if (path == fs::path(w)) pending += (pending.empty() ? "" : ", ") + label;
+      }
+      if (pending.empty() && !fs::exists(path)) pending = label + " (not there yet)";
+    }
+    if (options.dry_run && !pending.empty()) {
+      outcome.status = StageStatus::kWouldRun;
+      outcome.reason = "input " + pending + " is written earlier in this run";
+      log << step.name << ": would run — " << outcome.reason << "\n";
+      for (const fs::path& o : step.outputs) will_change.push_back(o.string());
+      continue;
+    }
+
+    const Stamp now = current_state(step, exe);
+    outcome.key = now.key;
+    Stamp last;
+    const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);
+    std::string reason = why_run(step, now, have_last ? &last : nullptr);
+    if (options.force) reason = "--force";
+
+    if (reason.empty()) {
+      outcome.status = options.dry_run ? StageStatus::kWouldSkip : StageStatus::kSkipped;
+      outcome.reason = "inputs, options and code unchanged (hash " + short_key(now.key) + ")";
+      log << step.name << ": " << (options.dry_run ? "would skip" : "skipping") << " — "
+          << outcome.reason << "\n";
+      continue;
+    }
+    outcome.reason = reason;
+    if (options.dry_run) {
+      outcome.status = StageStatus::kWouldRun;
+      log << step.name << ": would run — " << reason << "\n";
+      log << "  $ " << quote(exe.string());
+      for (const std::string& a : step.arguments) log << " " << quote(a);
+      log << "\n";
+      for (const fs::path& o : step.outputs) will_change.push_back(o.string());
+      continue;
+    }
+
+    log << step.name << ": running — " << reason << "\n";
+    log << "  $ " << quote(exe.string());
+    for (const std::string& a : step.arguments) log << " " << quote(a);
+    log << "\n";
+    log.flush();
+    // A failed or interrupted run must never look up to date.
+    std::error_code ec;
+    fs::remove(stamp_path(out_dir, step.name), ec);
+    const auto t0 = std::chrono::steady_clock::now();
+    outcome.exit_code = execute(exe, step.arguments);
+    outcome.wall_time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (outcome.exit_code != 0) {
+      outcome.status = StageStatus::kFailed;
+      outcome.reason = outcome.exit_code > 128
+                           ? "killed by signal " + std::to_string(outcome.exit_code - 128)
+                           : "exited with status " + std::to_string(outcome.exit_code);
+    } else {
+      for (const fs::path& o : step.outputs) {
+        if (!fs::exists(o)) {
+          outcome.status = StageStatus::kFailed;
+          outcome.reason = "exited with status 0 but did not write " + o.string();
+          break;
+        }
+      }
+    }
+    if (outcome.status == StageStatus::kFailed) {
+      report.status = RunStatus::kStageFailed;
+      report.message = "stage " + step.name + " (" + step.executable + ") " + outcome.reason +
+                       "; stopping (outputs of earlier stages are kept in " + out_dir.string() +
+                       ")";
+      log << step.name << ": FAILED after " << std::fixed << std::setprecision(1)
+          << outcome.wall_time_s << " s — " << outcome.reason << "\n";
+      log << "arthrosim: error: " << report.message << "\n";
+      log.unsetf(std::ios::floatfield);
+      return report;
+    }
+    Stamp done = now;
+    for (const fs::path& o : step.outputs) {
+      done.outputs[o.filename().string()] = common::sha256_file(o);
+    }
+    write_stamp(stamp_path(out_dir, step.name), step, done);
+    outcome.status = StageStatus::kRan;
+    log << step.name << ": done in " << std::fixed << std::setprecision(1) << outcome.wall_time_s
+        << " s (hash " << short_key(now.key) << ")\n";
+    log.unsetf(std::ios::floatfield);
+  }
+  log << "arthrosim: " << (options.dry_run ? "dry run finished" : "finished") << "; outputs in "
+      << out_dir.string() << "\n";
+  return report;
+}
+
+}  // namespace arthrosim::pipelines

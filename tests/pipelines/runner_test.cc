@@ -1,0 +1,407 @@
+// The scene runner with fake stage programs (small shell scripts written into
+// a scratch bin folder), so these tests depend on no real stage: stage
+// selection from outputs, reuse and its reasons, reruns on changed options,
+// inputs, code and outputs, failure propagation, missing programs, dry runs.
+#include "pipelines/runner.h"
+
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "common/scene.h"
+
+namespace arthrosim::pipelines {
+namespace {
+namespace fs = std::filesystem;
+using common::Scene;
+
+// A fake stage: appends "<stage> <args>" to $ARTHROSIM_FAKE_LOG, then writes
+// into each output (--out FILE, or report.html + summary.json in --out-dir)
+// its command line followed by the contents of every input file or folder
+// named on it (the scene file excepted). So its output changes exactly when
+// its arguments or one of its inputs do, like a deterministic stage.
+constexpr const char* kFakeStage = R"SH(#!/bin/sh
+stage="$(basename "$0")"
+echo "$stage $*" >> "$ARTHROSIM_FAKE_LOG"
+out=""; outdir=""; prev=""
+for a in "$@"; do
+  case "$prev" in --out) out="$a" ;; --out-dir) outdir="$a" ;; esac
+  prev="$a"
+done
+content() {
+  echo "$stage $*"
+  prev=""
+  for a in "$@"; do
+    case "$prev" in --out|--out-dir|--scene) prev="$a"; continue ;; esac
+    if [ -f "$a" ]; then cat "$a"; elif [ -d "$a" ]; then cat "$a"/*; fi
+    prev="$a"
+  done
+}
+if [ -n "$out" ]; then content "$@" > "$out"; fi
+if [ -n "$outdir" ]; then content "$@" > "$outdir/report.html"; content "$@" > "$outdir/summary.json"; fi
+echo "$stage: done"
+)SH";
+
+class RunnerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = fs::temp_directory_path() /
+            ("arthrosim_runner_test_" + std::to_string(getpid()) + "_" +
+             ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(root_);
+    fs::create_directories(root_ / "bin");
+    fs::create_directories(root_ / "scenes");
+    fs::create_directories(root_ / "models" / "knee");
+    fs::create_directories(root_ / "trials" / "walk");
+    std::ofstream(root_ / "models" / "knee" / "femur.stl") << "femur v1\n";
+    std::ofstream(root_ / "trials" / "walk" / "ik.mot") << "ik v1\n";
+    for (const char* s : {"prepare", "comak", "surface", "post"}) {
+      write_stage(std::string("arthrosim-") + s, kFakeStage);
+    }
+    log_file_ = root_ / "calls.log";
+    setenv("ARTHROSIM_FAKE_LOG", log_file_.c_str(), 1);
+    options_.out_dir = root_ / "out";
+    options_.stage_dir = root_ / "bin";
+  }
+  void TearDown() override { fs::remove_all(root_); }
+
+  void write_stage(const std::string& name, const std::string& script) {
+    const fs::path p = root_ / "bin" / name;
+    std::ofstream(p) << script;
+    fs::permissions(p, fs::perms::owner_all);
+  }
+
+  Scene scene(const std::string& text) {
+    const fs::path p = root_ / "scenes" / "s.yaml";
+    std::ofstream(p) << text;
+    return common::load_scene(p);
+  }
+
+  RunReport run(const Scene& s, std::string* printed = nullptr) {
+    std::ostringstream log;
+    RunReport r = run_scene(s, options_, log);
+    if (printed) *printed = log.str();
+    std::cout << log.str();
+    return r;
+  }
+
+  // Stage programs called so far, one line each ("arthrosim-prepare --model ...").
+  std::vector<std::string> calls() const {
+    std::vector<std::string> out;
+    std::ifstream in(log_file_);
+    for (std::string line; std::getline(in, line);) out.push_back(line.substr(0, line.find(' ')));
+    return out;
+  }
+
+  static std::vector<std::string> names(const std::vector<StageStep>& plan) {
+    std::vector<std::string> n;
+    for (const StageStep& s : plan) n.push_back(s.name);
+    return n;
+  }
+
+  static StageStatus status(const RunReport& r, const std::string& stage) {
+    for (const StageOutcome& o : r.stages) {
+      if (o.name == stage) return o.status;
+    }
+    ADD_FAILURE() << "no stage " << stage;
+    return StageStatus::kNotReached;
+  }
+  static std::string reason(const RunReport& r, const std::string& stage) {
+    for (const StageOutcome& o : r.stages) {
+      if (o.name == stage) return o.reason;
+    }
+    return "(no stage " + stage + ")";
+  }
+
+  fs::path root_;
+  fs::path log_file_;
+  RunnerOptions options_;
+};
+
+constexpr const char* kPrepareOnly =
+    "model: ../models/knee\noutputs: [prepared_model]\nprepare: {edge_length_mm: 3}\n";
+
+// Three scenarios as in the seed; `outputs` filled in by each test.
+std::string three_scenarios(const std::string& outputs, const std::string& edge = "3") {
+  return "model: ../models/knee\ntrial: ../trials/walk\noutputs: " + outputs +
+         "\nprepare: {edge_length_mm: " + edge +
+         "}\ncomak: {effects: [ligaments, muscles]}\nsurface:\n  scenarios:\n"
+         "    osmotic: {effects: [foundation_springs, osmotic_pressure], end_time_s: 1}\n"
+         "    gait: {effects: [foundation_springs, imposed_kinematics, mesh_contact]}\n"
+         "    gait_osmotic: {effects: [osmotic_pressure, imposed_kinematics, mesh_contact]}\n";
+}
+
+TEST_F(RunnerTest, StagesFollowFromOutputs) {
+  const fs::path out = root_ / "out";
+  using V = std::vector<std::string>;
+  EXPECT_EQ(names(plan_stages(scene(three_scenarios("[prepared_model]")), out)), V{"prepare"});
+  EXPECT_EQ(names(plan_stages(scene(three_scenarios("[kinematics]")), out)),
+            (V{"prepare", "comak"}));
+  EXPECT_EQ(names(plan_stages(scene(three_scenarios("[surface]")), out)),
+            (V{"prepare", "comak", "surface.osmotic", "surface.gait", "surface.gait_osmotic"}));
+  EXPECT_EQ(names(plan_stages(scene(three_scenarios("[report]")), out)),
+            (V{"prepare", "comak", "surface.osmotic", "surface.gait", "surface.gait_osmotic",
+               "post"}));
+  // The osmotic scenario alone needs no musculoskeletal stage.
+  const Scene osmotic = scene(
+      "model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
+      "    osmotic: {effects: [foundation_springs, osmotic_pressure], end_time_s: 1}\n");
+  const std::vector<StageStep> plan = plan_stages(osmotic, out);
+  EXPECT_EQ(names(plan), (V{"prepare", "surface.osmotic"}));
+  const StageStep& surf = plan[1];
+  EXPECT_EQ(surf.executable, "arthrosim-surface");
+  ASSERT_EQ(surf.inputs.size(), 1u);
+  EXPECT_EQ(surf.inputs[0].first, "prepared.h5");
+  EXPECT_EQ(surf.outputs, std::vector<fs::path>{out / "surface_osmotic.h5"});
+  const std::vector<std::string> expect_args = {
+      "--prepared", (out / "prepared.h5").string(), "--scene", osmotic.file.string(),
+      "--scenario", "osmotic", "--out", (out / "surface_osmotic.h5").string()};
+  EXPECT_EQ(surf.arguments, expect_args);
+  // Post gets kinematics only when COMAK is part of the run.
+  const Scene report_osmotic = scene(
+      "model: ../models/knee\noutputs: [report]\nsurface:\n  scenarios:\n"
+      "    osmotic: {effects: [inertia], end_time_s: 1}\n");
+  const StageStep post = plan_stages(report_osmotic, out).back();
+  EXPECT_EQ(post.name, "post");
+  for (const std::string& a : post.arguments) EXPECT_NE(a, "--kinematics");
+  const StageStep post_all = plan_stages(scene(three_scenarios("[report]")), out).back();
+  EXPECT_NE(std::find(post_all.arguments.begin(), post_all.arguments.end(), "--kinematics"),
+            post_all.arguments.end());
+  // The gait scenario reads the kinematics; its options are its own.
+  const StageStep gait = plan_stages(scene(three_scenarios("[surface]")), out)[3];
+  EXPECT_EQ(gait.name, "surface.gait");
+  EXPECT_EQ(gait.inputs.back().first, "kinematics.h5");
+  EXPECT_NE(std::find(gait.options.begin(), gait.options.end(),
+                      std::pair<std::string, std::string>(
+                          "surface.gait.effects",
+                          "[foundation_springs, imposed_kinematics, mesh_contact]")),
+            gait.options.end());
+  // Prepare's command line carries the edge length as written, in mm.
+  const StageStep prep = plan_stages(scene(three_scenarios("[prepared_model]", "2.5")), out)[0];
+  const std::vector<std::string> prep_args = {"--model", (root_ / "models" / "knee").string(),
+                                              "--edge-length-mm", "2.5", "--out",
+                                              (out / "prepared.h5").string()};
+  EXPECT_EQ(prep.arguments, prep_args);
+}
+
+TEST_F(RunnerTest, RunsOnlyNeededStagesInOrderAndReusesThem) {
+  const Scene s = scene(three_scenarios("[surface]"));
+  std::string printed;
+  RunReport r = run(s, &printed);
+  ASSERT_EQ(r.status, RunStatus::kOk) << r.message;
+  EXPECT_EQ(calls(), (std::vector<std::string>{"arthrosim-prepare", "arthrosim-comak",
+                                               "arthrosim-surface", "arthrosim-surface",
+                                               "arthrosim-surface"}));
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kRan);
+  EXPECT_EQ(reason(r, "prepare"), "no previous output");
+  EXPECT_NE(printed.find("prepare: running — no previous output"), std::string::npos);
+  for (const char* f : {"prepared.h5", "kinematics.h5", "surface_osmotic.h5", "surface_gait.h5",
+                        "surface_gait_osmotic.h5", ".stamps/prepare.txt",
+                        ".stamps/surface.gait.txt"}) {
+    EXPECT_TRUE(fs::exists(root_ / "out" / f)) << f;
+  }
+  EXPECT_FALSE(fs::exists(root_ / "out" / "report.html"));  // post was not asked for
+
+  // Second run: nothing changed, nothing runs.
+  r = run(s, &printed);
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(calls().size(), 5u);
+  for (const StageOutcome& o : r.stages) {
+    EXPECT_EQ(o.status, StageStatus::kSkipped) << o.name;
+    EXPECT_EQ(o.reason.rfind("inputs, options and code unchanged (hash ", 0), 0u) << o.reason;
+    EXPECT_EQ(o.key.size(), 64u);
+  }
+  EXPECT_NE(printed.find("prepare: skipping — inputs, options and code unchanged (hash "),
+            std::string::npos);
+}
+
+TEST_F(RunnerTest, ChangedOptionRerunsThatStageAndWhatDependsOnIt) {
+  ASSERT_EQ(run(scene(three_scenarios("[surface]", "3"))).status, RunStatus::kOk);
+  std::string printed;
+  // edge_length_mm changes prepare's command line, so its output changes, so
+  // every later stage reruns too (their input prepared.h5 changed).
+  const RunReport r = run(scene(three_scenarios("[surface]", "2")), &printed);
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(reason(r, "prepare"), "options changed: prepare.edge_length_mm 3 -> 2");
+  EXPECT_NE(printed.find("prepare: running — options changed: prepare.edge_length_mm 3 -> 2"),
+            std::string::npos);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kRan);
+  EXPECT_EQ(reason(r, "comak"), "input changed: prepared.h5");
+  EXPECT_EQ(status(r, "surface.osmotic"), StageStatus::kRan);
+  EXPECT_EQ(calls().size(), 10u);
+}
+
+TEST_F(RunnerTest, ChangedScenarioOptionRerunsOnlyThatScenario) {
+  ASSERT_EQ(run(scene(three_scenarios("[surface]"))).status, RunStatus::kOk);
+  std::string text = three_scenarios("[surface]");
+  const std::string from = "gait: {effects: [foundation_springs, imposed_kinematics, mesh_contact]}";
+  text.replace(text.find(from), from.size(),
+               "gait: {time_step_s: 5e-5, effects: [foundation_springs, imposed_kinematics, "
+               "mesh_contact]}");
+  const RunReport r = run(scene(text));
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kSkipped);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kSkipped);
+  EXPECT_EQ(status(r, "surface.osmotic"), StageStatus::kSkipped);
+  EXPECT_EQ(status(r, "surface.gait"), StageStatus::kRan);
+  EXPECT_EQ(reason(r, "surface.gait"), "options changed: surface.gait.time_step_s 1e-04 -> 5e-05");
+  EXPECT_EQ(status(r, "surface.gait_osmotic"), StageStatus::kSkipped);
+  EXPECT_EQ(calls().size(), 6u);
+}
+
+TEST_F(RunnerTest, ChangedInputFileReruns) {
+  const Scene s = scene(three_scenarios("[kinematics]"));
+  ASSERT_EQ(run(s).status, RunStatus::kOk);
+  // A trial file edited: COMAK reruns, prepare does not.
+  std::ofstream(root_ / "trials" / "walk" / "ik.mot") << "ik v2\n";
+  RunReport r = run(s);
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kSkipped);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kRan);
+  EXPECT_EQ(reason(r, "comak"), "input changed: trial");
+  // A mesh added to the model folder: both rerun.
+  std::ofstream(root_ / "models" / "knee" / "tibia.stl") << "tibia\n";
+  r = run(s);
+  EXPECT_EQ(reason(r, "prepare"), "input changed: model");
+  EXPECT_EQ(reason(r, "comak"), "inputs changed: model, prepared.h5");
+  EXPECT_EQ(calls().size(), 5u);
+}
+
+TEST_F(RunnerTest, ChangedExecutableBytesRerunAndIdenticalOutputStopsThePropagation) {
+  const Scene s = scene(three_scenarios("[kinematics]"));
+  ASSERT_EQ(run(s).status, RunStatus::kOk);
+  // A rebuilt prepare (different bytes) that writes the same output: prepare
+  // reruns, COMAK is skipped because its inputs are bit-identical.
+  write_stage("arthrosim-prepare", std::string(kFakeStage) + "# rebuilt\n");
+  const RunReport r = run(s);
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kRan);
+  EXPECT_EQ(reason(r, "prepare"),
+            "code changed: arthrosim-prepare is not the build that wrote the output");
+  EXPECT_EQ(status(r, "comak"), StageStatus::kSkipped);
+  EXPECT_EQ(calls(), (std::vector<std::string>{"arthrosim-prepare", "arthrosim-comak",
+                                               "arthrosim-prepare"}));
+}
+
+TEST_F(RunnerTest, MissingOrEditedOutputReruns) {
+  const Scene s = scene(kPrepareOnly);
+  ASSERT_EQ(run(s).status, RunStatus::kOk);
+  fs::remove(root_ / "out" / "prepared.h5");
+  RunReport r = run(s);
+  EXPECT_EQ(reason(r, "prepare"), "output prepared.h5 missing");
+  std::ofstream(root_ / "out" / "prepared.h5", std::ios::app) << "tampered\n";
+  r = run(s);
+  EXPECT_EQ(reason(r, "prepare"), "output prepared.h5 changed since the stage wrote it");
+  fs::remove(root_ / "out" / ".stamps" / "prepare.txt");
+  r = run(s);
+  EXPECT_EQ(reason(r, "prepare"), "no record of a previous successful run");
+  EXPECT_EQ(calls().size(), 4u);
+}
+
+TEST_F(RunnerTest, FailingStageStopsTheRunAndKeepsEarlierOutputs) {
+  write_stage("arthrosim-comak", "#!/bin/sh\necho 'comak: Ipopt failed at frame 7' >&2\nexit 3\n");
+  const Scene s = scene(three_scenarios("[surface]"));
+  std::string printed;
+  RunReport r = run(s, &printed);
+  EXPECT_EQ(r.status, RunStatus::kStageFailed);
+  EXPECT_EQ(r.message.rfind("stage comak (arthrosim-comak) exited with status 3; stopping", 0),
+            0u)
+      << r.message;
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kRan);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kFailed);
+  EXPECT_EQ(r.stages[1].exit_code, 3);
+  EXPECT_EQ(status(r, "surface.osmotic"), StageStatus::kNotReached);
+  EXPECT_TRUE(fs::exists(root_ / "out" / "prepared.h5"));
+  EXPECT_FALSE(fs::exists(root_ / "out" / ".stamps" / "comak.txt"));
+  EXPECT_NE(printed.find("comak: FAILED after"), std::string::npos);
+  EXPECT_EQ(calls(), std::vector<std::string>{"arthrosim-prepare"});  // comak's fake logs nothing
+
+  // Fixed: the next run reuses prepare and retries COMAK.
+  write_stage("arthrosim-comak", kFakeStage);
+  r = run(s);
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kSkipped);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kRan);
+  EXPECT_EQ(reason(r, "comak"), "no previous output");
+}
+
+TEST_F(RunnerTest, KilledStageAndStageWithoutOutputFail) {
+  write_stage("arthrosim-prepare", "#!/bin/sh\nkill -9 $$\n");
+  RunReport r = run(scene(kPrepareOnly));
+  EXPECT_EQ(r.status, RunStatus::kStageFailed);
+  EXPECT_EQ(r.stages[0].exit_code, 128 + 9);
+  EXPECT_EQ(r.stages[0].reason, "killed by signal 9");
+  write_stage("arthrosim-prepare", "#!/bin/sh\nexit 0\n");
+  r = run(scene(kPrepareOnly));
+  EXPECT_EQ(r.status, RunStatus::kStageFailed);
+  EXPECT_EQ(r.stages[0].reason,
+            "exited with status 0 but did not write " + (root_ / "out" / "prepared.h5").string());
+  EXPECT_FALSE(fs::exists(root_ / "out" / ".stamps" / "prepare.txt"));
+}
+
+TEST_F(RunnerTest, MissingStageProgramIsAnErrorBeforeAnythingRuns) {
+  fs::remove(root_ / "bin" / "arthrosim-surface");
+  const RunReport r = run(scene(three_scenarios("[surface]")));
+  EXPECT_EQ(r.status, RunStatus::kMissingExecutable);
+  EXPECT_EQ(r.message.rfind("stage arthrosim-surface not available in this build (looked for " +
+                                (root_ / "bin" / "arthrosim-surface").string() + ")",
+                            0),
+            0u)
+      << r.message;
+  EXPECT_TRUE(calls().empty());
+  for (const StageOutcome& o : r.stages) EXPECT_EQ(o.status, StageStatus::kNotReached);
+}
+
+TEST_F(RunnerTest, DryRunRunsNothingAndForceRunsEverything) {
+  const Scene s = scene(three_scenarios("[kinematics]"));
+  options_.dry_run = true;
+  std::string printed;
+  RunReport r = run(s, &printed);
+  ASSERT_EQ(r.status, RunStatus::kOk);
+  EXPECT_TRUE(calls().empty());
+  EXPECT_FALSE(fs::exists(root_ / "out"));
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kWouldRun);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kWouldRun);
+  EXPECT_EQ(reason(r, "comak"), "input prepared.h5 is written earlier in this run");
+  EXPECT_NE(printed.find("not run: surface.osmotic"), std::string::npos) << printed;
+
+  options_.dry_run = false;
+  ASSERT_EQ(run(s).status, RunStatus::kOk);
+  options_.dry_run = true;
+  r = run(s);
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kWouldSkip);
+  EXPECT_EQ(status(r, "comak"), StageStatus::kWouldSkip);
+  EXPECT_EQ(calls().size(), 2u);
+
+  options_.dry_run = false;
+  options_.force = true;
+  r = run(s);
+  EXPECT_EQ(reason(r, "prepare"), "--force");
+  EXPECT_EQ(status(r, "comak"), StageStatus::kRan);
+  EXPECT_EQ(calls().size(), 4u);
+}
+
+TEST_F(RunnerTest, ReportRunsPostWithEverySurfaceOutput) {
+  const RunReport r = run(scene(three_scenarios("[report]")));
+  ASSERT_EQ(r.status, RunStatus::kOk) << r.message;
+  EXPECT_EQ(status(r, "post"), StageStatus::kRan);
+  EXPECT_TRUE(fs::exists(root_ / "out" / "report.html"));
+  EXPECT_TRUE(fs::exists(root_ / "out" / "summary.json"));
+  std::ifstream in(log_file_);
+  std::string line, post_line;
+  while (std::getline(in, line)) {
+    if (line.rfind("arthrosim-post ", 0) == 0) post_line = line;
+  }
+  for (const char* f : {"surface_osmotic.h5", "surface_gait.h5", "surface_gait_osmotic.h5",
+                        "kinematics.h5"}) {
+    EXPECT_NE(post_line.find(f), std::string::npos) << f << " not passed to post: " << post_line;
+  }
+}
+
+}  // namespace
+}  // namespace arthrosim::pipelines
