@@ -351,6 +351,32 @@ TEST(Spatial, RejectsInvalidMeshes) {
   EXPECT_THROW(TriangleTree{m}, InputError);
 }
 
+TEST(Spatial, ConcurrentQueriesMatchSerialOnes) {
+  // Queries are const and allocation-free; the tree is built in the
+  // constructor, so OpenMP threads may share one tree.
+  const TriangleMesh m = test_sphere();
+  const TriangleTree tree(m);
+  std::mt19937_64 rng(6);
+  const int n = 4000;
+  std::vector<Vec3> dirs(n);
+  for (auto& d : dirs) d = random_unit(rng);
+  std::vector<int> serial(n), parallel(n);
+  std::vector<double> serial_d(n), parallel_d(n);
+  for (int i = 0; i < n; ++i) {
+    const auto h = tree.first_hit(Vec3(0.001, -0.002, 0.003), dirs[i]);
+    serial[i] = h ? h->triangle : -1;
+    serial_d[i] = tree.closest_point(0.05 * dirs[i]).distance;
+  }
+#pragma omp parallel for num_threads(2) schedule(dynamic, 64)
+  for (int i = 0; i < n; ++i) {
+    const auto h = tree.first_hit(Vec3(0.001, -0.002, 0.003), dirs[i]);
+    parallel[i] = h ? h->triangle : -1;
+    parallel_d[i] = tree.closest_point(0.05 * dirs[i]).distance;
+  }
+  EXPECT_EQ(serial, parallel);
+  EXPECT_EQ(serial_d, parallel_d);
+}
+
 TEST(Spatial, TreeIsMovable) {
   TriangleTree a(test_sphere());
   TriangleTree b = std::move(a);
