@@ -8,7 +8,6 @@
 // two runs of the same inputs differ (determinism checks compare files).
 #include <map>
 #include <string>
-#include <string_view>
 
 namespace arthrosim::common {
 
@@ -19,7 +18,7 @@ struct RunMetadata {
   std::string version;        ///< arthrosim version (common/version.h kVersion)
   std::string git_revision;   ///< git revision at configure time (kGitRevision)
   std::string scene_path;     ///< scene file as given on the command line ("" if none)
-  std::string scene_sha256;   ///< SHA-256 (hex) of the scene file's bytes ("" if none)
+  std::string scene_sha256;   ///< SHA-256 (hex, common/hashing.h) of the scene file's bytes ("" if none)
   std::string command_line;   ///< argv joined with spaces, shell-quoted where needed
   std::string options;        ///< resolved options of the stage, free text (e.g. YAML)
   std::map<std::string, std::string> dependencies;  ///< name -> version
@@ -43,11 +42,6 @@ RunMetadata collect_run_metadata(const std::string& program, int argc, const cha
 void write_metadata(H5File& file, const RunMetadata& metadata, const std::string& object = "/");
 /// Reads what write_metadata wrote (throws InputError if an attribute is missing).
 RunMetadata read_metadata(const H5File& file, const std::string& object = "/");
-
-/// SHA-256 (FIPS 180-4) of bytes, lower-case hex.
-std::string sha256_hex(std::string_view bytes);
-/// SHA-256 of a file's content; throws InputError if it cannot be read.
-std::string sha256_file(const std::string& path);
 
 /// Joins argv with spaces; arguments with spaces or shell metacharacters
 /// are single-quoted.

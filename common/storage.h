@@ -14,7 +14,10 @@
 //    but nRows/nColumns); everything else is OpenSim 4 style. Header lines
 //    without '=' after the first (free text such as "Units are S.I. units")
 //    and blank lines are accepted and ignored. nRows/nColumns, when present,
-//    must match the data (error otherwise).
+//    must match the data (error otherwise). The writer writes version=1
+//    (old) or version=3 (OpenSim 4), and nRows/nColumns in both styles.
+//  Data rows are split at any whitespace; "nan"/"inf" are accepted as
+//  numbers (callers that cannot handle them use check_finite).
 //
 // Units: inside arthrosim angles are radians. When the file says
 // inDegrees=yes, read_storage converts every *rotational* column from degrees
@@ -63,7 +66,8 @@ using RotationalPredicate = std::function<bool(const std::string& label)>;
 ///  - it is the time column ("time"), or
 ///  - it ends in a translation / vector-component suffix: _tx _ty _tz
 ///    (translational coordinates), _px _py _pz (centre of pressure),
-///    _vx _vy _vz (force vectors in GRF files), _x _y _z (positions,
+///    _vx _vy _vz (force vectors in GRF files), _fx _fy _fz _mx _my _mz
+///    (joint reaction force/moment components), _x _y _z (positions,
 ///    components), or
 ///  - it contains one of: force, torque, moment, cop, activation,
 ///    excitation, length, velocity (non-angle quantities).
