@@ -223,6 +223,15 @@ bool looks_like_binary_stl(const std::string& data) {
   return data.size() == 84 + 50 * n;
 }
 
+bool looks_textual(const std::string& data) {
+  const size_t n = std::min<size_t>(data.size(), 1024);
+  for (size_t i = 0; i < n; ++i) {
+    const unsigned char c = static_cast<unsigned char>(data[i]);
+    if (c < 32 && c != '\n' && c != '\r' && c != '\t' && c != '\f' && c != '\v') return false;
+  }
+  return true;
+}
+
 bool starts_with_solid(const std::string& data) {
   size_t i = 0;
   while (i < data.size() && std::isspace(static_cast<unsigned char>(data[i]))) ++i;
@@ -319,7 +328,12 @@ TriangleMesh parse_ascii_stl(const std::string& data, const std::string& name, c
       expect("normal", "after 'facet'");
       for (int c = 0; c < 3; ++c) {
         if (!tk.next(&tok, &line)) throw InputError(name, tk.line(), "ASCII STL: expected a normal component, found end of file");
-        to_double(tok, name, line, "facet normal component");
+        // Facet normals are not used (they are recomputed from the vertices);
+        // exporters write "nan" for degenerate facets, so only the syntax is checked.
+        double ignored;
+        const auto r = std::from_chars(tok.data() + (!tok.empty() && tok[0] == '+'), tok.data() + tok.size(), ignored);
+        if (r.ec != std::errc() || r.ptr != tok.data() + tok.size())
+          throw InputError(name, line, "ASCII STL: expected a number (facet normal component), found " + shown(tok));
       }
       expect("outer", "to start a facet's vertices");
       expect("loop", "after 'outer'");
@@ -959,7 +973,9 @@ TriangleMesh parse_stl(const std::string& content, const std::string& name, cons
   // Binary STL is recognised by its size (84 + 50 * count), not by the first
   // word: many exporters write "solid ..." into the binary header too.
   if (looks_like_binary_stl(content)) return parse_binary_stl(content, name, options);
-  if (starts_with_solid(content)) return parse_ascii_stl(content, name, options);
+  // A truncated binary file may also start with "solid": it is ASCII only if
+  // its first kilobyte is text (binary counts/floats contain NUL and control bytes).
+  if (starts_with_solid(content) && looks_textual(content)) return parse_ascii_stl(content, name, options);
   if (content.size() >= 84) return parse_binary_stl(content, name, options);  // reports the size mismatch
   throw InputError(name, 0, "STL: expected an ASCII file starting with 'solid' or a binary file of 84 + 50 * n bytes, found " +
                                 std::to_string(content.size()) + " bytes");

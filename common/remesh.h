@@ -17,7 +17,9 @@ struct RemeshOptions {
   /// their geometry: boundary edges are first split to at most
   /// 4/3 * target_edge_length along the original outline, then protected (not
   /// split, collapsed, flipped, and their vertices not moved). The outline
-  /// polyline is therefore preserved exactly.
+  /// polyline is therefore preserved exactly. When false, boundary edges may
+  /// also be split and collapsed during remeshing (CGAL's default): boundary
+  /// vertices stay on the input outline, but collapses can cut its corners.
   bool protect_boundary = true;
 };
 

@@ -35,9 +35,14 @@ class TriangleTree {
 
   /// First intersection of the ray origin + t * direction, 0 <= t <= max_distance
   /// (direction need not be unit; distance is reported in metres).
+  /// The direction is normalised internally, so max_distance and
+  /// RayHit::distance are both metres along the ray. Both faces of a triangle
+  /// are hit. Equal distances: the lower triangle index. Thread-safe (const,
+  /// no heap allocation). A zero/non-finite direction throws NumericalError.
   std::optional<RayHit> first_hit(const Vec3& origin, const Vec3& direction,
                                   double max_distance = 1e30) const;
-  /// Closest point on the surface to p.
+  /// Closest point on the surface to p (ties: the lower triangle index). An
+  /// empty mesh gives triangle -1 and an infinite distance.
   ClosestPoint closest_point(const Vec3& p) const;
   /// Triangles whose bounding boxes overlap the axis-aligned box [lo, hi] and
   /// that truly intersect it, sorted ascending.

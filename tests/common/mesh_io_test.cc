@@ -239,6 +239,11 @@ TEST(MeshIo, ErrorsNameFileLineAndWhatWasFound) {
   std::memcpy(bin2.data() + 84 + 50 + 12 + 4, &nan, 4);
   expect_error([&] { parse_stl(bin2, "nan.stl"); }, {"nan.stl", "triangle 1", "byte offset 150"});
   expect_error([] { parse_stl("garbage", "g.stl"); }, {"g.stl", "'solid'", "found 7 bytes"});
+  // A truncated binary file whose header starts with "solid" is still
+  // recognised as binary and reported as truncated.
+  std::string solid_bin = bin;
+  std::memcpy(solid_bin.data(), "solid part", 10);
+  expect_error([&] { parse_stl(solid_bin, "sb.stl"); }, {"sb.stl: error:", "truncated", "triangle 3"});
   // PLY: unsupported format, bad index, truncated binary body.
   const std::string ply_head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                                "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
@@ -254,6 +259,22 @@ TEST(MeshIo, ErrorsNameFileLineAndWhatWasFound) {
   // Unknown extension, missing file.
   expect_error([] { read_mesh("model.step"); }, {"model.step", ".stl, .obj, .ply or .vtk", "'.step'"});
   expect_error([] { read_mesh(out_dir() + "/does_not_exist.stl"); }, {"does_not_exist.stl", "readable"});
+}
+
+TEST(MeshIo, AsciiStlToleratesNanNormalsAndCrLf) {
+  // Normals are recomputed, so exporters' "nan" normals of degenerate facets
+  // are accepted; Windows line endings and upper-case keywords too.
+  const std::string stl =
+      "solid x\r\n facet normal nan nan nan\r\n  outer loop\r\n   vertex 0 0 0\r\n   vertex 1 0 0\r\n"
+      "   vertex 0 1 0\r\n  endloop\r\n endfacet\r\n FACET NORMAL 0 0 1\r\n  OUTER LOOP\r\n   VERTEX 1 0 0\r\n"
+      "   VERTEX 1 1 0\r\n   VERTEX 0 1 0\r\n  ENDLOOP\r\n ENDFACET\r\nendsolid x\r\n";
+  const TriangleMesh m = parse_stl(stl, "crlf.stl");
+  EXPECT_EQ(m.num_vertices(), 4);
+  EXPECT_EQ(m.num_triangles(), 2);
+  EXPECT_NEAR(surface_area(m), 1e-6, 1e-21);
+  // Welded vertices are numbered in order of first appearance.
+  EXPECT_EQ(m.F.row(0), Eigen::RowVector3i(0, 1, 2));
+  EXPECT_EQ(m.F.row(1), Eigen::RowVector3i(1, 3, 2));
 }
 
 TEST(MeshIo, PlyWithExtraPropertiesElementsAndTypes) {
