@@ -1,10 +1,12 @@
 #include "common/effects.h"
 
 #include <algorithm>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
 #include "common/error.h"
+#include "common/hdf5.h"
 
 namespace arthrosim::common {
 
@@ -175,6 +177,35 @@ EffectLedger EffectLedger::from_table(std::string stage, const std::vector<std::
     ledger.records_.push_back({effect[i], part[i], count[i]});
   }
   return ledger;
+}
+
+void write_effect_ledger(H5File& file, const EffectLedger& ledger) {
+  if (file.exists("/effects")) file.remove("/effects");
+  file.create_group("/effects");
+  ledger.write([&](const std::vector<std::string>& effect, const std::vector<std::string>& part,
+                   const std::vector<std::int64_t>& count) {
+    std::vector<int> count32;
+    for (std::int64_t c : count) {
+      if (c > std::numeric_limits<int>::max()) {
+        throw std::logic_error("write_effect_ledger: count " + std::to_string(c) +
+                               " does not fit the int dataset /effects/count");
+      }
+      count32.push_back(static_cast<int>(c));
+    }
+    file.write("/effects/built", effect);
+    file.write("/effects/part", part);
+    file.write("/effects/count", count32);
+  });
+  file.set_attribute("/effects", "stage", ledger.stage());
+}
+
+EffectLedger read_effect_ledger(const H5File& file) {
+  const std::vector<std::string> effect = file.read_strings("/effects/built");
+  const std::vector<std::string> part = file.read_strings("/effects/part");
+  const Eigen::VectorXi count32 = file.read_vector_int("/effects/count");
+  std::vector<std::int64_t> count(count32.data(), count32.data() + count32.size());
+  return EffectLedger::from_table(file.attribute_string("/effects", "stage"), effect, part, count,
+                                  file.path() + ": /effects");
 }
 
 }  // namespace arthrosim::common

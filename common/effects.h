@@ -23,6 +23,8 @@
 
 namespace arthrosim::common {
 
+class H5File;
+
 /// The stage whose scene block lists an effect.
 enum class EffectStage { kMusculoskeletal, kSurface };
 
@@ -109,5 +111,16 @@ class EffectLedger {
   std::string stage_;
   std::vector<BuiltEffect> records_;
 };
+
+/// Writes `ledger` into an output file (replacing an existing /effects):
+///   /effects/built  string (n)  effect name per record
+///   /effects/part   string (n)  what it was built on ("" when not per part)
+///   /effects/count  int (n)     instances built per record
+///   attribute "stage" on /effects
+/// n may be 0 (a stage that built no term). Every stage writes this.
+void write_effect_ledger(H5File& file, const EffectLedger& ledger);
+/// Reads what write_effect_ledger wrote; InputError naming the file and the
+/// dataset when it is missing or inconsistent.
+EffectLedger read_effect_ledger(const H5File& file);
 
 }  // namespace arthrosim::common

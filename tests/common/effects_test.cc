@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <set>
+#include <filesystem>
+#include <unistd.h>
 
 #include "common/error.h"
+#include "common/hdf5.h"
 
 namespace arthrosim::common {
 namespace {
@@ -108,6 +111,51 @@ TEST(EffectLedger, TableRoundTrip) {
   }
   EXPECT_THROW(EffectLedger::from_table("comak", {"ligaments"}, {}, {1}, "k.h5"), InputError);
   EXPECT_THROW(EffectLedger::from_table("comak", {"ligaments"}, {""}, {-4}, "k.h5"), InputError);
+}
+
+TEST(EffectLedger, Hdf5RoundTrip) {
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("arthrosim_effects_test_" + std::to_string(getpid()) + ".h5"))
+                               .string();
+  EffectLedger ledger("surface:gait");
+  ledger.record("foundation_springs", 3781, "femur");
+  ledger.record("mesh_contact", 2, "femur-tibia_medial");
+  {
+    H5File f(path, H5File::Mode::kTruncate);
+    write_effect_ledger(f, EffectLedger("old"));  // replaced below, not appended to
+    write_effect_ledger(f, ledger);
+  }
+  {
+    H5File f(path, H5File::Mode::kRead);
+    EXPECT_EQ(f.read_strings("/effects/built"),
+              (std::vector<std::string>{"foundation_springs", "mesh_contact"}));
+    const EffectLedger back = read_effect_ledger(f);
+    EXPECT_EQ(back.stage(), "surface:gait");
+    EXPECT_EQ(back.to_text(), ledger.to_text());
+    EXPECT_FALSE(back.built("osmotic_pressure"));
+  }
+  {
+    H5File f(path, H5File::Mode::kTruncate);
+    write_effect_ledger(f, EffectLedger("post"));  // nothing built is recorded too
+  }
+  {
+    H5File f(path, H5File::Mode::kRead);
+    EXPECT_TRUE(read_effect_ledger(f).records().empty());
+  }
+  {
+    H5File f(path, H5File::Mode::kTruncate);  // no ledger at all
+    f.write("/x", std::vector<int>{1});
+  }
+  {
+    H5File f(path, H5File::Mode::kRead);
+    try {
+      read_effect_ledger(f);
+      ADD_FAILURE() << "missing ledger accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("/effects/built"), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove(path);
 }
 
 }  // namespace
