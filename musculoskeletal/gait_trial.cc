@@ -1,5 +1,6 @@
 #include "musculoskeletal/gait_trial.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -227,6 +228,21 @@ TrialDescription read_trial_description(const std::string& path) {
 
 namespace {
 
+// Line number (1-based) of the column-label line of a storage file: the line
+// after "endheader". Data row r (0-based) is then on line offset + 1 + r (the
+// reader accepts no blank lines among the data). Used only to put line
+// numbers in messages about values the reader accepted (time order, NaN).
+int label_line(const std::string& file) {
+  std::ifstream in(file);
+  std::string s;
+  int line = 0;
+  while (std::getline(in, s)) {
+    ++line;
+    if (trim(s) == "endheader") return line + 1;
+  }
+  return 0;
+}
+
 struct LoadedTable {
   Eigen::VectorXd time;
   Eigen::MatrixXd values;  // columns in the order of `quantities`, signs applied
@@ -273,16 +289,21 @@ LoadedTable load_columns(const TrialDescription& d, const std::string& file,
     }
     out.values.col(k) = it->second.sign * table.data.col(c);
   }
+  const int labels_at = label_line(file);
+  auto line_of = [&](Eigen::Index r) { return labels_at > 0 ? labels_at + 1 + static_cast<int>(r) : 0; };
   for (Eigen::Index r = 0; r < out.values.rows(); ++r) {
-    if (!std::isfinite(out.time(r))) {
-      throw InputError(file, 0, "non-finite time in data row " + std::to_string(r + 1));
+    if (!std::isfinite(out.time(r))) throw InputError(file, line_of(r), "non-finite time");
+    if (r > 0 && !(out.time(r) > out.time(r - 1))) {
+      std::ostringstream s;
+      s << "time must increase strictly, found " << out.time(r) << " s after " << out.time(r - 1) << " s";
+      throw InputError(file, line_of(r), s.str());
     }
     for (Eigen::Index k = 0; k < out.values.cols(); ++k) {
       if (!std::isfinite(out.values(r, k))) {
         std::ostringstream s;
-        s << "non-finite value in column '" << d.columns.at(quantities[k]).label << "' at data row "
-          << r + 1 << " (time " << out.time(r) << " s)";
-        throw InputError(file, 0, s.str());
+        s << "non-finite value in column '" << d.columns.at(quantities[k]).label << "' (time "
+          << out.time(r) << " s)";
+        throw InputError(file, line_of(r), s.str());
       }
     }
   }

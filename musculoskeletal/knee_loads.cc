@@ -1,6 +1,7 @@
 #include "musculoskeletal/knee_loads.h"
 
 #include <cmath>
+#include <utility>
 #include <sstream>
 
 #include "common/error.h"

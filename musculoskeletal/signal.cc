@@ -1,5 +1,6 @@
 #include "musculoskeletal/signal.h"
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <sstream>

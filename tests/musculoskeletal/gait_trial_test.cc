@@ -1,0 +1,221 @@
+// Tests of musculoskeletal/gait_trial.h: the trial description, loading the
+// bundled SYNTHETIC trial, resampling/filtering, and file:line errors.
+#include "musculoskeletal/gait_trial.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "common/error.h"
+#include "musculoskeletal/knee_loads.h"
+
+namespace arthrosim::musculoskeletal {
+namespace {
+
+const std::string kTrial = std::string(ARTHROSIM_SOURCE_DIR) + "/data/trials/synthetic_gait/trial.yaml";
+constexpr double kG = 9.80665;
+
+std::string message_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "(no exception)";
+}
+
+// A scratch folder with a copy of the bundled trial that tests may spoil.
+std::filesystem::path scratch_copy(const std::string& name) {
+  const auto dir = std::filesystem::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const char* f : {"trial.yaml", "ik.mot", "grf.mot"}) {
+    std::filesystem::copy_file(std::filesystem::path(kTrial).parent_path() / f, dir / f);
+  }
+  return dir;
+}
+
+void replace_in_file(const std::filesystem::path& p, const std::string& from, const std::string& to) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  std::string text = s.str();
+  const auto pos = text.find(from);
+  ASSERT_NE(pos, std::string::npos) << from;
+  text.replace(pos, from.size(), to);
+  std::ofstream(p) << text;
+}
+
+TEST(TrialDescription, ReadsBundledSyntheticTrial) {
+  const TrialDescription d = read_trial_description(kTrial);
+  EXPECT_TRUE(d.synthetic);
+  EXPECT_NE(d.description.find("SYNTHETIC"), std::string::npos);
+  EXPECT_DOUBLE_EQ(d.subject_mass_kg, 61.0);
+  EXPECT_DOUBLE_EQ(d.subject_height_m, 1.65);
+  EXPECT_EQ(d.side, Side::kRight);
+  EXPECT_EQ(d.columns.at("knee_flexion").label, "knee_angle_r");
+  EXPECT_EQ(d.columns.at("knee_flexion").sign, 1.0);
+  EXPECT_TRUE(std::filesystem::exists(d.kinematics_file));
+  EXPECT_TRUE(std::filesystem::exists(d.grf_file));
+}
+
+TEST(TrialDescription, ErrorsNameFileAndLine) {
+  auto parse = [](const std::string& text) {
+    std::istringstream in(text);
+    return parse_trial_description(in, "t.yaml", "");
+  };
+  const std::string ok =
+      "subject_mass_kg: 61\nsubject_height_m: 1.65\nside: right\n"
+      "lab_frame: opensim_x_forward_y_up_z_right\nkinematics_file: ik.mot\n"
+      "knee_loads_file: l.sto\n"
+      "column.hip_flexion: a\ncolumn.hip_adduction: b\ncolumn.hip_rotation: c\n"
+      "column.knee_flexion: -knee_angle_r   # gait2392 sign\ncolumn.ankle_flexion: e\n"
+      "column.knee_force_x: fx\ncolumn.knee_force_y: fy\ncolumn.knee_force_z: fz\n"
+      "column.knee_moment_x: mx\ncolumn.knee_moment_y: my\ncolumn.knee_moment_z: mz\n";
+  const TrialDescription d = parse(ok);
+  EXPECT_EQ(d.columns.at("knee_flexion").label, "knee_angle_r");
+  EXPECT_EQ(d.columns.at("knee_flexion").sign, -1.0);
+  EXPECT_EQ(d.columns.at("knee_flexion").line, 10);
+  EXPECT_NE(message_of([&] { parse(ok + "colour: red\n"); }).find("t.yaml:18: error: unknown key 'colour'"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse("subject_mass_kg: sixty\n"); }).find("t.yaml:1: error: expected a finite number"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse(ok + "side: left\n"); }).find("t.yaml:18: error: duplicate key 'side' (first on line 3)"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse("subject:\n  mass_kg: 61\n"); }).find("t.yaml:1: error:"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse(ok + "column.knee_angle: x\n"); }).find("t.yaml:18: error: unknown quantity"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse("lab_frame: z_up\n"); }).find("t.yaml:1: error: expected lab_frame"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse(ok + "column.pelvis_tx: tx\n"); }).find("all six pelvis columns"),
+            std::string::npos);
+  EXPECT_NE(message_of([&] { parse("subject_mass_kg: 61\n"); }).find("missing required key"),
+            std::string::npos);
+}
+
+// The bundled trial: one gait cycle of 1.14 s at 100 Hz (115 samples), angles in
+// radians, vertical GRF with two peaks of ~1.10 BW (the key values of the
+// generator; the filter is not applied to forces, and linear resampling onto
+// the same grid returns the file's values), a valley below 0.85 BW, and zero
+// force in swing (toe-off at 60 % = 0.684 s).
+TEST(GaitTrial, BundledSyntheticTrial) {
+  const GaitTrial t = load_gait_trial(kTrial);
+  EXPECT_TRUE(t.synthetic);
+  ASSERT_EQ(t.num_samples(), 115);
+  EXPECT_NEAR(t.time(0), 0.0, 1e-12);
+  EXPECT_NEAR(t.time(114), 1.14, 1e-9);
+  const double BW = 61.0 * kG;
+  const Eigen::VectorXd fy = t.grf_force_W.col(1) / BW;
+  // First peak in 0-30 % of stance, second in 60-100 %, valley between.
+  const double p1 = fy.segment(0, 20).maxCoeff(), p2 = fy.segment(40, 29).maxCoeff();
+  const double valley = fy.segment(20, 20).minCoeff();
+  EXPECT_NEAR(p1, 1.10, 0.01);
+  EXPECT_NEAR(p2, 1.10, 0.01);
+  EXPECT_LT(valley, 0.85);
+  EXPECT_GT(valley, 0.7);
+  for (int i = 0; i < t.num_samples(); ++i) {
+    if (t.time(i) > 0.69) {
+      EXPECT_EQ(t.grf_force_W.row(i).norm(), 0.0) << "swing sample " << i;
+    }
+  }
+  // AP braking/propulsion ~ -+0.2 BW and ML within 0.06 BW.
+  EXPECT_NEAR(t.grf_force_W.col(0).minCoeff() / BW, -0.20, 0.01);
+  EXPECT_NEAR(t.grf_force_W.col(0).maxCoeff() / BW, 0.20, 0.01);
+  EXPECT_LT(t.grf_force_W.col(2).cwiseAbs().maxCoeff() / BW, 0.06);
+  // Knee flexion in radians after filtering: loading-response peak ~18 deg near
+  // 15 % (sample 17), swing peak ~60 deg; the 6 Hz zero-lag filter lowers the
+  // swing peak by a little (measured: see the printed values).
+  const Eigen::VectorXd knee_deg = t.q.col(kKneeFlexion) * 180.0 / M_PI;
+  const double lr = knee_deg.segment(10, 15).maxCoeff();
+  const double swing = knee_deg.maxCoeff();
+  std::printf("knee flexion: loading-response peak %.2f deg, swing peak %.2f deg\n", lr, swing);
+  EXPECT_GT(lr, 15.0);
+  EXPECT_LT(lr, 20.0);
+  EXPECT_GT(swing, 55.0);
+  EXPECT_LT(swing, 62.0);
+  // Velocities exist and are consistent with the angle excursion (knee flexes
+  // ~56 deg in ~0.14 s around toe-off: several rad/s).
+  EXPECT_GT(t.qd.col(kKneeFlexion).cwiseAbs().maxCoeff(), 3.0);
+  EXPECT_LT(t.qd.col(kKneeFlexion).cwiseAbs().maxCoeff(), 10.0);
+}
+
+// Resampling to another rate keeps the duration and the force level.
+TEST(GaitTrial, ResamplesToRequestedRate) {
+  GaitTrialOptions o;
+  o.rate_hz = 250.0;
+  const GaitTrial t = load_gait_trial(kTrial, o);
+  EXPECT_EQ(t.num_samples(), 286);  // 1.14 s x 250 Hz + 1
+  EXPECT_NEAR(t.time(t.num_samples() - 1), 1.14, 1e-9);
+  EXPECT_NEAR(t.grf_force_W.col(1).maxCoeff() / (61.0 * kG), 1.10, 0.01);
+}
+
+// Knee loads of the bundled trial: in mid-stance the axial force on the tibia is
+// about the vertical GRF minus the shank+foot weight (the shank is within ~15
+// deg of vertical then, cos 15 deg = 0.97), pointing up the tibia (+Y), and the
+// swing loads are those of the segment weights and inertia only (< 100 N).
+TEST(GaitTrial, BundledTrialKneeLoads) {
+  const GaitTrial t = load_gait_trial(kTrial);
+  const KneeLoads k = compute_knee_loads(t, leg_model_for_trial(t));
+  const double w_sf = (0.0465 + 0.0145) * 61.0 * kG;
+  const int mid = 30;  // 0.30 s, ~44 % of stance
+  const double expected = t.grf_force_W(mid, 1) - w_sf;
+  EXPECT_GT(k.F_ext_T(mid, 1), 0.93 * expected);
+  EXPECT_LT(k.F_ext_T(mid, 1), 1.03 * expected);
+  for (int i = 75; i < 110; ++i) EXPECT_LT(k.F_ext_T.row(i).norm(), 100.0) << i;
+  double peak_add = 0.0, peak_flex = 0.0;
+  for (int i = 0; i < 69; ++i) {
+    peak_add = std::max(peak_add, k.M_ext_T(i, 0));
+    peak_flex = std::max(peak_flex, -k.M_ext_T(i, 2));
+  }
+  const double BWHt = 61.0 * kG * 1.65;
+  std::printf("external knee moments in stance: peak adduction %.1f N m (%.2f %%BW*Ht), peak flexion"
+              " %.1f N m (%.2f %%BW*Ht)\n", peak_add, 100 * peak_add / BWHt, peak_flex,
+              100 * peak_flex / BWHt);
+  // Healthy walking: first-peak external adduction moment ~2-3.5 %BW*Ht, flexion
+  // moment in loading response ~2-5 %BW*Ht (e.g. Kadaba 1989 ranges); the loose
+  // band 1-6 % checks orders of magnitude and signs of this synthetic trial.
+  EXPECT_GT(100 * peak_add / BWHt, 1.0);
+  EXPECT_LT(100 * peak_add / BWHt, 6.0);
+  EXPECT_GT(100 * peak_flex / BWHt, 1.0);
+  EXPECT_LT(100 * peak_flex / BWHt, 6.0);
+}
+
+TEST(GaitTrial, BadFilesGiveFileLineErrors) {
+  {
+    const auto dir = scratch_copy("missing_column");
+    replace_in_file(dir / "trial.yaml", "column.knee_flexion: knee_angle_r", "column.knee_flexion: knee_angle_x");
+    const std::string m = message_of([&] { load_gait_trial((dir / "trial.yaml").string()); });
+    EXPECT_NE(m.find("trial.yaml:"), std::string::npos) << m;
+    EXPECT_NE(m.find("'knee_angle_x'"), std::string::npos) << m;
+    EXPECT_NE(m.find("knee_angle_r"), std::string::npos) << m;  // lists the labels found
+  }
+  {
+    const auto dir = scratch_copy("bad_row");
+    replace_in_file(dir / "ik.mot", "0.05000000\t", "0.05000000\tabc\t");
+    const std::string m = message_of([&] { load_gait_trial((dir / "trial.yaml").string()); });
+    EXPECT_NE(m.find("ik.mot:15: error:"), std::string::npos) << m;
+  }
+  {
+    const auto dir = scratch_copy("nonmonotonic");
+    replace_in_file(dir / "grf.mot", "0.05000000\t", "0.03000000\t");
+    const std::string m = message_of([&] { load_gait_trial((dir / "trial.yaml").string()); });
+    // 8 header lines, labels on line 9, t = 0.05 s is data row 5 -> line 15.
+    EXPECT_NE(m.find("grf.mot:15: error: time must increase"), std::string::npos) << m;
+  }
+  {
+    const auto dir = scratch_copy("nan_value");
+    replace_in_file(dir / "ik.mot", "0.06000000\t", "0.06000000\tnan\t");
+    replace_in_file(dir / "ik.mot", "0.06000000\tnan\t-10.00000000\t", "0.06000000\tnan\t");
+    const std::string m = message_of([&] { load_gait_trial((dir / "trial.yaml").string()); });
+    EXPECT_NE(m.find("ik.mot:16: error:"), std::string::npos) << m;
+    EXPECT_NE(m.find("pelvis_tilt"), std::string::npos) << m;
+  }
+  EXPECT_THROW(read_trial_description("/nonexistent/trial.yaml"), common::InputError);
+}
+
+}  // namespace
+}  // namespace arthrosim::musculoskeletal
