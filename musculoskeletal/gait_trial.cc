@@ -220,7 +220,11 @@ TrialDescription parse_trial_description(std::istream& in, const std::string& so
   return d;
 }
 
-TrialDescription read_trial_description(const std::string& path) {
+TrialDescription read_trial_description(const std::string& given) {
+  // A folder stands for the trial.yaml inside it (scenes name a trial folder).
+  const std::string path = std::filesystem::is_directory(given)
+                               ? (std::filesystem::path(given) / "trial.yaml").string()
+                               : given;
   std::ifstream in(path);
   if (!in) throw InputError(path, 0, "cannot open the trial description");
   return parse_trial_description(in, path, std::filesystem::path(path).parent_path().string());

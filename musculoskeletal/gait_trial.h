@@ -84,7 +84,7 @@ struct TrialDescription {
   std::map<std::string, int> key_lines;          ///< key -> line (for messages)
 };
 
-/// Reads a trial description; throws common::InputError "file:line: error: ..."
+/// Reads a trial description (a folder means the trial.yaml inside it); throws common::InputError "file:line: error: ..."
 /// on unknown keys, nested YAML, bad numbers, duplicate or missing keys.
 TrialDescription read_trial_description(const std::string& path);
 /// Same from a stream; relative file names are resolved against `directory`.

@@ -63,6 +63,9 @@ TEST(TrialDescription, ReadsBundledSyntheticTrial) {
   EXPECT_EQ(d.columns.at("knee_flexion").sign, 1.0);
   EXPECT_TRUE(std::filesystem::exists(d.kinematics_file));
   EXPECT_TRUE(std::filesystem::exists(d.grf_file));
+  // The folder names the same trial.
+  const TrialDescription f = read_trial_description(std::filesystem::path(kTrial).parent_path().string());
+  EXPECT_EQ(f.kinematics_file, d.kinematics_file);
 }
 
 TEST(TrialDescription, ErrorsNameFileAndLine) {
