@@ -271,6 +271,11 @@ ShellElement::ShellElement(const std::array<Eigen::Vector3d, 4>& X,
     }
 }
 
+void ShellElement::slot_functions(double xi, double eta, double zeta, Eigen::Matrix<double, 8, 1>& phi,
+                                  Eigen::Matrix<double, 8, 3>& dphi) const {
+  dphi = slot_derivatives(xi, eta, zeta, h_, &phi);
+}
+
 void ShellElement::local_map(double xi, double eta, double zeta, Eigen::Matrix<double, 6, 6>& T,
                              Eigen::Matrix3d& frame, double& detJ) const {
   const auto P = slot_derivatives(xi, eta, zeta, h_);

@@ -83,6 +83,12 @@ class ShellElement {
   const std::array<double, 4>& nodal_areas() const { return nodal_area_; }
   const std::array<double, 4>& thickness() const { return h_; }
 
+  /// Slot functions phi_s at (xi, eta, zeta) (s = 2k: N_k multiplies r_k;
+  /// s = 2k+1: N_k zeta h_k/2 multiplies d_k) and their derivatives with
+  /// respect to (xi, eta, zeta) (columns). r = sum_s phi_s q_s.
+  void slot_functions(double xi, double eta, double zeta, Eigen::Matrix<double, 8, 1>& phi,
+                      Eigen::Matrix<double, 8, 3>& dphi) const;
+
   static constexpr int kNumEas = 5;
 
  private:

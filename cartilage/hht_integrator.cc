@@ -1,0 +1,240 @@
+#include "cartilage/hht_integrator.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "common/error.h"
+
+namespace arthrosim::cartilage {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+double weighted_max(const Eigen::VectorXd& x, const Eigen::VectorXd& w) {
+  return (x.cwiseAbs().cwiseProduct(w)).maxCoeff();
+}
+
+}  // namespace
+
+HhtIntegrator::HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& options)
+    : sys_(system), opts_(options) {
+  if (!(opts_.alpha >= -1.0 / 3.0 - 1e-15 && opts_.alpha <= 0))
+    throw common::InputError("HHT: alpha must be in [-1/3, 0], found " + std::to_string(opts_.alpha));
+  if (!(opts_.dt_s > 0)) throw common::InputError("HHT: dt must be > 0 s, found " + std::to_string(opts_.dt_s));
+  if (opts_.max_newton_iterations < 1 || opts_.max_halvings < 0)
+    throw common::InputError("HHT: max_newton_iterations >= 1 and max_halvings >= 0 required");
+  if (!opts_.quasi_static && !sys_.has_inertia())
+    throw common::InputError("HHT: dynamic integration needs an inertia term (or set quasi_static)");
+  gamma_ = 0.5 - opts_.alpha;
+  beta_ = 0.25 * (1 - opts_.alpha) * (1 - opts_.alpha);
+  dt_ = opts_.dt_s;
+  // Constraint elimination indices in the fixed pattern (rows/cols -> identity).
+  const auto& P = sys_.tangent_pattern();
+  const auto& c = sys_.constrained();
+  for (int j = 0; j < P.outerSize(); ++j)
+    for (int k = P.outerIndexPtr()[j]; k < P.outerIndexPtr()[j + 1]; ++k) {
+      const int i = P.innerIndexPtr()[k];
+      if (c[i] || c[j]) (i == j ? diag_index_ : zero_index_).push_back(k);
+    }
+  LinearSolverKind kind = LinearSolverKind::kUmfpack;
+  if (opts_.solver == LinearSolverChoice::kCholmod ||
+      (opts_.solver == LinearSolverChoice::kAuto && sys_.tangent_symmetric()))
+    kind = LinearSolverKind::kCholmod;
+  solver_ = std::make_unique<SparseDirectSolver>(kind);
+  stats_.linear_solver = to_string(kind);
+}
+
+HhtIntegrator::~HhtIntegrator() = default;
+
+void HhtIntegrator::constrain_matrix(Eigen::SparseMatrix<double>& K) const {
+  double* v = K.valuePtr();
+  for (int k : zero_index_) v[k] = 0;
+  for (int k : diag_index_) v[k] = 1;
+}
+
+bool HhtIntegrator::factorize(Eigen::SparseMatrix<double>& K, std::string& reason) {
+  auto t0 = Clock::now();
+  if (!solver_->analyzed()) {
+    solver_->analyze(K);
+    ++stats_.symbolic_analyses;
+  }
+  bool ok = solver_->factorize(K);
+  ++stats_.factorizations;
+  if (!ok && solver_->kind() == LinearSolverKind::kCholmod) {
+    // Reported switch, not a silent fallback: counted in statistics.
+    ++stats_.solver_switches;
+    solver_ = std::make_unique<SparseDirectSolver>(LinearSolverKind::kUmfpack);
+    stats_.linear_solver = to_string(LinearSolverKind::kUmfpack);
+    solver_->analyze(K);
+    ++stats_.symbolic_analyses;
+    ok = solver_->factorize(K);
+    ++stats_.factorizations;
+  }
+  stats_.factorization_s += since(t0);
+  if (!ok) reason = solver_->message();
+  return ok;
+}
+
+void HhtIntegrator::initialize(double t0, const Eigen::VectorXd& q0, const Eigen::VectorXd& v0) {
+  const int n = sys_.num_dofs();
+  if (q0.size() != n) throw common::InputError("HHT: initial q has size " + std::to_string(q0.size()) + ", expected " + std::to_string(n));
+  t_ = t0;
+  q_ = q0;
+  sys_.apply_constraints(t_, q_);
+  v_ = v0.size() == n ? v0 : Eigen::VectorXd::Zero(n);
+  a_ = Eigen::VectorXd::Zero(n);
+  h_prev_ = 0;
+  q_scale_ = 0;
+  for (int i = 0; i < n; ++i)
+    q_scale_ = std::max(q_scale_, std::abs(sys_.increment_weights()(i) * q_(i)));
+  if (q_scale_ == 0) q_scale_ = 1.0;
+  const auto& c = sys_.constrained();
+  for (int i = 0; i < n; ++i)
+    if (c[i]) v_(i) = 0;
+  EvalRequest req;
+  req.t = t_;
+  req.q = &q_;
+  req.v = opts_.quasi_static ? nullptr : &v_;
+  auto ta = Clock::now();
+  sys_.evaluate(req, F_, nullptr, nullptr);
+  stats_.assembly_s += since(ta);
+  if (!opts_.quasi_static) {
+    sys_.solve_mass(-F_, a_);
+    if (!a_.allFinite()) throw common::NumericalError("HHT: non-finite initial acceleration at t = " + std::to_string(t_));
+  }
+  stats_.status = IntegratorStatus::kRunning;
+}
+
+bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual) {
+  const int n = sys_.num_dofs();
+  const auto& c = sys_.constrained();
+  const double t1 = t_ + h;
+  Eigen::VectorXd q = q_, v = v_, a = a_, F, Ma, G, dq;
+  if (opts_.quasi_static && opts_.extrapolate_predictor && h_prev_ > 0) q += (h / h_prev_) * dq_prev_;
+  sys_.apply_constraints(t1, q);
+  const double ka = 1.0 / (beta_ * h * h), kv = gamma_ / (beta_ * h);
+  auto newmark = [&]() {
+    if (opts_.quasi_static) return;
+    a = ka * (q - q_ - h * v_) - (0.5 / beta_ - 1.0) * a_;
+    v = v_ + h * ((1 - gamma_) * a_ + gamma_ * a);
+  };
+  StepRecord rec;
+  rec.t_start = t_;
+  rec.dt = h;
+  double r_ref = 0, last_inc = std::numeric_limits<double>::infinity();
+  const Eigen::VectorXd& w = sys_.increment_weights();
+  for (int k = 0;; ++k) {
+    newmark();
+    EvalRequest req;
+    req.t = t1;
+    req.q = &q;
+    req.v = opts_.quasi_static ? nullptr : &v;
+    req.a = opts_.quasi_static ? nullptr : &a;
+    req.force_scale = opts_.quasi_static ? 1.0 : 1.0 + opts_.alpha;
+    req.kq = 1.0;
+    req.kv = opts_.quasi_static ? 0.0 : kv;
+    req.ka = opts_.quasi_static ? 0.0 : ka;
+    auto ta = Clock::now();
+    try {
+      sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
+    } catch (const common::NumericalError& e) {
+      stats_.assembly_s += since(ta);
+      reason = e.what();
+      return false;
+    }
+    stats_.assembly_s += since(ta);
+    G = opts_.quasi_static ? F : Eigen::VectorXd(Ma + (1 + opts_.alpha) * F - opts_.alpha * F_);
+    for (int i = 0; i < n; ++i)
+      if (c[i]) G(i) = 0;
+    const double r = G.norm();
+    last_residual = r;
+    rec.residual_norms.push_back(r);
+    if (!std::isfinite(r)) {
+      reason = "non-finite residual";
+      return false;
+    }
+    if (k == 0) r_ref = r;
+    const bool res_ok = r <= std::max(opts_.residual_rtol * r_ref, opts_.residual_atol_N);
+    const double change = weighted_max(q - q_, w);
+    const bool inc_ok = (k == 0) ? r <= opts_.residual_atol_N
+                                 : last_inc <= opts_.increment_rtol * change + opts_.increment_atol_m;
+    const bool roundoff = k > 0 && !res_ok && last_inc <= opts_.roundoff_increment_rel * q_scale_ &&
+                          r <= opts_.roundoff_residual_drop * r_ref;
+    if ((res_ok && inc_ok) || roundoff) {
+      if (roundoff) ++stats_.roundoff_acceptances;
+      dq_prev_ = q - q_;
+      h_prev_ = h;
+      t_ = t1;
+      q_ = q;
+      v_ = opts_.quasi_static ? Eigen::VectorXd::Zero(n) : v;
+      a_ = opts_.quasi_static ? Eigen::VectorXd::Zero(n) : a;
+      F_ = F;
+      ++stats_.steps;
+      if (opts_.keep_step_log) stats_.log.push_back(std::move(rec));
+      return true;
+    }
+    if (k >= opts_.max_newton_iterations) {
+      std::ostringstream s;
+      s << "Newton did not converge in " << opts_.max_newton_iterations << " iterations (residual " << r
+        << " N, first " << r_ref << " N, last increment " << last_inc << " m)";
+      reason = s.str();
+      return false;
+    }
+    constrain_matrix(K_);
+    if (!factorize(K_, reason)) return false;
+    auto ts = Clock::now();
+    dq = solver_->solve(-G);
+    stats_.solve_s += since(ts);
+    ++stats_.newton_iterations;
+    if (!dq.allFinite()) {
+      reason = "non-finite Newton increment";
+      return false;
+    }
+    for (int i = 0; i < n; ++i)
+      if (c[i]) dq(i) = 0;
+    q += dq;
+    last_inc = weighted_max(dq, w);
+    rec.increment_norms.push_back(last_inc);
+  }
+}
+
+void HhtIntegrator::advance_to(double t_end) {
+  if (stats_.status == IntegratorStatus::kNotStarted)
+    throw common::InputError("HHT: initialize() must be called before advance_to()");
+  auto t0 = Clock::now();
+  int halvings = 0;
+  // Tolerance on reaching t_end: a billionth of the nominal step.
+  while (t_end - t_ > 1e-9 * opts_.dt_s) {
+    const double h = std::min(dt_, t_end - t_);
+    std::string reason;
+    double r = 0;
+    if (attempt(h, reason, r)) {
+      halvings = 0;
+      if (dt_ < opts_.dt_s && ++successes_since_halving_ >= opts_.steps_before_growth) {
+        dt_ = std::min(2 * dt_, opts_.dt_s);
+        successes_since_halving_ = 0;
+      }
+      continue;
+    }
+    ++stats_.rejected_steps;
+    std::ostringstream s;
+    s << "t=" << t_ << " s, dt=" << h << " s: " << reason;
+    stats_.rejections.push_back(s.str());
+    if (++halvings > opts_.max_halvings) {
+      stats_.status = IntegratorStatus::kFailed;
+      stats_.total_s += since(t0);
+      std::ostringstream m;
+      m << "HHT: step from t = " << t_ << " s failed after " << opts_.max_halvings
+        << " halvings (last dt " << h << " s, residual " << r << " N): " << reason;
+      throw common::NumericalError(m.str());
+    }
+    dt_ = 0.5 * h;
+    successes_since_halving_ = 0;
+  }
+  stats_.total_s += since(t0);
+}
+
+}  // namespace arthrosim::cartilage

@@ -1,0 +1,136 @@
+#pragma once
+// Hilber-Hughes-Taylor (HHT-alpha) time integration with Newton iterations,
+// and a quasi-static mode, for any TimeIntegrable (e.g. ShellModel).
+//
+// HHT (Hilber, Hughes & Taylor 1977), alpha in [-1/3, 0],
+// gamma = (1 - 2 alpha)/2, beta = (1 - alpha)^2/4:
+//   M a_{n+1} + (1 + alpha) F(q_{n+1}, v_{n+1}, t_{n+1}) - alpha F(q_n, v_n, t_n) = 0
+//   q_{n+1} = q_n + h v_n + h^2 ((1/2 - beta) a_n + beta a_{n+1})
+//   v_{n+1} = v_n + h ((1 - gamma) a_n + gamma a_{n+1})
+// Unknown: q_{n+1} (a, v follow from the Newmark relations); Newton matrix
+//   ka M + (1 + alpha)(dF/dq + kv dF/dv),  ka = 1/(beta h^2), kv = gamma/(beta h).
+// alpha = 0 is the trapezoidal rule (no numerical dissipation).
+// Quasi-static mode: F(q_{n+1}, 0, t_{n+1}) = 0 at each time (load) step.
+//
+// Convergence of a step (both must hold; norms over unconstrained coordinates):
+//   residual:  ||G||_2 <= max(residual_rtol * ||G^(0)||_2, residual_atol_N)
+//              (G^(0): residual of the step's first iterate, in N);
+//   increment: max_i w_i |dq_i| <= increment_rtol * max_i w_i |q_i - q_n,i| + increment_atol_m
+//              (w_i = 1 for positions, h/2 for transverse gradients, so both
+//              are lengths in m).
+// Round-off stagnation (documented exception): when the increment has dropped
+// below roundoff_increment_rel * (largest position coordinate) -- a few
+// thousand ulps -- and the residual has fallen by roundoff_residual_drop from
+// its first value, the iterate cannot be improved in double precision and the
+// step is accepted (counted in statistics.roundoff_acceptances). This matters
+// for very thin shells, whose residual floor eps * E t L can exceed
+// residual_atol_N.
+// Quasi-static predictor: q_{n+1}^(0) = q_n + (h/h_prev)(q_n - q_{n-1})
+// (extrapolate_predictor), which saves most of the Newton iterations of
+// load-controlled large-rotation paths.
+// A step whose Newton iteration does not converge in max_newton_iterations,
+// or meets a non-finite value or a failed factorisation, is rejected (counted,
+// reason logged) and retried with half the step; after max_halvings
+// consecutive halvings the run stops with common::NumericalError naming the
+// time and the residual. After steps_before_growth successful steps the step
+// doubles again, up to dt_s.
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cartilage/linear_solver.h"
+#include "cartilage/time_integrable.h"
+
+namespace arthrosim::cartilage {
+
+enum class LinearSolverChoice {
+  kAuto,     ///< CHOLMOD when every term is symmetric, else UMFPACK
+  kCholmod,  ///< force CHOLMOD (switches to UMFPACK, counted, if not SPD)
+  kUmfpack,  ///< force UMFPACK
+};
+
+struct IntegratorOptions {
+  bool quasi_static = false;       ///< no inertia, F(q, 0, t) = 0 per step
+  double alpha = -0.2;             ///< HHT alpha in [-1/3, 0]; seed 002: -0.2
+  double dt_s = 1e-4;              ///< nominal step [s] (> 0); seed 002: 1e-4 s
+  int max_newton_iterations = 15;  ///< per attempt, >= 1
+  double residual_rtol = 1e-8;     ///< relative residual tolerance
+  double residual_atol_N = 1e-10;  ///< absolute residual tolerance [N]
+  double increment_rtol = 1e-8;    ///< relative increment tolerance
+  double increment_atol_m = 1e-14; ///< absolute increment tolerance [m]
+  double roundoff_increment_rel = 1e-11;  ///< see "round-off stagnation"
+  double roundoff_residual_drop = 1e-3;   ///< required ||G|| / ||G^(0)||
+  bool extrapolate_predictor = true;      ///< quasi-static secant predictor
+  int max_halvings = 10;           ///< consecutive halvings before giving up
+  int steps_before_growth = 4;     ///< successful steps before doubling dt back
+  LinearSolverChoice solver = LinearSolverChoice::kAuto;
+  bool keep_step_log = true;       ///< keep per-step residual histories
+};
+
+enum class IntegratorStatus { kNotStarted, kRunning, kFailed };
+
+struct StepRecord {
+  double t_start = 0, dt = 0;
+  std::vector<double> residual_norms;   ///< ||G|| at each iterate [N]
+  std::vector<double> increment_norms;  ///< weighted increment [m]
+};
+
+struct IntegratorStatistics {
+  IntegratorStatus status = IntegratorStatus::kNotStarted;
+  long steps = 0;              ///< accepted steps
+  long rejected_steps = 0;     ///< attempts rejected (each one halves the step)
+  long newton_iterations = 0;  ///< linear solves in accepted + rejected attempts
+  long factorizations = 0;
+  long symbolic_analyses = 0;
+  long solver_switches = 0;    ///< CHOLMOD -> UMFPACK after a non-SPD matrix
+  long roundoff_acceptances = 0;  ///< steps accepted by round-off stagnation
+  double assembly_s = 0, factorization_s = 0, solve_s = 0, total_s = 0;  ///< wall time
+  std::string linear_solver;   ///< solver in use
+  std::vector<std::string> rejections;  ///< "t=..., dt=...: reason"
+  std::vector<StepRecord> log;          ///< accepted steps (if keep_step_log)
+};
+
+class HhtIntegrator {
+ public:
+  /// The system must outlive the integrator.
+  HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& options);
+  ~HhtIntegrator();
+
+  /// Sets the initial state (constraints applied at t0) and, in dynamic mode,
+  /// the initial acceleration from M a0 = -F(q0, v0, t0).
+  void initialize(double t0, const Eigen::VectorXd& q0, const Eigen::VectorXd& v0 = Eigen::VectorXd());
+  /// Advances to t_end in steps of at most dt_s (halving when needed).
+  void advance_to(double t_end);
+
+  double time() const { return t_; }
+  const Eigen::VectorXd& q() const { return q_; }
+  const Eigen::VectorXd& v() const { return v_; }
+  const Eigen::VectorXd& a() const { return a_; }
+  double current_dt() const { return dt_; }
+  const IntegratorStatistics& statistics() const { return stats_; }
+  const IntegratorOptions& options() const { return opts_; }
+
+ private:
+  /// One attempt from (t_, q_, v_, a_) over h; true on convergence (state
+  /// advanced). On failure the state is untouched and `reason` says why.
+  bool attempt(double h, std::string& reason, double& last_residual);
+  bool factorize(Eigen::SparseMatrix<double>& K, std::string& reason);
+  void constrain_matrix(Eigen::SparseMatrix<double>& K) const;
+
+  TimeIntegrable& sys_;
+  IntegratorOptions opts_;
+  double gamma_ = 0.5, beta_ = 0.25;
+  double t_ = 0, dt_ = 0;
+  int successes_since_halving_ = 0;
+  Eigen::VectorXd q_, v_, a_, F_;  // F_: F at the current accepted state
+  Eigen::VectorXd dq_prev_;          // last accepted step's change (predictor)
+  double h_prev_ = 0, q_scale_ = 0;
+  Eigen::SparseMatrix<double> K_;
+  std::vector<int> zero_index_, diag_index_;
+  std::unique_ptr<SparseDirectSolver> solver_;
+  IntegratorStatistics stats_;
+};
+
+}  // namespace arthrosim::cartilage

@@ -1,0 +1,619 @@
+#include "cartilage/shell_model.h"
+
+#include <omp.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "cartilage/linear_solver.h"
+#include "common/error.h"
+
+namespace arthrosim::cartilage {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& a) {
+  Eigen::Matrix3d S;
+  S << 0, -a.z(), a.y(), a.z(), 0, -a.x(), -a.y(), a.x(), 0;
+  return S;
+}
+
+// ---------------------------------------------------------------------------
+// internal_forces: f_int = sum_e dPi_e/dq_e. Elements are evaluated in
+// parallel into per-element buffers, then summed serially in element order,
+// so the result is bit-identical for any number of threads.
+class InternalForcesTerm final : public ShellTerm {
+ public:
+  explicit InternalForcesTerm(ShellModel& model)
+      : ShellTerm("internal_forces"), model_(model), fe_(model.num_elements()), Ke_(model.num_elements()) {}
+
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
+    const int ne = model_.num_elements();
+    const bool want_K = K != nullptr;
+    auto t0 = std::chrono::steady_clock::now();
+#pragma omp parallel for schedule(static) if (ne > 64)
+    for (int e = 0; e < ne; ++e) {
+      const Vector24 qe = model_.gather(e, ctx.q);
+      model_.element(e).internal_force(qe, fe_[e], want_K ? &Ke_[e] : nullptr);
+    }
+    auto& stats = model_.mutable_statistics();
+    stats.element_time_s += seconds_since(t0);
+    t0 = std::chrono::steady_clock::now();
+    double* values = want_K ? K->matrix().valuePtr() : nullptr;
+    for (int e = 0; e < ne; ++e) {
+      for (int l = 0; l < 24; ++l) F(model_.global_index(e, l)) += fe_[e](l);
+      if (!want_K) continue;
+      const int* idx = model_.element_value_indices(e);
+      for (int m = 0; m < 24; ++m)
+        for (int l = 0; l < 24; ++l) values[idx[24 * l + m]] += ctx.kq * Ke_[e](l, m);
+    }
+    stats.scatter_time_s += seconds_since(t0);
+  }
+
+ private:
+  ShellModel& model_;
+  mutable std::vector<Vector24> fe_;
+  mutable std::vector<Matrix24> Ke_;
+};
+
+// ---------------------------------------------------------------------------
+// Shared geometry of the foundation terms: per node the reference position,
+// unit reference transverse direction and nodal area; the anchor moves with
+// the bone: T(t) = X_WB(t) X_WB(0)^-1.
+struct FoundationGeometry {
+  explicit FoundationGeometry(const ShellModel& model, BoneMotion b) : bone(std::move(b)) {
+    if (!bone.pose || !bone.spatial_velocity)
+      throw common::InputError("foundation: BoneMotion needs both pose and spatial_velocity callbacks");
+    X_WB0_inv = bone.pose(0.0).inverse();
+    const int n = model.num_nodes();
+    r0.resize(n);
+    n0.resize(n);
+    area = model.nodal_areas();
+    for (int i = 0; i < n; ++i) {
+      r0[i] = model.reference_position(i);
+      n0[i] = model.reference_director(i).normalized();
+    }
+  }
+  /// Anchor point, direction, their time derivatives at time t for node i.
+  void at(double t, const Eigen::Isometry3d& X_WB, const Eigen::Matrix<double, 6, 1>& V, int i,
+          Eigen::Vector3d& p, Eigen::Vector3d& n, Eigen::Vector3d& p_dot, Eigen::Vector3d& n_dot) const {
+    const Eigen::Isometry3d T = X_WB * X_WB0_inv;
+    p = T * r0[i];
+    n = T.linear() * n0[i];
+    const Eigen::Vector3d w = V.head<3>();
+    p_dot = V.tail<3>() + w.cross(p - X_WB.translation());
+    n_dot = w.cross(n);
+  }
+  BoneMotion bone;
+  Eigen::Isometry3d X_WB0_inv;
+  std::vector<Eigen::Vector3d> r0, n0;
+  Eigen::VectorXd area;
+};
+
+class FoundationSpringsTerm final : public ShellTerm {
+ public:
+  FoundationSpringsTerm(const ShellModel& model, double k, BoneMotion bone)
+      : ShellTerm("foundation_springs"), geo_(model, std::move(bone)), k_(k) {
+    if (!(k >= 0) || !std::isfinite(k))
+      throw common::InputError("foundation_springs: stiffness k must be >= 0 N/m^3, found " + std::to_string(k));
+  }
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
+    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
+    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
+    for (size_t i = 0; i < geo_.r0.size(); ++i) {
+      Eigen::Vector3d p, n, pd, nd;
+      geo_.at(ctx.t, X, V, static_cast<int>(i), p, n, pd, nd);
+      const double delta = n.dot(p - ctx.q.segment<3>(6 * i));
+      // Compressive-only. At delta = 0 (the reference state) the spring is
+      // taken as engaged: zero force but its stiffness in the tangent, so the
+      // first Newton step from rest sees the foundation.
+      if (delta < 0) continue;
+      const double kA = k_ * geo_.area(i);
+      F.segment<3>(6 * i) -= kA * delta * n;
+      if (K) K->add_block3(i, 0, i, 0, ctx.kq * kA * n * n.transpose());
+    }
+  }
+
+ private:
+  FoundationGeometry geo_;
+  double k_;
+};
+
+class FoundationDampingTerm final : public ShellTerm {
+ public:
+  FoundationDampingTerm(const ShellModel& model, double c, BoneMotion bone, bool compressive_only)
+      : ShellTerm("foundation_damping"), geo_(model, std::move(bone)), c_(c), compressive_only_(compressive_only) {
+    if (!(c >= 0) || !std::isfinite(c))
+      throw common::InputError("foundation_damping: coefficient c must be >= 0 N s/m^3, found " + std::to_string(c));
+  }
+  // The d n/dt term couples positions and velocities asymmetrically when the
+  // bone rotates.
+  bool symmetric() const override { return geo_.bone.at_rest; }
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
+    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
+    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
+    for (size_t i = 0; i < geo_.r0.size(); ++i) {
+      Eigen::Vector3d p, n, pd, nd;
+      geo_.at(ctx.t, X, V, static_cast<int>(i), p, n, pd, nd);
+      const Eigen::Vector3d r = ctx.q.segment<3>(6 * i);
+      if (compressive_only_ && n.dot(p - r) < 0) continue;
+      const Eigen::Vector3d v = ctx.v.segment<3>(6 * i);
+      const double delta_dot = nd.dot(p - r) + n.dot(pd - v);
+      const double cA = c_ * geo_.area(i);
+      F.segment<3>(6 * i) -= cA * delta_dot * n;
+      if (K) {
+        Eigen::Matrix3d B = ctx.kv * cA * n * n.transpose();
+        if (!geo_.bone.at_rest) B += ctx.kq * cA * n * nd.transpose();
+        K->add_block3(i, 0, i, 0, B);
+      }
+    }
+  }
+
+ private:
+  FoundationGeometry geo_;
+  double c_;
+  bool compressive_only_;
+};
+
+// ---------------------------------------------------------------------------
+// Follower pressure on the face zeta = zf: external virtual work
+//   dW = int p n . dr da = int p (a1 x a2) . dr dxi deta,  a_alpha = dr/dxi_alpha
+// at zeta = zf; 2x2 Gauss is exact (integrand bi-quadratic). Tangent of
+// F = -f_ext: dF_s/dq_t = -p phi_s (phi_t,xi (-[a2]x) + phi_t,eta [a1]x).
+class PressureTerm final : public ShellTerm {
+ public:
+  PressureTerm(const ShellModel& model, std::string name, double zf, std::function<double(double)> p)
+      : ShellTerm(std::move(name)), model_(model), zf_(zf), p_(std::move(p)),
+        fe_(model.num_elements()), Ke_(model.num_elements()) {
+    if (!(zf >= -1 && zf <= 1))
+      throw common::InputError(this->name() + ": face_zeta must be in [-1, 1], found " + std::to_string(zf));
+    if (!p_) throw common::InputError(this->name() + ": pressure function is empty");
+  }
+  bool symmetric() const override { return false; }
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
+    const double p = p_(ctx.t);
+    if (!std::isfinite(p)) throw common::NumericalError(name() + ": non-finite pressure at t = " + std::to_string(ctx.t));
+    if (p == 0) return;
+    const int ne = model_.num_elements();
+    const bool want_K = K != nullptr;
+    const double g = 1.0 / std::sqrt(3.0);
+#pragma omp parallel for schedule(static) if (ne > 64)
+    for (int e = 0; e < ne; ++e) {
+      const Vector24 qe = model_.gather(e, ctx.q);
+      const Eigen::Map<const Eigen::Matrix<double, 3, 8>> Qt(qe.data());
+      fe_[e].setZero();
+      if (want_K) Ke_[e].setZero();
+      for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+          Eigen::Matrix<double, 8, 1> phi;
+          Eigen::Matrix<double, 8, 3> dphi;
+          model_.element(e).slot_functions(i ? g : -g, j ? g : -g, zf_, phi, dphi);
+          const Eigen::Vector3d a1 = Qt * dphi.col(0), a2 = Qt * dphi.col(1);
+          const Eigen::Vector3d na = a1.cross(a2);
+          for (int s = 0; s < 8; ++s) fe_[e].segment<3>(3 * s) -= p * phi(s) * na;
+          if (!want_K) continue;
+          const Eigen::Matrix3d S1 = -skew(a2), S2 = skew(a1);
+          for (int t = 0; t < 8; ++t) {
+            const Eigen::Matrix3d dna = dphi(t, 0) * S1 + dphi(t, 1) * S2;
+            for (int s = 0; s < 8; ++s) Ke_[e].block<3, 3>(3 * s, 3 * t) -= p * phi(s) * dna;
+          }
+        }
+    }
+    double* values = want_K ? K->matrix().valuePtr() : nullptr;
+    for (int e = 0; e < ne; ++e) {
+      for (int l = 0; l < 24; ++l) F(model_.global_index(e, l)) += fe_[e](l);
+      if (!want_K) continue;
+      const int* idx = model_.element_value_indices(e);
+      for (int m = 0; m < 24; ++m)
+        for (int l = 0; l < 24; ++l) values[idx[24 * l + m]] += ctx.kq * Ke_[e](l, m);
+    }
+  }
+
+ private:
+  const ShellModel& model_;
+  double zf_;
+  std::function<double(double)> p_;
+  mutable std::vector<Vector24> fe_;
+  mutable std::vector<Matrix24> Ke_;
+};
+
+class PointLoadsTerm final : public ShellTerm {
+ public:
+  PointLoadsTerm(const ShellModel& model, std::string name, std::vector<std::pair<int, Eigen::Vector3d>> loads,
+                 std::function<double(double)> scale)
+      : ShellTerm(std::move(name)), loads_(std::move(loads)), scale_(std::move(scale)) {
+    for (const auto& [node, f] : loads_)
+      if (node < 0 || node >= model.num_nodes() || !f.allFinite())
+        throw common::InputError(this->name() + ": node index must be in [0, " + std::to_string(model.num_nodes()) +
+                                 ") with a finite force, found node " + std::to_string(node));
+    if (!scale_) throw common::InputError(this->name() + ": scale function is empty");
+  }
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler*) const override {
+    const double s = scale_(ctx.t);
+    for (const auto& [node, f] : loads_) F.segment<3>(6 * node) -= s * f;
+  }
+
+ private:
+  std::vector<std::pair<int, Eigen::Vector3d>> loads_;
+  std::function<double(double)> scale_;
+};
+
+// Conservative director couple: potential -M theta(d), theta the angle of d
+// about the axis e; grad theta = (e x d)/|d_perp|^2 and its Hessian
+//   [e]x/|d_perp|^2 - 2 (e x d) d_perp^T/|d_perp|^4   (symmetric).
+class DirectorMomentsTerm final : public ShellTerm {
+ public:
+  DirectorMomentsTerm(const ShellModel& model, std::string name, const Eigen::Vector3d& axis,
+                      std::vector<std::pair<int, double>> moments, std::function<double(double)> scale)
+      : ShellTerm(std::move(name)), e_(axis.normalized()), moments_(std::move(moments)), scale_(std::move(scale)) {
+    if (!(axis.norm() > 0) || !axis.allFinite()) throw common::InputError(this->name() + ": axis must be a non-zero vector");
+    for (const auto& [node, m] : moments_)
+      if (node < 0 || node >= model.num_nodes() || !std::isfinite(m))
+        throw common::InputError(this->name() + ": invalid node " + std::to_string(node) + " or moment");
+    if (!scale_) throw common::InputError(this->name() + ": scale function is empty");
+  }
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
+    const double s = scale_(ctx.t);
+    for (const auto& [node, m] : moments_) {
+      const Eigen::Vector3d d = ctx.q.segment<3>(6 * node + 3);
+      const Eigen::Vector3d dp = d - d.dot(e_) * e_;
+      const double r2 = dp.squaredNorm();
+      if (!(r2 > 0)) throw common::NumericalError(name() + ": director of node " + std::to_string(node) + " is parallel to the moment axis");
+      const Eigen::Vector3d exd = e_.cross(d);
+      const double M = s * m;
+      F.segment<3>(6 * node + 3) -= M * exd / r2;
+      if (K) {
+        const Eigen::Matrix3d H = skew(e_) / r2 - 2.0 * exd * dp.transpose() / (r2 * r2);
+        K->add_block3(node, 3, node, 3, -ctx.kq * M * H);
+      }
+    }
+  }
+
+ private:
+  Eigen::Vector3d e_;
+  std::vector<std::pair<int, double>> moments_;
+  std::function<double(double)> scale_;
+};
+
+class InertiaTerm final : public ShellTerm {
+ public:
+  explicit InertiaTerm(const ShellModel& model) : ShellTerm("inertia"), model_(model) {}
+  bool inertial() const override { return true; }
+  void add(const TermContext& ctx, Eigen::VectorXd& Ma, TangentAssembler* K) const override {
+    Ma.noalias() += model_.mass_matrix() * ctx.a;
+    if (K && ctx.ka != 0) {
+      const double* m = model_.mass_matrix().valuePtr();
+      double* k = K->matrix().valuePtr();
+      const Eigen::Index nnz = model_.mass_matrix().nonZeros();
+      for (Eigen::Index i = 0; i < nnz; ++i) k[i] += ctx.ka * m[i];
+    }
+  }
+
+ private:
+  const ShellModel& model_;
+};
+
+}  // namespace
+
+BoneMotion BoneMotion::fixed() {
+  BoneMotion b;
+  b.pose = [](double) { return Eigen::Isometry3d::Identity(); };
+  b.spatial_velocity = [](double) { return Eigen::Matrix<double, 6, 1>::Zero().eval(); };
+  b.at_rest = true;
+  return b;
+}
+
+void TangentAssembler::add_element(int e, const Matrix24& Ke) {
+  const int* idx = model_.element_value_indices(e);
+  double* v = K_.valuePtr();
+  for (int m = 0; m < 24; ++m)
+    for (int l = 0; l < 24; ++l) v[idx[24 * l + m]] += Ke(l, m);
+}
+
+void TangentAssembler::add_block3(int a, int oa, int b, int ob, const Eigen::Matrix3d& B) {
+  double* v = K_.valuePtr();
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      const int k = model_.value_index(6 * a + oa + i, 6 * b + ob + j);
+      if (k < 0) throw common::NumericalError("TangentAssembler: entry outside the pattern");
+      v[k] += B(i, j);
+    }
+}
+
+ShellModel::ShellModel(const common::QuadMesh& mesh, const common::Points3& directors,
+                       const Eigen::VectorXd& thickness_m, const ShellMaterial& material)
+    : num_nodes_(mesh.num_nodes()), quads_(mesh.Q) {
+  const std::string where = mesh.name.empty() ? std::string("shell mesh") : mesh.name;
+  if (num_nodes_ == 0 || mesh.num_quads() == 0) throw common::InputError(where + ": expected a non-empty quad mesh");
+  if (directors.rows() != num_nodes_ || thickness_m.size() != num_nodes_)
+    throw common::InputError(where + ": expected " + std::to_string(num_nodes_) + " directors and thicknesses, found " +
+                             std::to_string(directors.rows()) + " and " + std::to_string(thickness_m.size()));
+  for (int e = 0; e < mesh.num_quads(); ++e)
+    for (int k = 0; k < 4; ++k)
+      if (quads_(e, k) < 0 || quads_(e, k) >= num_nodes_)
+        throw common::InputError(where + ": quad " + std::to_string(e) + " has node index " +
+                                 std::to_string(quads_(e, k)) + ", expected [0, " + std::to_string(num_nodes_) + ")");
+  q0_.resize(6 * num_nodes_);
+  weights_.resize(6 * num_nodes_);
+  for (int i = 0; i < num_nodes_; ++i) {
+    const Eigen::Vector3d D = directors.row(i).transpose();
+    if (!(D.norm() > 0) || !D.allFinite())
+      throw common::InputError(where + ": node " + std::to_string(i) + " has a zero or non-finite director");
+    q0_.segment<3>(6 * i) = mesh.V.row(i).transpose();
+    q0_.segment<3>(6 * i + 3) = D.normalized();
+    weights_.segment<3>(6 * i).setOnes();
+    weights_.segment<3>(6 * i + 3).setConstant(0.5 * thickness_m(i));
+  }
+  nodal_area_ = Eigen::VectorXd::Zero(num_nodes_);
+  elements_.reserve(mesh.num_quads());
+  for (int e = 0; e < mesh.num_quads(); ++e) {
+    std::array<Eigen::Vector3d, 4> X, D;
+    std::array<double, 4> h;
+    for (int k = 0; k < 4; ++k) {
+      const int n = quads_(e, k);
+      X[k] = q0_.segment<3>(6 * n);
+      D[k] = q0_.segment<3>(6 * n + 3);
+      h[k] = thickness_m(n);
+    }
+    elements_.push_back(std::make_unique<ShellElement>(X, D, h, material, where + ": quad " + std::to_string(e)));
+    for (int k = 0; k < 4; ++k) nodal_area_(quads_(e, k)) += elements_.back()->nodal_areas()[k];
+  }
+  constrained_.assign(6 * num_nodes_, 0);
+  build_pattern();
+}
+
+ShellModel::~ShellModel() = default;
+
+void ShellModel::build_pattern() {
+  // Node-block pattern: nodes a, b couple iff they share a quad.
+  std::vector<std::vector<int>> nb(num_nodes_);
+  for (int e = 0; e < quads_.rows(); ++e)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) nb[quads_(e, b)].push_back(quads_(e, a));
+  for (auto& v : nb) {
+    std::sort(v.begin(), v.end());
+    v.erase(std::unique(v.begin(), v.end()), v.end());
+  }
+  for (int i = 0; i < num_nodes_; ++i)
+    if (nb[i].empty()) throw common::InputError("shell mesh: node " + std::to_string(i) + " belongs to no quad");
+  const int n = 6 * num_nodes_;
+  std::vector<int> outer(n + 1), inner;
+  outer[0] = 0;
+  for (int b = 0; b < num_nodes_; ++b)
+    for (int j = 0; j < 6; ++j) {
+      for (int a : nb[b])
+        for (int i = 0; i < 6; ++i) inner.push_back(6 * a + i);
+      outer[6 * b + j + 1] = static_cast<int>(inner.size());
+    }
+  std::vector<double> vals(inner.size(), 0.0);
+  pattern_ = Eigen::Map<const Eigen::SparseMatrix<double>>(n, n, static_cast<Eigen::Index>(inner.size()), outer.data(),
+                                                           inner.data(), vals.data());
+  pattern_.makeCompressed();
+  element_index_.resize(576 * quads_.rows());
+  for (int e = 0; e < quads_.rows(); ++e)
+    for (int l = 0; l < 24; ++l)
+      for (int m = 0; m < 24; ++m) element_index_[576 * e + 24 * l + m] = value_index(global_index(e, l), global_index(e, m));
+}
+
+int ShellModel::value_index(int row, int col) const {
+  const int* inner = pattern_.innerIndexPtr();
+  const int begin = pattern_.outerIndexPtr()[col], end = pattern_.outerIndexPtr()[col + 1];
+  const int* it = std::lower_bound(inner + begin, inner + end, row);
+  if (it == inner + end || *it != row) return -1;
+  return static_cast<int>(it - inner);
+}
+
+Vector24 ShellModel::gather(int e, const Eigen::VectorXd& x) const {
+  Vector24 out;
+  for (int k = 0; k < 4; ++k) out.segment<6>(6 * k) = x.segment<6>(6 * quads_(e, k));
+  return out;
+}
+
+std::vector<int> ShellModel::boundary_nodes() const {
+  std::map<std::pair<int, int>, int> count;
+  for (int e = 0; e < quads_.rows(); ++e)
+    for (int k = 0; k < 4; ++k) {
+      int a = quads_(e, k), b = quads_(e, (k + 1) % 4);
+      if (a > b) std::swap(a, b);
+      ++count[{a, b}];
+    }
+  std::set<int> out;
+  for (const auto& [edge, c] : count)
+    if (c == 1) {
+      out.insert(edge.first);
+      out.insert(edge.second);
+    }
+  return {out.begin(), out.end()};
+}
+
+ShellTerm& ShellModel::register_term(std::unique_ptr<ShellTerm> term) {
+  for (const auto& t : terms_)
+    if (t->name() == term->name()) throw common::InputError("shell model: term '" + term->name() + "' added twice");
+  built_.push_back(term->name());
+  terms_.push_back(std::move(term));
+  return *terms_.back();
+}
+
+ShellTerm& ShellModel::add_internal_forces() { return register_term(std::make_unique<InternalForcesTerm>(*this)); }
+
+ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone) {
+  return register_term(std::make_unique<FoundationSpringsTerm>(*this, k, std::move(bone)));
+}
+
+ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only) {
+  return register_term(std::make_unique<FoundationDampingTerm>(*this, c, std::move(bone), compressive_only));
+}
+
+ShellTerm& ShellModel::add_pressure(const std::string& name, double face_zeta, std::function<double(double)> p) {
+  return register_term(std::make_unique<PressureTerm>(*this, name, face_zeta, std::move(p)));
+}
+
+ShellTerm& ShellModel::add_point_loads(const std::string& name, std::vector<std::pair<int, Eigen::Vector3d>> loads,
+                                       std::function<double(double)> scale) {
+  return register_term(std::make_unique<PointLoadsTerm>(*this, name, std::move(loads), std::move(scale)));
+}
+
+ShellTerm& ShellModel::add_director_moments(const std::string& name, const Eigen::Vector3d& axis,
+                                            std::vector<std::pair<int, double>> moments,
+                                            std::function<double(double)> scale) {
+  return register_term(std::make_unique<DirectorMomentsTerm>(*this, name, axis, std::move(moments), std::move(scale)));
+}
+
+ShellTerm& ShellModel::add_inertia() {
+  // Assemble the constant consistent mass matrix once, in the tangent pattern.
+  mass_ = pattern_;
+  std::fill(mass_.valuePtr(), mass_.valuePtr() + mass_.nonZeros(), 0.0);
+  TangentAssembler A(*this, mass_);
+  for (int e = 0; e < num_elements(); ++e) A.add_element(e, elements_[e]->mass());
+  has_inertia_ = true;
+  return register_term(std::make_unique<InertiaTerm>(*this));
+}
+
+void ShellModel::fix_nodes(const std::string& name, const std::vector<int>& nodes, std::array<bool, 6> mask) {
+  NodeConstraint c;
+  c.name = name;
+  c.nodes = nodes;
+  c.mask = mask;
+  const Eigen::VectorXd q0 = q0_;
+  c.value = [q0](double, int node, Eigen::Matrix<double, 6, 1>& q6) { q6 = q0.segment<6>(6 * node); };
+  add_constraint(std::move(c));
+}
+
+void ShellModel::add_periphery_fixed(BoneMotion bone) {
+  if (!bone.pose) throw common::InputError("periphery_fixed: BoneMotion needs a pose callback");
+  NodeConstraint c;
+  c.name = "periphery_fixed";
+  c.nodes = boundary_nodes();
+  c.mask.fill(true);
+  const Eigen::Isometry3d X0_inv = bone.pose(0.0).inverse();
+  const Eigen::VectorXd q0 = q0_;
+  auto pose = bone.pose;
+  c.value = [q0, X0_inv, pose](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+    const Eigen::Isometry3d T = pose(t) * X0_inv;
+    q6.head<3>() = T * Eigen::Vector3d(q0.segment<3>(6 * node));
+    q6.tail<3>() = T.linear() * q0.segment<3>(6 * node + 3);
+  };
+  add_constraint(std::move(c));
+}
+
+void ShellModel::add_constraint(NodeConstraint c) {
+  if (!c.value) throw common::InputError("constraint '" + c.name + "': value function is empty");
+  for (const auto& existing : constraints_)
+    if (existing.name == c.name) throw common::InputError("constraint '" + c.name + "' added twice");
+  for (int node : c.nodes) {
+    if (node < 0 || node >= num_nodes_)
+      throw common::InputError("constraint '" + c.name + "': node " + std::to_string(node) + " out of range [0, " +
+                               std::to_string(num_nodes_) + ")");
+    for (int j = 0; j < 6; ++j)
+      if (c.mask[j]) constrained_[6 * node + j] = 1;
+  }
+  built_.push_back(c.name);
+  constraints_.push_back(std::move(c));
+}
+
+void ShellModel::apply_constraints(double t, Eigen::VectorXd& q) const {
+  for (const auto& c : constraints_)
+    for (int node : c.nodes) {
+      Eigen::Matrix<double, 6, 1> q6 = q.segment<6>(6 * node);
+      c.value(t, node, q6);
+      for (int j = 0; j < 6; ++j)
+        if (c.mask[j]) q(6 * node + j) = q6(j);
+    }
+}
+
+bool ShellModel::tangent_symmetric() const {
+  for (const auto& t : terms_)
+    if (!t->symmetric()) return false;
+  return true;
+}
+
+std::string ShellModel::describe_dof(int i) const {
+  static const char* names[6] = {"r_x", "r_y", "r_z", "d_x", "d_y", "d_z"};
+  return "node " + std::to_string(i / 6) + " " + names[i % 6];
+}
+
+void ShellModel::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+                          Eigen::SparseMatrix<double>* K) {
+  const int n = num_dofs();
+  if (!req.q || req.q->size() != n) throw common::NumericalError("ShellModel::evaluate: q has the wrong size");
+  static thread_local Eigen::VectorXd zero;
+  if (zero.size() != n) zero = Eigen::VectorXd::Zero(n);
+  const Eigen::VectorXd& v = req.v ? *req.v : zero;
+  const Eigen::VectorXd& a = req.a ? *req.a : zero;
+  F.setZero(n);
+  if (Ma) Ma->setZero(n);
+  ++stats_.evaluations;
+  std::unique_ptr<TangentAssembler> assembler;
+  if (K) {
+    ++stats_.tangent_evaluations;
+    if (K->nonZeros() != pattern_.nonZeros() || K->rows() != n) *K = pattern_;
+    std::fill(K->valuePtr(), K->valuePtr() + K->nonZeros(), 0.0);
+    assembler = std::make_unique<TangentAssembler>(*this, *K);
+  }
+  TermContext ctx{req.t, *req.q, v, a, req.force_scale * req.kq, req.force_scale * req.kv, req.ka};
+  Eigen::VectorXd scratch;
+  for (const auto& term : terms_) {
+    if (term->inertial()) {
+      if (!Ma) continue;
+      term->add(ctx, *Ma, assembler.get());
+    } else {
+      term->add(ctx, F, assembler.get());
+    }
+    const Eigen::VectorXd& out = term->inertial() ? *Ma : F;
+    if (!out.allFinite()) {
+      for (int i = 0; i < n; ++i)
+        if (!std::isfinite(out(i))) {
+          std::ostringstream s;
+          s << "shell model: term '" << term->name() << "' produced a non-finite force (" << out(i) << ") at "
+            << describe_dof(i) << ", t = " << req.t << " s";
+          throw common::NumericalError(s.str());
+        }
+    }
+  }
+  if (K && !Eigen::Map<const Eigen::VectorXd>(K->valuePtr(), K->nonZeros()).allFinite())
+    throw common::NumericalError("shell model: non-finite tangent entry at t = " + std::to_string(req.t) + " s");
+}
+
+void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {
+  if (!has_inertia_) throw common::NumericalError("ShellModel::solve_mass: the model has no inertia term");
+  if (!mass_solver_) {
+    // Constrained rows/columns -> identity (elimination); factor once, reuse.
+    Eigen::SparseMatrix<double> M = mass_;
+    for (int j = 0; j < M.outerSize(); ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(M, j); it; ++it)
+        if (constrained_[it.row()] || constrained_[j]) it.valueRef() = (it.row() == j) ? 1.0 : 0.0;
+    mass_solver_ = std::make_unique<SparseDirectSolver>(LinearSolverKind::kCholmod);
+    mass_solver_->analyze(M);
+    if (!mass_solver_->factorize(M))
+      throw common::NumericalError("shell model: mass matrix factorisation failed: " + mass_solver_->message());
+  }
+  Eigen::VectorXd b = rhs;
+  for (int i = 0; i < b.size(); ++i)
+    if (constrained_[i]) b(i) = 0;
+  a = mass_solver_->solve(b);
+}
+
+common::Points3 quad_mesh_vertex_normals(const common::QuadMesh& mesh) {
+  common::Points3 N = common::Points3::Zero(mesh.num_nodes(), 3);
+  for (int e = 0; e < mesh.num_quads(); ++e) {
+    const Eigen::Vector3d d1 = mesh.V.row(mesh.Q(e, 2)) - mesh.V.row(mesh.Q(e, 0));
+    const Eigen::Vector3d d2 = mesh.V.row(mesh.Q(e, 3)) - mesh.V.row(mesh.Q(e, 1));
+    const Eigen::Vector3d a = 0.5 * d1.cross(d2);
+    for (int k = 0; k < 4; ++k) N.row(mesh.Q(e, k)) += a.transpose();
+  }
+  for (int i = 0; i < N.rows(); ++i) {
+    const double l = N.row(i).norm();
+    if (l > 0) N.row(i) /= l;
+  }
+  return N;
+}
+
+}  // namespace arthrosim::cartilage

@@ -1,0 +1,56 @@
+#pragma once
+// The interface the time integrator (hht_integrator.h) needs from a
+// discretised model: generalised forces, inertia, tangents in a fixed sparse
+// pattern, constrained (eliminated) coordinates. ShellModel implements it; a
+// test implements it for a single-DOF oscillator.
+//
+// Equations. F(q, v, t) collects every non-inertial term (internal forces,
+// dampers, minus external loads); M a the inertial one. The integrator asks
+// for F, M a, and the combined tangent
+//     K = force_scale * (kq dF/dq + kv dF/dv) + ka M
+// (HHT: force_scale = 1 + alpha, kv = gamma/(beta h), ka = 1/(beta h^2)).
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <string>
+#include <vector>
+
+namespace arthrosim::cartilage {
+
+struct EvalRequest {
+  double t = 0;                          ///< time [s]
+  const Eigen::VectorXd* q = nullptr;    ///< coordinates
+  const Eigen::VectorXd* v = nullptr;    ///< velocities (nullptr: zero)
+  const Eigen::VectorXd* a = nullptr;    ///< accelerations (nullptr: zero)
+  double force_scale = 1.0;              ///< multiplies the F-part of the tangent
+  double kq = 1.0, kv = 0.0, ka = 0.0;   ///< tangent factors (see file comment)
+};
+
+class TimeIntegrable {
+ public:
+  virtual ~TimeIntegrable() = default;
+  virtual int num_dofs() const = 0;
+  /// True when an inertia term exists (dynamic problem).
+  virtual bool has_inertia() const = 0;
+  /// True when every term's tangent is symmetric (CHOLMOD may be used).
+  virtual bool tangent_symmetric() const = 0;
+  /// F (size n) and, when Ma != nullptr, M a; when K != nullptr, the tangent
+  /// values in tangent_pattern()'s layout. Throws NumericalError naming the
+  /// term and coordinate if a non-finite value appears.
+  virtual void evaluate(const EvalRequest& request, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+                        Eigen::SparseMatrix<double>* K) = 0;
+  /// Compressed column pattern (values irrelevant) shared by every tangent.
+  virtual const Eigen::SparseMatrix<double>& tangent_pattern() const = 0;
+  /// 1 for coordinates fixed/prescribed by a constraint (eliminated), else 0.
+  virtual const std::vector<char>& constrained() const = 0;
+  /// Writes the prescribed values at time t into the constrained entries of q.
+  virtual void apply_constraints(double t, Eigen::VectorXd& q) const = 0;
+  /// Solves M a = rhs on the unconstrained coordinates (a = 0 on the others).
+  virtual void solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) = 0;
+  /// Per-coordinate weight turning an increment into a length [m] for the
+  /// convergence test (1 for positions, h/2 for transverse gradients).
+  virtual const Eigen::VectorXd& increment_weights() const = 0;
+  /// Human-readable name of coordinate i (for messages), e.g. "node 12 r_z".
+  virtual std::string describe_dof(int i) const = 0;
+};
+
+}  // namespace arthrosim::cartilage

@@ -1,0 +1,231 @@
+// ShellModel terms: every tangent handed to Newton is checked against central
+// finite differences of the generalised force; terms not asked for are never
+// built; assembly is deterministic (bit-identical for 1 and 2 threads).
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <Eigen/Dense>
+#include <random>
+
+#include "cartilage/shell_model.h"
+#include "common/error.h"
+#include "shell_test_meshes.h"
+
+namespace arthrosim::cartilage {
+namespace {
+
+struct Fixture {
+  common::QuadMesh mesh = testing::spherical_patch(3, 0.02, 0.03);
+  common::Points3 directors = quad_mesh_vertex_normals(mesh);
+  Eigen::VectorXd thickness = Eigen::VectorXd::Constant(mesh.num_nodes(), 1e-3);
+  ShellMaterial material;
+};
+
+Eigen::VectorXd deformed(const ShellModel& m, double amp, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Eigen::VectorXd q = m.reference_state();
+  for (int i = 0; i < q.size(); ++i) q(i) += amp * u(rng) * (i % 6 < 3 ? 1e-3 : 1.0);
+  return q;
+}
+
+/// max |K - K_fd| / max |K| with K = dF/dq (wrt = 0) or dF/dv (wrt = 1).
+double fd_error(ShellModel& m, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, int wrt) {
+  const int n = m.num_dofs();
+  Eigen::SparseMatrix<double> K;
+  Eigen::VectorXd F;
+  EvalRequest r;
+  r.t = t;
+  r.q = &q;
+  r.v = &v;
+  r.kq = wrt == 0 ? 1.0 : 0.0;
+  r.kv = wrt == 1 ? 1.0 : 0.0;
+  m.evaluate(r, F, nullptr, &K);
+  const Eigen::MatrixXd Kd = Eigen::MatrixXd(K);
+  Eigen::MatrixXd Kfd(n, n);
+  for (int j = 0; j < n; ++j) {
+    // Steps: 1e-9 m on positions (0.1% of the 1 mm thickness scale times
+    // 1e-3) and 1e-6 on dimensionless gradients; central differences then
+    // have truncation and round-off errors < 1e-7 relative.
+    const double h = (j % 6 < 3) ? 1e-9 : 1e-6;
+    Eigen::VectorXd qp = q, qm = q, vp = v, vm = v, Fp, Fm;
+    (wrt == 0 ? qp : vp)(j) += h;
+    (wrt == 0 ? qm : vm)(j) -= h;
+    EvalRequest a = r, b = r;
+    a.q = &qp;
+    a.v = &vp;
+    b.q = &qm;
+    b.v = &vm;
+    m.evaluate(a, Fp, nullptr, nullptr);
+    m.evaluate(b, Fm, nullptr, nullptr);
+    Kfd.col(j) = (Fp - Fm) / (2 * h);
+  }
+  const double scale = Kd.cwiseAbs().maxCoeff();
+  EXPECT_GT(scale, 0.0);
+  return (Kd - Kfd).cwiseAbs().maxCoeff() / scale;
+}
+
+// Tolerance for all FD checks below: 1e-6 relative to max|K|. Central
+// differences with the steps above are accurate to ~1e-8; a missing or wrong
+// term (e.g. a dropped geometric stiffness, the non-symmetric pressure part)
+// shows up at 1e-3 .. 1.
+constexpr double kFdTol = 1e-6;
+
+TEST(ShellTerms, InternalForcesTangent) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  m.add_internal_forces();
+  const Eigen::VectorXd q = deformed(m, 0.05, 1), v = Eigen::VectorXd::Zero(m.num_dofs());
+  EXPECT_LT(fd_error(m, 0, q, v, 0), kFdTol);
+  EXPECT_TRUE(m.tangent_symmetric());
+}
+
+TEST(ShellTerms, FollowerPressureTangentIsNonSymmetricAndConsistent) {
+  for (double face : {-1.0, 0.0, 1.0}) {
+    Fixture f;
+    ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+    m.add_pressure("osmotic_pressure", face, [](double) { return 0.2e6; });
+    const Eigen::VectorXd q = deformed(m, 0.1, 2), v = Eigen::VectorXd::Zero(m.num_dofs());
+    EXPECT_LT(fd_error(m, 0, q, v, 0), kFdTol) << "face " << face;
+    EXPECT_FALSE(m.tangent_symmetric());
+    // Total force of a uniform pressure on the undeformed cap equals p times
+    // the projected area vector (closed-form: p * integral n dA).
+    Eigen::VectorXd F;
+    const Eigen::VectorXd q0 = m.reference_state();
+    EvalRequest r;
+    r.q = &q0;
+    m.evaluate(r, F, nullptr, nullptr);
+    Eigen::Vector3d total = Eigen::Vector3d::Zero();
+    for (int i = 0; i < m.num_nodes(); ++i) total -= F.segment<3>(6 * i);
+    // Sum of p (a1 x a2) over the faces = p times the vector area of the
+    // boundary-spanning surface; for this symmetric cap it points along +z.
+    EXPECT_NEAR(total.x(), 0.0, 1e-12 * total.norm());
+    EXPECT_NEAR(total.y(), 0.0, 1e-12 * total.norm());
+    EXPECT_GT(total.z(), 0.0);
+  }
+}
+
+TEST(ShellTerms, FoundationSpringTangent) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  // Moving, rotated bone (the anchors translate and turn).
+  BoneMotion bone;
+  bone.pose = [](double t) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    X.translation() = Eigen::Vector3d(0, 0, 1e-4 * t);
+    return X;
+  };
+  bone.spatial_velocity = [](double) {
+    Eigen::Matrix<double, 6, 1> V;
+    V << 0.3, 0, 0, 0, 0, 1e-4;
+    return V;
+  };
+  m.add_foundation_springs(7e8, bone);
+  // Push the nodes towards the bone so most springs are compressed.
+  Eigen::VectorXd q = deformed(m, 0.02, 3);
+  for (int i = 0; i < m.num_nodes(); ++i) q.segment<3>(6 * i) -= 2e-5 * m.reference_director(i);
+  const Eigen::VectorXd v = Eigen::VectorXd::Zero(m.num_dofs());
+  EXPECT_LT(fd_error(m, 0.5, q, v, 0), kFdTol);
+}
+
+TEST(ShellTerms, FoundationDampingTangents) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  BoneMotion bone;
+  bone.pose = [](double t) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    return X;
+  };
+  bone.spatial_velocity = [](double) {
+    Eigen::Matrix<double, 6, 1> V;
+    V << 0, 0.3, 0, 0, 0, 0;
+    return V;
+  };
+  m.add_foundation_damping(7e6, bone, /*compressive_only=*/false);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const Eigen::VectorXd q = deformed(m, 0.02, 4);
+  Eigen::VectorXd v(m.num_dofs());
+  for (int i = 0; i < v.size(); ++i) v(i) = 1e-3 * u(rng);
+  EXPECT_LT(fd_error(m, 0.2, q, v, 0), kFdTol);  // d/dq (rotating direction)
+  EXPECT_LT(fd_error(m, 0.2, q, v, 1), kFdTol);  // d/dv
+  EXPECT_FALSE(m.tangent_symmetric());
+}
+
+TEST(ShellTerms, DirectorMomentTangent) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  m.add_director_moments("end_moment", Eigen::Vector3d(0, -1, 0), {{0, 2.0}, {3, 1.5}}, [](double) { return 1.0; });
+  const Eigen::VectorXd q = deformed(m, 0.2, 6), v = Eigen::VectorXd::Zero(m.num_dofs());
+  EXPECT_LT(fd_error(m, 0, q, v, 0), kFdTol);
+}
+
+TEST(ShellTerms, OnlyRequestedTermsAreBuilt) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  EXPECT_TRUE(m.built_terms().empty());
+  m.add_internal_forces();
+  m.add_pressure("osmotic_pressure", -1, [](double) { return 0.2e6; });
+  m.add_periphery_fixed();
+  EXPECT_EQ(m.built_terms(), (std::vector<std::string>{"internal_forces", "osmotic_pressure", "periphery_fixed"}));
+  EXPECT_FALSE(m.has_inertia());
+  EXPECT_EQ(m.mass_matrix().nonZeros(), 0);  // no mass assembled without inertia
+  EXPECT_THROW(m.add_internal_forces(), common::InputError);  // no duplicates
+}
+
+TEST(ShellTerms, AssemblyIsDeterministicAcrossThreadCounts) {
+  Fixture f;
+  f.mesh = testing::spherical_patch(12, 0.02, 0.03);  // 144 elements: parallel loops active
+  f.directors = quad_mesh_vertex_normals(f.mesh);
+  f.thickness = Eigen::VectorXd::Constant(f.mesh.num_nodes(), 1e-3);
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  m.add_internal_forces();
+  m.add_pressure("osmotic_pressure", -1, [](double) { return 0.2e6; });
+  const Eigen::VectorXd q = deformed(m, 0.05, 9);
+  auto run = [&](int threads) {
+    omp_set_num_threads(threads);
+    Eigen::VectorXd F;
+    Eigen::SparseMatrix<double> K;
+    EvalRequest r;
+    r.q = &q;
+    m.evaluate(r, F, nullptr, &K);
+    return std::make_pair(F, Eigen::VectorXd(Eigen::Map<Eigen::VectorXd>(K.valuePtr(), K.nonZeros())));
+  };
+  const auto a = run(1), b = run(2);
+  omp_set_num_threads(2);
+  EXPECT_TRUE((a.first.array() == b.first.array()).all());
+  EXPECT_TRUE((a.second.array() == b.second.array()).all());
+}
+
+TEST(ShellTerms, NonFiniteInputNamesTermAndCoordinate) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  m.add_internal_forces();
+  Eigen::VectorXd q = m.reference_state();
+  q(6 * 4 + 2) = std::numeric_limits<double>::quiet_NaN();
+  Eigen::VectorXd F;
+  EvalRequest r;
+  r.q = &q;
+  try {
+    m.evaluate(r, F, nullptr, nullptr);
+    FAIL() << "expected NumericalError";
+  } catch (const common::NumericalError& e) {
+    EXPECT_NE(std::string(e.what()).find("internal_forces"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("node"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ShellTerms, RejectsBadInput) {
+  Fixture f;
+  Eigen::VectorXd short_thickness = Eigen::VectorXd::Constant(3, 1e-3);
+  EXPECT_THROW(ShellModel(f.mesh, f.directors, short_thickness, f.material), common::InputError);
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  EXPECT_THROW(m.add_foundation_springs(-1.0), common::InputError);
+  EXPECT_THROW(m.add_pressure("p", 2.0, [](double) { return 1.0; }), common::InputError);
+  EXPECT_THROW(m.fix_nodes("bad", {999}, {true, true, true, false, false, false}), common::InputError);
+}
+
+}  // namespace
+}  // namespace arthrosim::cartilage
