@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "cartilage/linear_solver.h"
+#include "common/effects.h"
 #include "common/error.h"
 
 namespace arthrosim::cartilage {
@@ -330,7 +331,7 @@ void TangentAssembler::add_block3(int a, int oa, int b, int ob, const Eigen::Mat
 
 ShellModel::ShellModel(const common::QuadMesh& mesh, const common::Points3& directors,
                        const Eigen::VectorXd& thickness_m, const ShellMaterial& material)
-    : num_nodes_(mesh.num_nodes()), quads_(mesh.Q) {
+    : num_nodes_(mesh.num_nodes()), quads_(mesh.Q), part_(mesh.name) {
   const std::string where = mesh.name.empty() ? std::string("shell mesh") : mesh.name;
   if (num_nodes_ == 0 || mesh.num_quads() == 0) throw common::InputError(where + ": expected a non-empty quad mesh");
   if (directors.rows() != num_nodes_ || thickness_m.size() != num_nodes_)
@@ -434,37 +435,47 @@ std::vector<int> ShellModel::boundary_nodes() const {
   return {out.begin(), out.end()};
 }
 
-ShellTerm& ShellModel::register_term(std::unique_ptr<ShellTerm> term) {
+void ShellModel::record(const std::string& name, long count) {
+  built_.push_back(name);
+  if (ledger_ && common::find_effect(name)) ledger_->record(name, count, part_);
+}
+
+ShellTerm& ShellModel::register_term(std::unique_ptr<ShellTerm> term, long count) {
   for (const auto& t : terms_)
     if (t->name() == term->name()) throw common::InputError("shell model: term '" + term->name() + "' added twice");
-  built_.push_back(term->name());
+  record(term->name(), count);
   terms_.push_back(std::move(term));
   return *terms_.back();
 }
 
-ShellTerm& ShellModel::add_internal_forces() { return register_term(std::make_unique<InternalForcesTerm>(*this)); }
+ShellTerm& ShellModel::add_internal_forces() {
+  return register_term(std::make_unique<InternalForcesTerm>(*this), num_elements());
+}
 
 ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone) {
-  return register_term(std::make_unique<FoundationSpringsTerm>(*this, k, std::move(bone)));
+  return register_term(std::make_unique<FoundationSpringsTerm>(*this, k, std::move(bone)), num_nodes_);
 }
 
 ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only) {
-  return register_term(std::make_unique<FoundationDampingTerm>(*this, c, std::move(bone), compressive_only));
+  return register_term(std::make_unique<FoundationDampingTerm>(*this, c, std::move(bone), compressive_only),
+                       num_nodes_);
 }
 
 ShellTerm& ShellModel::add_pressure(const std::string& name, double face_zeta, std::function<double(double)> p) {
-  return register_term(std::make_unique<PressureTerm>(*this, name, face_zeta, std::move(p)));
+  return register_term(std::make_unique<PressureTerm>(*this, name, face_zeta, std::move(p)), num_elements());
 }
 
 ShellTerm& ShellModel::add_point_loads(const std::string& name, std::vector<std::pair<int, Eigen::Vector3d>> loads,
                                        std::function<double(double)> scale) {
-  return register_term(std::make_unique<PointLoadsTerm>(*this, name, std::move(loads), std::move(scale)));
+  const long n = static_cast<long>(loads.size());
+  return register_term(std::make_unique<PointLoadsTerm>(*this, name, std::move(loads), std::move(scale)), n);
 }
 
 ShellTerm& ShellModel::add_director_moments(const std::string& name, const Eigen::Vector3d& axis,
                                             std::vector<std::pair<int, double>> moments,
                                             std::function<double(double)> scale) {
-  return register_term(std::make_unique<DirectorMomentsTerm>(*this, name, axis, std::move(moments), std::move(scale)));
+  const long n = static_cast<long>(moments.size());
+  return register_term(std::make_unique<DirectorMomentsTerm>(*this, name, axis, std::move(moments), std::move(scale)), n);
 }
 
 ShellTerm& ShellModel::add_inertia() {
@@ -474,7 +485,7 @@ ShellTerm& ShellModel::add_inertia() {
   TangentAssembler A(*this, mass_);
   for (int e = 0; e < num_elements(); ++e) A.add_element(e, elements_[e]->mass());
   has_inertia_ = true;
-  return register_term(std::make_unique<InertiaTerm>(*this));
+  return register_term(std::make_unique<InertiaTerm>(*this), num_elements());
 }
 
 void ShellModel::fix_nodes(const std::string& name, const std::vector<int>& nodes, std::array<bool, 6> mask) {
@@ -515,7 +526,7 @@ void ShellModel::add_constraint(NodeConstraint c) {
     for (int j = 0; j < 6; ++j)
       if (c.mask[j]) constrained_[6 * node + j] = 1;
   }
-  built_.push_back(c.name);
+  record(c.name, static_cast<long>(c.nodes.size()));
   constraints_.push_back(std::move(c));
 }
 

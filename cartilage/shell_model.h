@@ -31,6 +31,10 @@
 #include "cartilage/time_integrable.h"
 #include "common/mesh.h"
 
+namespace arthrosim::common {
+class EffectLedger;
+}
+
 namespace arthrosim::cartilage {
 
 class ShellModel;
@@ -170,6 +174,15 @@ class ShellModel : public TimeIntegrable {
   /// General prescribed motion.
   void add_constraint(NodeConstraint c);
 
+  /// Records every later-built term whose name is in the scene vocabulary
+  /// (common/effects.h: foundation_springs, foundation_damping,
+  /// osmotic_pressure, periphery_fixed, inertia, ...) into `ledger`, with
+  /// part = the mesh name and count = springs/dampers (nodes), loaded
+  /// elements, constrained nodes or mass elements. Terms outside the
+  /// vocabulary (internal_forces, generic test loads) appear only in
+  /// built_terms(). The ledger must outlive the model; nullptr detaches.
+  void attach_ledger(common::EffectLedger* ledger) { ledger_ = ledger; }
+
   /// Names of the terms and constraints built so far, in creation order.
   const std::vector<std::string>& built_terms() const { return built_; }
   const std::vector<std::unique_ptr<ShellTerm>>& terms() const { return terms_; }
@@ -202,7 +215,8 @@ class ShellModel : public TimeIntegrable {
   ShellModelStatistics& mutable_statistics() { return stats_; }
 
  private:
-  ShellTerm& register_term(std::unique_ptr<ShellTerm> term);
+  ShellTerm& register_term(std::unique_ptr<ShellTerm> term, long count);
+  void record(const std::string& name, long count);
   void build_pattern();
 
   int num_nodes_ = 0;
@@ -216,6 +230,8 @@ class ShellModel : public TimeIntegrable {
   std::vector<char> constrained_;
   std::vector<std::string> built_;
   bool has_inertia_ = false;
+  std::string part_;
+  common::EffectLedger* ledger_ = nullptr;
   std::unique_ptr<SparseDirectSolver> mass_solver_;
   ShellModelStatistics stats_;
 };

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "cartilage/shell_model.h"
+#include "common/effects.h"
 #include "common/error.h"
 #include "shell_test_meshes.h"
 
@@ -173,6 +174,25 @@ TEST(ShellTerms, OnlyRequestedTermsAreBuilt) {
   EXPECT_FALSE(m.has_inertia());
   EXPECT_EQ(m.mass_matrix().nonZeros(), 0);  // no mass assembled without inertia
   EXPECT_THROW(m.add_internal_forces(), common::InputError);  // no duplicates
+}
+
+TEST(ShellTerms, SceneEffectsAreRecordedInTheLedger) {
+  Fixture f;
+  f.mesh.name = "femur";
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  common::EffectLedger ledger("surface:test");
+  m.attach_ledger(&ledger);
+  m.add_internal_forces();
+  m.add_foundation_springs(7e8);
+  m.add_pressure("osmotic_pressure", -1, [](double) { return 0.2e6; });
+  m.add_periphery_fixed();
+  EXPECT_TRUE(ledger.built("foundation_springs"));
+  EXPECT_EQ(ledger.count("foundation_springs"), m.num_nodes());
+  EXPECT_EQ(ledger.count("osmotic_pressure"), m.num_elements());
+  EXPECT_EQ(ledger.count("periphery_fixed"), static_cast<long>(m.boundary_nodes().size()));
+  EXPECT_FALSE(ledger.built("foundation_damping"));
+  EXPECT_FALSE(ledger.built("inertia"));
+  EXPECT_NO_THROW(ledger.require_only({"foundation_springs", "osmotic_pressure", "periphery_fixed"}));
 }
 
 TEST(ShellTerms, AssemblyIsDeterministicAcrossThreadCounts) {
