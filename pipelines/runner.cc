@@ -1,5 +1,7 @@
 #include "pipelines/runner.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -12,6 +14,7 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "common/error.h"
@@ -206,6 +209,32 @@ int execute(const fs::path& exe, const std::vector<std::string>& args) {
   return 127;
 }
 
+// An exclusive lock on DIR/.arthrosim.lock for the duration of a run, so two
+// runs cannot interleave stages and stamps in one output folder. flock locks
+// are released by the kernel when the process ends, however it ends.
+class OutputFolderLock {
+ public:
+  explicit OutputFolderLock(const fs::path& dir) {
+    const fs::path file = dir / ".arthrosim.lock";
+    fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd_ < 0) {
+      throw common::InputError(file.string(), 0,
+                               std::string("cannot create the lock file: ") + std::strerror(errno));
+    }
+    locked_ = ::flock(fd_, LOCK_EX | LOCK_NB) == 0;
+  }
+  ~OutputFolderLock() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  OutputFolderLock(const OutputFolderLock&) = delete;
+  OutputFolderLock& operator=(const OutputFolderLock&) = delete;
+  bool locked() const { return locked_; }
+
+ private:
+  int fd_ = -1;
+  bool locked_ = false;
+};
+
 }  // namespace
 
 std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) {
@@ -356,7 +385,18 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
     }
   }
 
-  if (!options.dry_run) fs::create_directories(out_dir);
+  std::optional<OutputFolderLock> lock;
+  if (!options.dry_run) {
+    fs::create_directories(out_dir);
+    lock.emplace(out_dir);
+    if (!lock->locked()) {
+      report.status = RunStatus::kFolderBusy;
+      report.message = "another arthrosim run is using " + out_dir.string() +
+                       " (it holds .arthrosim.lock); wait for it or choose another --out";
+      log << "arthrosim: error: " << report.message << "\n";
+      return report;
+    }
+  }
   std::vector<std::string> will_change;  // dry run: outputs that would be rewritten
   for (std::size_t i = 0; i < plan.size(); ++i) {
     const StageStep& step = plan[i];

@@ -22,7 +22,8 @@
 // parts and the hashes of the outputs. The next run skips the stage when the
 // key is the same and every output still has the recorded hash; otherwise it
 // says what changed and runs it. The stamp is deleted before a stage starts,
-// so a stage that fails or is killed never looks up to date.
+// so a stage that fails or is killed never looks up to date. A run holds an
+// exclusive lock on DIR/.arthrosim.lock, so two runs never share a folder.
 #include <filesystem>
 #include <iosfwd>
 #include <string>
@@ -82,6 +83,7 @@ enum class RunStatus {
   kOk,
   kStageFailed,        ///< a stage failed; outputs of earlier stages stay
   kMissingExecutable,  ///< a planned stage's executable is not in stage_dir
+  kFolderBusy,         ///< another run holds the output folder's lock
 };
 
 struct RunReport {

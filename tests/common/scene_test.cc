@@ -401,8 +401,8 @@ TEST_F(SceneTest, DocumentationCoversTheSchemaAndItsExampleParses) {
   const std::size_t b = doc.find("```", a + open.size());
   ASSERT_NE(b, std::string::npos);
   const std::string example = doc.substr(a + open.size(), b - a - open.size());
-  // The example refers to ../models/knee_parametric and ../trials/synthetic_gait.
-  fs::create_directories(root_ / "models" / "knee_parametric");
+  // The example refers to ../models/knee_parametric/medium and ../trials/synthetic_gait.
+  fs::create_directories(root_ / "models" / "knee_parametric" / "medium");
   fs::create_directories(root_ / "trials" / "synthetic_gait");
   const Scene s = load(example);
   EXPECT_TRUE(s.wants(Output::kReport));

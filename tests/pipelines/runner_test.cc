@@ -5,6 +5,8 @@
 #include "pipelines/runner.h"
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -384,6 +386,23 @@ TEST_F(RunnerTest, DryRunRunsNothingAndForceRunsEverything) {
   EXPECT_EQ(reason(r, "prepare"), "--force");
   EXPECT_EQ(status(r, "comak"), StageStatus::kRan);
   EXPECT_EQ(calls().size(), 4u);
+}
+
+TEST_F(RunnerTest, OutputFolderInUseIsRefused) {
+  // Stand in for a concurrent run: hold the folder's lock on another open
+  // file description (flock locks conflict between descriptions).
+  fs::create_directories(root_ / "out");
+  const int fd = ::open((root_ / "out" / ".arthrosim.lock").c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
+  RunReport r = run(scene(kPrepareOnly));
+  EXPECT_EQ(r.status, RunStatus::kFolderBusy);
+  EXPECT_NE(r.message.find("another arthrosim run is using"), std::string::npos);
+  EXPECT_TRUE(calls().empty());
+  ::close(fd);  // released: the run goes ahead
+  r = run(scene(kPrepareOnly));
+  EXPECT_EQ(r.status, RunStatus::kOk);
+  EXPECT_EQ(calls().size(), 1u);
 }
 
 TEST_F(RunnerTest, ReportRunsPostWithEverySurfaceOutput) {
