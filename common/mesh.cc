@@ -165,6 +165,112 @@ BoundingBox bounding_box(const Points3& points) {
   return box;
 }
 
+Points3 quad_normals(const QuadMesh& mesh) {
+  Points3 N(mesh.num_quads(), 3);
+  for (int q = 0; q < mesh.num_quads(); ++q) {
+    const Vec3 p = (mesh.V.row(mesh.Q(q, 2)) - mesh.V.row(mesh.Q(q, 0))).transpose();
+    const Vec3 r = (mesh.V.row(mesh.Q(q, 3)) - mesh.V.row(mesh.Q(q, 1))).transpose();
+    const Vec3 n = p.cross(r);
+    const double len = n.norm();
+    N.row(q) = (len > 0.0 ? Vec3(n / len) : Vec3::Zero()).transpose();
+  }
+  return N;
+}
+
+Eigen::VectorXd quad_areas(const QuadMesh& mesh) {
+  // x(xi, eta) = sum_i N_i x_i with N_i = (1 + xi_i xi)(1 + eta_i eta) / 4 on
+  // [-1, 1]^2; area = integral of |x_xi x x_eta|, 2x2 Gauss points +-1/sqrt(3)
+  // with unit weights.
+  const double g = 1.0 / std::sqrt(3.0);
+  const double xi_n[4] = {-1, 1, 1, -1}, eta_n[4] = {-1, -1, 1, 1};
+  Eigen::VectorXd A(mesh.num_quads());
+  for (int q = 0; q < mesh.num_quads(); ++q) {
+    double a = 0.0;
+    for (double xi : {-g, g}) {
+      for (double eta : {-g, g}) {
+        Vec3 dxi = Vec3::Zero(), deta = Vec3::Zero();
+        for (int i = 0; i < 4; ++i) {
+          const Vec3 x = mesh.V.row(mesh.Q(q, i)).transpose();
+          dxi += 0.25 * xi_n[i] * (1.0 + eta_n[i] * eta) * x;
+          deta += 0.25 * eta_n[i] * (1.0 + xi_n[i] * xi) * x;
+        }
+        a += dxi.cross(deta).norm();
+      }
+    }
+    A(q) = a;
+  }
+  return A;
+}
+
+std::vector<int> boundary_nodes(const QuadMesh& mesh) {
+  std::vector<std::array<int, 2>> edges;
+  edges.reserve(4 * static_cast<size_t>(std::max(mesh.num_quads(), 0)));
+  for (int q = 0; q < mesh.num_quads(); ++q) {
+    for (int k = 0; k < 4; ++k) {
+      const int a = mesh.Q(q, k), b = mesh.Q(q, (k + 1) % 4);
+      edges.push_back({std::min(a, b), std::max(a, b)});
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  std::vector<int> nodes;
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    if (j - i == 1) {
+      nodes.push_back(edges[i][0]);
+      nodes.push_back(edges[i][1]);
+    }
+    i = j;
+  }
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  return nodes;
+}
+
+std::vector<std::vector<int>> boundary_loops(const TriangleMesh& mesh) {
+  const MeshTopology topo = build_topology(mesh);
+  const std::string label = mesh.name.empty() ? std::string("<mesh>") : mesh.name;
+  // Directed boundary edges a -> b as traversed by their single triangle.
+  std::vector<int> next(mesh.num_vertices(), -1), incoming(mesh.num_vertices(), 0);
+  for (Eigen::Index e = 0; e < topo.edges.rows(); ++e) {
+    if (topo.edge_triangles[e].size() != 1) continue;
+    const int t = topo.edge_triangles[e][0];
+    const int lo = topo.edges(e, 0), hi = topo.edges(e, 1);
+    int a = lo, b = hi;
+    for (int k = 0; k < 3; ++k) {
+      if (mesh.F(t, k) == hi && mesh.F(t, (k + 1) % 3) == lo) {
+        a = hi;
+        b = lo;
+      }
+    }
+    if (next[a] >= 0) {
+      throw InputError(label, 0, "boundary_loops: expected one outgoing boundary edge per boundary vertex, found "
+                                 "two at vertex " + std::to_string(a));
+    }
+    next[a] = b;
+    ++incoming[b];
+  }
+  for (int v = 0; v < mesh.num_vertices(); ++v) {
+    if ((next[v] >= 0) != (incoming[v] == 1) || incoming[v] > 1) {
+      throw InputError(label, 0, "boundary_loops: expected one incoming and one outgoing boundary edge at vertex " +
+                                     std::to_string(v) + ", found " + std::to_string(incoming[v]) + " incoming and " +
+                                     (next[v] >= 0 ? "1" : "0") + " outgoing");
+    }
+  }
+  std::vector<std::vector<int>> loops;
+  std::vector<char> done(mesh.num_vertices(), 0);
+  for (int v = 0; v < mesh.num_vertices(); ++v) {  // ascending: each loop starts at its smallest vertex
+    if (next[v] < 0 || done[v]) continue;
+    std::vector<int> loop;
+    for (int w = v; !done[w]; w = next[w]) {
+      done[w] = 1;
+      loop.push_back(w);
+    }
+    loops.push_back(std::move(loop));
+  }
+  return loops;
+}
+
 QuadMesh split_triangles_to_quads(const TriangleMesh& mesh) {
   const MeshTopology topo = build_topology(mesh);
   const int n = mesh.num_vertices();

@@ -85,6 +85,24 @@ BoundingBox bounding_box(const Points3& points);
 inline BoundingBox bounding_box(const TriangleMesh& mesh) { return bounding_box(mesh.V); }
 inline BoundingBox bounding_box(const QuadMesh& mesh) { return bounding_box(mesh.V); }
 
+/// Unit normal of every quad at its centre, ((x2 - x0) x (x3 - x1)) normalised:
+/// the normal of the bilinear surface at (0, 0) (x_xi x x_eta there is half of
+/// that diagonal cross product). Degenerate quads give a zero row.
+Points3 quad_normals(const QuadMesh& mesh);
+/// Areas [m^2] of the bilinear quads (2x2 Gauss quadrature of |x_xi x x_eta|;
+/// exact for planar quads, where it equals |(x2 - x0) x (x3 - x1)| / 2).
+Eigen::VectorXd quad_areas(const QuadMesh& mesh);
+/// Nodes on the open boundary of a quad mesh (on edges used by one quad), sorted.
+std::vector<int> boundary_nodes(const QuadMesh& mesh);
+
+/// Ordered boundary loops of a triangle mesh. Each loop follows the boundary
+/// edges in the direction their triangle traverses them (the surface is on
+/// the left seen from the normal side), starts at its smallest vertex, and
+/// loops are sorted by that vertex. Throws InputError (naming the mesh and
+/// vertex) if a boundary vertex has other than one outgoing and one incoming
+/// boundary edge (a non-manifold or inconsistently oriented boundary).
+std::vector<std::vector<int>> boundary_loops(const TriangleMesh& mesh);
+
 /// Each triangle (a,b,c) becomes 3 quads through its edge midpoints and its
 /// centroid g: (a, m_ab, g, m_ca), (b, m_bc, g, m_ab), (c, m_ca, g, m_bc),
 /// same orientation as the triangle. Output nodes: the n input vertices first

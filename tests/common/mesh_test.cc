@@ -155,6 +155,78 @@ TEST(Mesh, SplitTrianglesToQuadsIsConformingAndKeepsAreaAndOrientation) {
   EXPECT_NEAR((q.V.row(13) - Eigen::RowVector3d(1, 1, 1) / 3.0).norm(), 0.0, 1e-15);
 }
 
+TEST(Mesh, QuadNormalsAndAreas) {
+  QuadMesh q;
+  q.V.resize(8, 3);
+  // A planar trapezoid (bases 2 and 1, height 1: area 1.5) and a warped quad
+  // (hyperbolic paraboloid z = h x y over the unit square).
+  const double h = 0.5;
+  q.V << 0, 0, 0, 2, 0, 0, 1.5, 1, 0, 0.5, 1, 0,  //
+      0, 0, 0, 1, 0, 0, 1, 1, h, 0, 1, 0;
+  q.Q.resize(2, 4);
+  q.Q << 0, 1, 2, 3, 4, 5, 6, 7;
+  const Points3 N = quad_normals(q);
+  const Eigen::VectorXd A = quad_areas(q);
+  EXPECT_NEAR((N.row(0) - Eigen::RowVector3d(0, 0, 1)).norm(), 0.0, 1e-15);
+  EXPECT_NEAR(A(0), 1.5, 1e-15);
+  // Warped: x_u x x_v = (-h y, -h x, 1); at the centre the normal is
+  // (-h/2, -h/2, 1)/|.|. Area = integral of sqrt(1 + h^2 (x^2 + y^2)) over the
+  // unit square; for h = 0.5 a fine midpoint rule gives 1.0787...; 2x2 Gauss
+  // is accurate to ~1e-4 for this smooth integrand.
+  const Vec3 n_exact = Vec3(-h / 2, -h / 2, 1).normalized();
+  EXPECT_NEAR((N.row(1).transpose() - n_exact).norm(), 0.0, 1e-15);
+  double ref = 0.0;
+  const int m = 2000;
+  for (int i = 0; i < m; ++i)
+    for (int j = 0; j < m; ++j) {
+      const double x = (i + 0.5) / m, y = (j + 0.5) / m;
+      ref += std::sqrt(1 + h * h * (x * x + y * y)) / (double(m) * m);
+    }
+  EXPECT_NEAR(A(1), ref, 2e-4);
+}
+
+TEST(Mesh, BoundaryNodesOfQuadMesh) {
+  // A 2 x 1 strip of quads: every node is on the boundary. The split
+  // tetrahedron is closed: no boundary node.
+  QuadMesh strip;
+  strip.V.resize(6, 3);
+  strip.V << 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0, 1, 1, 0, 2, 1, 0;
+  strip.Q.resize(2, 4);
+  strip.Q << 0, 1, 4, 3, 1, 2, 5, 4;
+  EXPECT_EQ(boundary_nodes(strip), (std::vector<int>{0, 1, 2, 3, 4, 5}));
+  EXPECT_TRUE(boundary_nodes(split_triangles_to_quads(tetrahedron())).empty());
+  // The split unit square: boundary = 4 corners + 4 edge midpoints; the
+  // diagonal midpoint and the 2 centroids are interior.
+  const QuadMesh sq = split_triangles_to_quads(unit_square());
+  EXPECT_EQ(boundary_nodes(sq).size(), 8u);
+}
+
+TEST(Mesh, BoundaryLoopsFollowOrientation) {
+  // Unit square (normal +z): loop counter-clockwise seen from +z, from vertex 0.
+  const auto loops = boundary_loops(unit_square());
+  ASSERT_EQ(loops.size(), 1u);
+  EXPECT_EQ(loops[0], (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_TRUE(boundary_loops(tetrahedron()).empty());
+  // An annulus-like mesh (square with a square hole) has two loops; the inner
+  // one runs clockwise seen from +z (surface on its left).
+  TriangleMesh ring;
+  ring.V.resize(8, 3);
+  ring.V << 0, 0, 0, 3, 0, 0, 3, 3, 0, 0, 3, 0, 1, 1, 0, 2, 1, 0, 2, 2, 0, 1, 2, 0;
+  ring.F.resize(8, 3);
+  ring.F << 0, 1, 5, 0, 5, 4, 1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6, 3, 0, 4, 3, 4, 7;
+  const auto rl = boundary_loops(ring);
+  ASSERT_EQ(rl.size(), 2u);
+  EXPECT_EQ(rl[0], (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_EQ(rl[1], (std::vector<int>{4, 7, 6, 5}));
+  // Two triangles touching at one vertex (a bow tie): not a simple boundary.
+  TriangleMesh bow;
+  bow.V.resize(5, 3);
+  bow.V << 0, 0, 0, 1, 0, 0, 1, 1, 0, -1, 0, 0, -1, -1, 0;
+  bow.F.resize(2, 3);
+  bow.F << 0, 1, 2, 0, 3, 4;
+  EXPECT_THROW(boundary_loops(bow), InputError);
+}
+
 TEST(Mesh, TransformedIsRigid) {
   const TriangleMesh m = tetrahedron();
   Eigen::Isometry3d X_WM = Eigen::Isometry3d::Identity();
