@@ -377,6 +377,24 @@ TEST(Spatial, ConcurrentQueriesMatchSerialOnes) {
   EXPECT_EQ(serial_d, parallel_d);
 }
 
+TEST(Spatial, EmptyAndSingleTriangleMeshes) {
+  const TriangleTree empty{TriangleMesh{}};
+  EXPECT_FALSE(empty.first_hit(Vec3::Zero(), Vec3(1, 0, 0)).has_value());
+  EXPECT_EQ(empty.closest_point(Vec3::Zero()).triangle, -1);
+  EXPECT_TRUE(std::isinf(empty.closest_point(Vec3::Zero()).distance));
+  EXPECT_TRUE(empty.triangles_in_box(Vec3::Constant(-1), Vec3::Constant(1)).empty());
+  TriangleMesh one;
+  one.V.resize(3, 3);
+  one.V << 0, 0, 0, 1, 0, 0, 0, 1, 0;
+  one.F.resize(1, 3);
+  one.F << 0, 1, 2;
+  const TriangleTree tree(one);
+  EXPECT_EQ(tree.first_hit(Vec3(0.2, 0.2, 1), Vec3(0, 0, -1))->triangle, 0);
+  EXPECT_NEAR(tree.closest_point(Vec3(0.2, 0.2, 1)).distance, 1.0, 1e-15);
+  EXPECT_EQ(tree.triangles_in_box(Vec3(0.1, 0.1, -0.1), Vec3(0.2, 0.2, 0.1)), std::vector<int>{0});
+  EXPECT_TRUE(tree.triangles_in_box(Vec3(0.6, 0.6, -0.1), Vec3(0.9, 0.9, 0.1)).empty());  // box beyond the hypotenuse
+}
+
 TEST(Spatial, TreeIsMovable) {
   TriangleTree a(test_sphere());
   TriangleTree b = std::move(a);
