@@ -411,7 +411,6 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       for (const std::string& w : will_change) {
         if (path == fs::path(w)) pending += (pending.empty() ? "" : ", ") + label;
       }
-      if (pending.empty() && !fs::exists(path)) pending = label + " (not there yet)";
     }
     if (options.dry_run && !pending.empty()) {
       outcome.status = StageStatus::kWouldRun;
@@ -493,8 +492,31 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
         << " s (hash " << short_key(now.key) << ")\n";
     log.unsetf(std::ios::floatfield);
   }
-  log << "arthrosim: " << (options.dry_run ? "dry run finished" : "finished") << "; outputs in "
-      << out_dir.string() << "\n";
+  log << "arthrosim: " << (options.dry_run ? "dry run finished:" : "finished:");
+  for (const StageOutcome& o : report.stages) {
+    log << " " << o.name << " ";
+    switch (o.status) {
+      case StageStatus::kRan: {
+        std::ostringstream t;
+        t << std::fixed << std::setprecision(1) << o.wall_time_s;
+        log << "ran (" << t.str() << " s)";
+        break;
+      }
+      case StageStatus::kSkipped:
+        log << "reused";
+        break;
+      case StageStatus::kWouldRun:
+        log << "would run";
+        break;
+      case StageStatus::kWouldSkip:
+        log << "would be reused";
+        break;
+      default:
+        log << "not run";
+    }
+    log << (&o == &report.stages.back() ? "" : ",");
+  }
+  log << "; outputs in " << out_dir.string() << "\n";
   return report;
 }
 
