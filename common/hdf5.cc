@@ -428,6 +428,11 @@ std::vector<std::int64_t> H5File::dims(const std::string& name) const {
   return Impl::dims_of(d.get());
 }
 
+std::vector<std::int64_t> H5File::extent(const std::string& name) const {
+  Hid d = impl_->open_dataset(normalize(name));
+  return Impl::extent_of(d.get());
+}
+
 H5Type H5File::type(const std::string& name) const {
   Hid d = impl_->open_dataset(normalize(name));
   return Impl::type_of(d.get());
@@ -914,17 +919,12 @@ H5File::Appender H5File::make_appender(const std::string& name, const std::vecto
   Hid space(H5Screate_simple(rank, dims0.data(), maxdims.data()), H5Sclose);
   Hid dcpl = make_ocpl(H5P_DATASET_CREATE);
   H5Pset_chunk(dcpl.get(), rank, chunk.data());
-  // Chunks are allocated (and filled) when the extent grows, not at first
-  // write: a steady-state append then changes no chunk index.
+  // Chunks are allocated when the extent grows, not at first write: a
+  // steady-state append then changes no chunk index. They are not filled
+  // (writing fill values would cost as much I/O as the data): frames beyond
+  // the counter are unspecified, in practice zeros of a fresh file region.
   H5Pset_alloc_time(dcpl.get(), H5D_ALLOC_TIME_EARLY);
-  H5Pset_fill_time(dcpl.get(), H5D_FILL_TIME_ALLOC);
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  const int int_fill = std::numeric_limits<int>::min();
-  if (is_double) {
-    H5Pset_fill_value(dcpl.get(), H5T_NATIVE_DOUBLE, &nan);
-  } else {
-    H5Pset_fill_value(dcpl.get(), H5T_NATIVE_INT, &int_fill);
-  }
+  H5Pset_fill_time(dcpl.get(), H5D_FILL_TIME_NEVER);
   a->dset = Hid(H5Dcreate2(impl_->file.get(), norm.c_str(), is_double ? H5T_IEEE_F64LE : H5T_STD_I32LE,
                            space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
                 H5Dclose);

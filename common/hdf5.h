@@ -93,8 +93,15 @@ class H5File {
   /// Names (not full paths) of the members of a group, sorted by name.
   /// Throws InputError if `group` is not a group.
   std::vector<std::string> list(const std::string& group = "/") const;
-  /// Dims of a dataset (empty for a scalar dataset). Throws if missing.
+  /// Readable dims of a dataset (empty for a scalar dataset): for a dataset
+  /// written by an Appender the first dimension is the number of complete
+  /// frames. Throws if missing.
   std::vector<std::int64_t> dims(const std::string& name) const;
+  /// Allocated extent of a dataset as HDF5 stores it; differs from dims()
+  /// only for an appended dataset whose Appender is still open or was killed
+  /// (capacity allocated ahead). Needed by writers of references into the
+  /// file (XDMF).
+  std::vector<std::int64_t> extent(const std::string& name) const;
   /// Element type of a dataset. Throws if missing.
   H5Type type(const std::string& name) const;
   /// Creates a group (and its parents) if it does not exist yet.
@@ -175,8 +182,8 @@ class H5File {
   /// the file structure; not crash-safe; log2(n) of them), so pass the
   /// expected frame count when known. close() (or the destructor) shrinks the
   /// dataset to the frames written, so after a normal end other tools (h5py,
-  /// ParaView) see exactly n_frames; after a kill they see the capacity with
-  /// NaN (double) or INT_MIN (int) in the frames beyond the counter.
+  /// ParaView) see exactly n_frames; after a kill they see the capacity, with
+  /// unspecified values (zeros in practice) in the frames beyond the counter.
   ///
   /// If the dataset already exists with the same element type and frame
   /// dims, appending continues after its last complete frame; otherwise

@@ -50,7 +50,8 @@ std::string dims_text(const std::vector<std::int64_t>& d) {
 // A dataset referenced by the XDMF file, with its checked dims and type.
 struct Ref {
   std::string dataset;
-  std::vector<std::int64_t> dims;
+  std::vector<std::int64_t> dims;    // readable dims (complete frames)
+  std::vector<std::int64_t> extent;  // allocated extent (larger while appending)
   bool is_int = false;
   bool per_step = false;  // first dimension is the step
 };
@@ -105,6 +106,7 @@ class Builder {
     r.dataset = dataset.empty() || dataset[0] != '/' ? "/" + dataset : dataset;
     if (!h5_.is_dataset(r.dataset)) fail(r.dataset, "not found");
     r.dims = h5_.dims(r.dataset);
+    r.extent = h5_.extent(r.dataset);
     const H5Type t = h5_.type(r.dataset);
     if (t != H5Type::kDouble && t != H5Type::kInt) fail(r.dataset, "expected a numeric dataset");
     r.is_int = t == H5Type::kInt;
@@ -182,25 +184,29 @@ class Builder {
     return r.is_int ? "NumberType=\"Int\" Precision=\"4\"" : "NumberType=\"Float\" Precision=\"8\"";
   }
 
-  // DataItem for `r`: whole dataset, or row `step` of a per-step dataset via
-  // a HyperSlab (start, stride, count rows).
+  // DataItem for `r`: the whole dataset, or through a HyperSlab (start,
+  // stride, count rows) row `step` of a per-step dataset, or the complete
+  // frames of a dataset whose allocated extent is larger (appender open).
+  // The HDF item always states the true extent of the dataset.
   void data_item(const Ref& r, std::int64_t step, const std::string& pad) {
     const std::string heavy = escape(ref_) + ":" + escape(r.dataset);
-    if (!r.per_step) {
+    if (!r.per_step && r.extent == r.dims) {
       out_ << pad << "<DataItem Dimensions=\"" << join(r.dims) << "\" " << type_attrs(r) << " Format=\"HDF\">"
            << heavy << "</DataItem>\n";
       return;
     }
     std::vector<std::int64_t> count = r.dims;
-    count[0] = 1;
     std::vector<std::int64_t> start(r.dims.size(), 0), stride(r.dims.size(), 1);
-    start[0] = step;
+    if (r.per_step) {
+      count[0] = 1;
+      start[0] = step;
+    }
     out_ << pad << "<DataItem ItemType=\"HyperSlab\" Type=\"HyperSlab\" Dimensions=\"" << join(count) << "\" "
          << type_attrs(r) << ">\n";
     out_ << pad << "  <DataItem Dimensions=\"3 " << r.dims.size() << "\" NumberType=\"Int\" Format=\"XML\">"
          << join(start) << " " << join(stride) << " " << join(count) << "</DataItem>\n";
-    out_ << pad << "  <DataItem Dimensions=\"" << join(r.dims) << "\" " << type_attrs(r) << " Format=\"HDF\">" << heavy
-         << "</DataItem>\n";
+    out_ << pad << "  <DataItem Dimensions=\"" << join(r.extent) << "\" " << type_attrs(r) << " Format=\"HDF\">"
+         << heavy << "</DataItem>\n";
     out_ << pad << "</DataItem>\n";
   }
 

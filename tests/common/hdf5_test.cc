@@ -334,6 +334,12 @@ TEST(Hdf5, AppenderFramesOfRank0To2) {
       mi.append(Eigen::Matrix2i::Constant(k));
     }
     EXPECT_EQ(v.num_frames(), 5);
+    // While appending, space is allocated ahead: the extent is a whole number
+    // of chunks (2 frames per chunk for v: 5 frames -> grown 2, 4, 8), the
+    // readable dims are the complete frames.
+    EXPECT_EQ(f.dims("v"), (std::vector<std::int64_t>{5, 3}));
+    EXPECT_EQ(f.extent("v"), (std::vector<std::int64_t>{8, 3}));
+    EXPECT_EQ(f.read_matrix("v").rows(), 5);
     // Shape and type errors name the dataset and frame.
     try {
       v.append(Eigen::Vector4d::Zero());
@@ -357,6 +363,9 @@ TEST(Hdf5, AppenderFramesOfRank0To2) {
     EXPECT_THROW(f.appender("fixed", {3}), InputError);    // not appendable
   }
   H5File f(p.string(), H5File::Mode::kRead);
+  // Closed appenders shrank their datasets to the frames written.
+  for (const char* name : {"time", "v", "m", "mi"}) EXPECT_EQ(f.extent(name), f.dims(name)) << name;
+  EXPECT_EQ(f.attribute_int("v", "arthrosim_frames_complete"), 6);
   const Eigen::VectorXd t = f.read_vector("time");
   ASSERT_EQ(t.size(), 5);
   for (int k = 0; k < 5; ++k) EXPECT_EQ(t(k), 0.1 * k);

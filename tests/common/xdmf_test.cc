@@ -184,11 +184,15 @@ std::vector<std::int64_t> check_data_item(const Node& item, const H5File& h5, co
     EXPECT_EQ(parse_dims(inner[0]->attrs.at("Dimensions")), (std::vector<std::int64_t>{3, static_cast<std::int64_t>(r)}));
     EXPECT_EQ(sel.size(), 3 * r);
     std::vector<std::int64_t> count(sel.begin() + 2 * r, sel.end());
+    // Every selected element lies within the complete frames (dims(), not
+    // just the allocated extent).
+    std::string text = inner[1]->text;
+    const std::vector<std::int64_t> readable = h5.dims(text.substr(text.find(':') + 1));
     for (size_t k = 0; k < r; ++k) {
       const std::int64_t start = sel[k], stride = sel[r + k], cnt = sel[2 * r + k];
       EXPECT_GE(start, 0);
       EXPECT_GE(stride, 1);
-      EXPECT_LE(start + (cnt - 1) * stride, ref_dims[k] - 1) << "hyperslab outside the dataset";
+      EXPECT_LE(start + (cnt - 1) * stride, readable[k] - 1) << "hyperslab outside the complete frames";
     }
     EXPECT_EQ(count, parse_dims(item.attrs.at("Dimensions")));
     return count;
@@ -202,8 +206,9 @@ std::vector<std::int64_t> check_data_item(const Node& item, const H5File& h5, co
   EXPECT_EQ(text.substr(0, colon), h5_name);
   const std::string dataset = text.substr(colon + 1);
   EXPECT_TRUE(h5.is_dataset(dataset)) << dataset;
+  // The stated dims are the dataset's true extent (what a reader will find).
   const std::vector<std::int64_t> dims = parse_dims(item.attrs.at("Dimensions"));
-  EXPECT_EQ(dims, h5.dims(dataset)) << dataset;
+  EXPECT_EQ(dims, h5.extent(dataset)) << dataset;
   const bool is_int = h5.type(dataset) == H5Type::kInt;
   EXPECT_EQ(item.attrs.at("NumberType"), is_int ? "Int" : "Float") << dataset;
   EXPECT_EQ(item.attrs.at("Precision"), is_int ? "4" : "8") << dataset;
@@ -387,6 +392,50 @@ TEST(Xdmf, BadDatasetsAreReportedByName) {
               }),
               HasSubstr("dataset /quad/X (for XDMF): expected dims (2, N, 3) for 2 time steps, found (3, 4, 3)"));
   EXPECT_THAT(message([](XdmfSeries& s) { s.surfaces.clear(); }), HasSubstr("no surface"));
+}
+
+// While an appender is open its dataset has more space allocated than frames
+// written; the XDMF file must state the true extent and select only the
+// complete frames.
+TEST(Xdmf, OpenAppenderDatasetsAreReferencedByExtentAndSliced) {
+  const fs::path h5_path = temp_dir() / "appending.h5";
+  H5File f(h5_path.string(), H5File::Mode::kTruncate);
+  write_fixture(f, 1);
+  auto X = f.appender("live/X", {4, 3}, {.expected_frames = 10});
+  auto p = f.appender("live/p", {4}, {.expected_frames = 10});
+  for (int k = 0; k < 3; ++k) {
+    X.append(Eigen::Matrix<double, 4, 3>::Constant(k));
+    p.append(Eigen::Vector4d::Constant(k));
+  }
+  EXPECT_EQ(f.extent("live/X"), (std::vector<std::int64_t>{10, 4, 3}));
+  EXPECT_EQ(f.dims("live/X"), (std::vector<std::int64_t>{3, 4, 3}));
+  XdmfSeries s;
+  s.times = {0.0, 0.1, 0.2};
+  XdmfSurface surf{"live", "live/X", "tri/F", XdmfCellType::kTriangle, {}};
+  surf.fields = {{"p", "live/p", XdmfCenter::kNode, true}};
+  s.surfaces = {surf};
+  const fs::path xdmf_path = temp_dir() / "appending.xdmf";
+  write_xdmf(xdmf_path.string(), f, s);
+  std::unique_ptr<Node> root = XmlParser(read_text(xdmf_path)).parse();
+  const auto steps = root->find_all("Domain")[0]->find_all("Grid")[0]->find_all("Grid");
+  ASSERT_EQ(steps.size(), 3u);
+  int references = 0;
+  for (const Node* g : steps) {
+    check_data_item(*g->find_all("Geometry")[0]->find_all("DataItem")[0], f, "appending.h5", &references);
+    check_data_item(*g->find_all("Attribute")[0]->find_all("DataItem")[0], f, "appending.h5", &references);
+  }
+  EXPECT_EQ(references, 6);
+  // A static (not per-step) reference to an appended dataset selects its
+  // complete rows: node positions appended one point per frame.
+  auto V = f.appender("live/V", {3}, {.expected_frames = 10});
+  for (int i = 0; i < 4; ++i) V.append(Eigen::Vector3d(i, 0, 0));
+  XdmfSeries st;
+  st.surfaces = {XdmfSurface{"points", "live/V", "tri/F", XdmfCellType::kTriangle, {}}};
+  write_xdmf(xdmf_path.string(), f, st);
+  root = XmlParser(read_text(xdmf_path)).parse();
+  const Node& geo = *root->find_all("Domain")[0]->find_all("Grid")[0]->find_all("Geometry")[0]->find_all("DataItem")[0];
+  EXPECT_EQ(geo.attrs.at("ItemType"), "HyperSlab");
+  EXPECT_EQ(check_data_item(geo, f, "appending.h5", &references), (std::vector<std::int64_t>{4, 3}));
 }
 
 // The parser used above must itself reject malformed XML, or the
