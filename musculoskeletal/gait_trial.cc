@@ -75,7 +75,7 @@ TrialDescription parse_trial_description(std::istream& in, const std::string& so
   std::set<std::string> quantities(trial_coordinate_names().begin(), trial_coordinate_names().end());
   quantities.insert(kGrfQuantities.begin(), kGrfQuantities.end());
   quantities.insert(kKneeLoadQuantities.begin(), kKneeLoadQuantities.end());
-  const std::set<std::string> plain_keys = {"synthetic",        "description",    "subject_mass_kg",
+  const std::set<std::string> plain_keys = {"synthetic", "periodic", "description", "subject_mass_kg",
                                             "subject_height_m", "side",           "lab_frame",
                                             "kinematics_file",  "grf_file",       "knee_loads_file"};
   auto resolve = [&](const std::string& f) {
@@ -151,11 +151,12 @@ TrialDescription parse_trial_description(std::istream& in, const std::string& so
                        "unknown key '" + key + "'; expected one of: " +
                            join(std::vector<std::string>(plain_keys.begin(), plain_keys.end())) +
                            ", column.<quantity>, leg.<geometry>");
-    } else if (key == "synthetic") {
+    } else if (key == "synthetic" || key == "periodic") {
       if (value != "true" && value != "false") {
-        throw InputError(source_name, line, "expected true or false for 'synthetic', found '" + value + "'");
+        throw InputError(source_name, line,
+                         "expected true or false for '" + key + "', found '" + value + "'");
       }
-      d.synthetic = value == "true";
+      (key == "synthetic" ? d.synthetic : d.periodic) = value == "true";
     } else if (key == "description") {
       d.description = value;
     } else if (key == "subject_mass_kg" || key == "subject_height_m") {
@@ -324,6 +325,7 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
   GaitTrial t;
   t.source = d.path;
   t.synthetic = d.synthetic;
+  t.periodic = d.periodic;
   t.body_mass_kg = d.subject_mass_kg;
   t.height_m = d.subject_height_m;
   t.side = d.side;
@@ -355,12 +357,43 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
                                     " Hz in the common time range");
   }
   const double h = 1.0 / options.rate_hz;
+  const Eigen::Index last = kin.time.size() - 1;
+  if (d.periodic) {
+    // One whole cycle: the grid must end on the kinematics' last row, and the
+    // first and last rows must describe the same posture (pelvis_tx/tz may
+    // drift; 2 deg and 2 cm tolerances catch a trial that is not one cycle).
+    const double t_last = t.time(t.time.size() - 1);
+    if (std::abs(t_last - kin.time(last)) > 1e-9 || std::abs(t.time(0) - kin.time(0)) > 1e-9) {
+      std::ostringstream s;
+      s << "periodic: true needs the load files to cover the kinematics' time range ["
+        << kin.time(0) << ", " << kin.time(last) << "] s and that range to be a whole number of "
+        << "samples at " << options.rate_hz << " Hz; the common grid is [" << t.time(0) << ", "
+        << t_last << "] s";
+      throw InputError(d.path, d.key_lines.at("periodic"), s.str());
+    }
+    for (int c = 0; c < kNumTrialCoordinates; ++c) {
+      if (c == kPelvisTx || c == kPelvisTz) continue;
+      const double jump = std::abs(kin.values(last, c) - kin.values(0, c));
+      const bool length = c == kPelvisTy;
+      if (jump > (length ? 0.02 : 2.0 * M_PI / 180.0)) {
+        std::ostringstream s;
+        s << "periodic: true but " << trial_coordinate_names()[c] << " differs between the first and "
+          << "last rows of " << d.kinematics_file << " by " << (length ? jump : jump * 180.0 / M_PI)
+          << (length ? " m" : " deg") << " (allowed " << (length ? "0.02 m" : "2 deg") << ")";
+        throw InputError(d.path, d.key_lines.at("periodic"), s.str());
+      }
+    }
+  }
 
   Eigen::MatrixXd q = resample_linear(kin.time, kin.values, t.time, d.kinematics_file);
-  if (options.filter_kinematics) q = filtfilt_lowpass(q, options.rate_hz, options.lowpass, d.kinematics_file);
+  if (options.filter_kinematics) {
+    LowPassOptions lp = options.lowpass;
+    lp.periodic = d.periodic;
+    q = filtfilt_lowpass(q, options.rate_hz, lp, d.kinematics_file);
+  }
   t.q = q;
-  t.qd = first_derivative(q, h);
-  t.qdd = second_derivative(q, h);
+  t.qd = first_derivative(q, h, d.periodic);
+  t.qdd = second_derivative(q, h, d.periodic);
 
   if (grf) {
     Eigen::MatrixXd g = resample_linear(grf->time, grf->values, t.time, d.grf_file);

@@ -12,6 +12,9 @@
 //   kinematics_file: ik.mot     (required; paths relative to the trial file)
 //   grf_file: grf.mot           knee_loads_file: loads.sto  (at least one)
 //   synthetic: true|false       description: free text
+//   periodic: true|false        the kinematics are exactly one cycle (last row
+//                               = first row one period later; pelvis_tx/tz may
+//                               drift): filter and differentiate periodically
 //   column.<quantity>: <label>  maps a quantity to a column; "-label" negates it.
 //   leg.thigh_length_m, leg.shank_length_m, leg.ankle_height_m,
 //   leg.foot_length_m, leg.hip_x_m, leg.hip_y_m, leg.hip_z_m: override the
@@ -36,8 +39,9 @@
 // Processing (load_gait_trial): every table is resampled by linear
 // interpolation onto one uniform grid at options.rate_hz covering the time
 // range common to all files; kinematics are low-pass filtered (zero-lag
-// Butterworth, musculoskeletal/signal.h; 6 Hz, 2nd order per pass by default)
-// and differentiated by central differences to velocities and accelerations;
+// Butterworth, musculoskeletal/signal.h; 6 Hz, 2nd order per pass by default;
+// padded by odd reflection, or periodically for a periodic trial) and
+// differentiated by central differences to velocities and accelerations;
 // ground reactions are not filtered by default (their steps at heel strike and
 // toe-off would leak into swing) and are zeroed wherever the vertical force is
 // below options.min_vertical_grf_n (COP undefined there).
@@ -72,6 +76,7 @@ struct ColumnMapping {
 struct TrialDescription {
   std::string path;                   ///< the trial file as given
   bool synthetic = false;
+  bool periodic = false;
   std::string description;
   double subject_mass_kg = 0.0;
   double subject_height_m = 0.0;
@@ -107,6 +112,7 @@ struct GaitTrialOptions {
 struct GaitTrial {
   std::string source;            ///< trial file
   bool synthetic = false;
+  bool periodic = false;         ///< filtered/differentiated as one cycle
   double body_mass_kg = 0.0;
   double height_m = 0.0;
   Side side = Side::kRight;

@@ -85,6 +85,21 @@ Eigen::VectorXd pad_odd(const Eigen::VectorXd& x, int pad) {
   return out;
 }
 
+// Periodic continuation with drift: the samples 0..n-2 are one period, the
+// last sample repeats the first plus the drift.
+Eigen::VectorXd pad_periodic(const Eigen::VectorXd& x, int pad) {
+  const Eigen::Index n = x.size(), period = n - 1;
+  const double drift = x(n - 1) - x(0);
+  auto value = [&](Eigen::Index i) {  // any integer i
+    Eigen::Index q = i >= 0 ? i / period : -((-i + period - 1) / period);
+    const Eigen::Index r = i - q * period;
+    return x(r) + static_cast<double>(q) * drift;
+  };
+  Eigen::VectorXd out(n + 2 * pad);
+  for (Eigen::Index i = 0; i < out.size(); ++i) out(i) = value(i - pad);
+  return out;
+}
+
 }  // namespace
 
 Eigen::MatrixXd filtfilt_lowpass(const Eigen::MatrixXd& x, double rate_hz,
@@ -96,11 +111,13 @@ Eigen::MatrixXd filtfilt_lowpass(const Eigen::MatrixXd& x, double rate_hz,
   }
   const auto sections = butterworth_lowpass(options.cutoff_hz, rate_hz, options.pass_order);
   int pad = options.pad_samples;
-  if (pad < 0) pad = static_cast<int>(std::ceil(2.0 * rate_hz / options.cutoff_hz));
-  pad = std::min<int>(pad, static_cast<int>(n - 1));
+  if (pad < 0) {
+    pad = static_cast<int>(std::ceil((options.periodic ? 4.0 : 2.0) * rate_hz / options.cutoff_hz));
+  }
+  if (!options.periodic) pad = std::min<int>(pad, static_cast<int>(n - 1));
   Eigen::MatrixXd out(n, x.cols());
   for (Eigen::Index c = 0; c < x.cols(); ++c) {
-    Eigen::VectorXd p = pad_odd(x.col(c), pad);
+    Eigen::VectorXd p = options.periodic ? pad_periodic(x.col(c), pad) : pad_odd(x.col(c), pad);
     p = filter_forward(sections, p, true);
     p.reverseInPlace();
     p = filter_forward(sections, p, true);
@@ -159,25 +176,38 @@ Eigen::MatrixXd resample_linear(const Eigen::VectorXd& times, const Eigen::Matri
   return out;
 }
 
-Eigen::MatrixXd first_derivative(const Eigen::MatrixXd& x, double h) {
+Eigen::MatrixXd first_derivative(const Eigen::MatrixXd& x, double h, bool periodic) {
   const Eigen::Index n = x.rows();
   if (n < 4) throw std::invalid_argument("first_derivative: need at least 4 samples");
   Eigen::MatrixXd d(n, x.cols());
-  d.row(0) = (-3.0 * x.row(0) + 4.0 * x.row(1) - x.row(2)) / (2.0 * h);
   for (Eigen::Index i = 1; i + 1 < n; ++i) d.row(i) = (x.row(i + 1) - x.row(i - 1)) / (2.0 * h);
-  d.row(n - 1) = (3.0 * x.row(n - 1) - 4.0 * x.row(n - 2) + x.row(n - 3)) / (2.0 * h);
+  if (periodic) {
+    // x[-1] = x[n-2] - drift, x[n] = x[1] + drift; both ends see the same neighbours.
+    const Eigen::RowVectorXd drift = x.row(n - 1) - x.row(0);
+    d.row(0) = (x.row(1) - (x.row(n - 2) - drift)) / (2.0 * h);
+    d.row(n - 1) = d.row(0);
+  } else {
+    d.row(0) = (-3.0 * x.row(0) + 4.0 * x.row(1) - x.row(2)) / (2.0 * h);
+    d.row(n - 1) = (3.0 * x.row(n - 1) - 4.0 * x.row(n - 2) + x.row(n - 3)) / (2.0 * h);
+  }
   return d;
 }
 
-Eigen::MatrixXd second_derivative(const Eigen::MatrixXd& x, double h) {
+Eigen::MatrixXd second_derivative(const Eigen::MatrixXd& x, double h, bool periodic) {
   const Eigen::Index n = x.rows();
   if (n < 4) throw std::invalid_argument("second_derivative: need at least 4 samples");
   Eigen::MatrixXd d(n, x.cols());
   const double h2 = h * h;
-  d.row(0) = (2.0 * x.row(0) - 5.0 * x.row(1) + 4.0 * x.row(2) - x.row(3)) / h2;
   for (Eigen::Index i = 1; i + 1 < n; ++i)
     d.row(i) = (x.row(i + 1) - 2.0 * x.row(i) + x.row(i - 1)) / h2;
-  d.row(n - 1) = (2.0 * x.row(n - 1) - 5.0 * x.row(n - 2) + 4.0 * x.row(n - 3) - x.row(n - 4)) / h2;
+  if (periodic) {
+    const Eigen::RowVectorXd drift = x.row(n - 1) - x.row(0);
+    d.row(0) = (x.row(1) - 2.0 * x.row(0) + (x.row(n - 2) - drift)) / h2;
+    d.row(n - 1) = d.row(0);
+  } else {
+    d.row(0) = (2.0 * x.row(0) - 5.0 * x.row(1) + 4.0 * x.row(2) - x.row(3)) / h2;
+    d.row(n - 1) = (2.0 * x.row(n - 1) - 5.0 * x.row(n - 2) + 4.0 * x.row(n - 3) - x.row(n - 4)) / h2;
+  }
   return d;
 }
 

@@ -15,7 +15,9 @@
 // applied (fc is the cutoff of each pass -- say so when quoting it).
 //
 // End effects: before each pass the signal is extended at both ends by odd
-// (point) reflection, x[-k] = 2 x[0] - x[k], which continues value and slope,
+// (point) reflection, x[-k] = 2 x[0] - x[k], which continues value and slope
+// (but forces the second derivative towards zero at the two ends: use the
+// periodic option for a trial that is exactly one cycle),
 // and every section starts in its steady state for the first padded value: a
 // constant passes through unchanged, a straight line up to the start transient
 // decayed over the padding (~5e-6 x slope[1/s] for the defaults, measured).
@@ -48,9 +50,16 @@ struct LowPassOptions {
   double cutoff_hz = 6.0;
   /// Order of one pass, even, 2..8. The zero-lag filter has twice this order.
   int pass_order = 2;
-  /// Samples of odd reflection added at each end before each pass; -1 = automatic:
-  /// min(n - 1, ceil(2 rate / cutoff)) (two cutoff periods).
+  /// Samples of padding added at each end before each pass; -1 = automatic:
+  /// odd reflection min(n - 1, ceil(2 rate / cutoff)) (two cutoff periods),
+  /// periodic ceil(4 rate / cutoff).
   int pad_samples = -1;
+  /// Periodic signal (e.g. exactly one gait cycle): the last row is one period
+  /// after the first, x[n-1] = x[0] + drift (drift = x[n-1] - x[0], e.g. the
+  /// stride in pelvis_tx). Pads with the periodic continuation
+  /// x[n-1+k] = x[k] + drift, x[-k] = x[n-1-k] - drift instead of the odd
+  /// reflection, so the ends are filtered like the middle.
+  bool periodic = false;
 };
 
 /// Butterworth low-pass sections for sampling rate `rate_hz`. Throws
@@ -81,7 +90,9 @@ Eigen::MatrixXd resample_linear(const Eigen::VectorXd& times, const Eigen::Matri
                                 const Eigen::VectorXd& new_times, const std::string& what = "signal");
 
 /// First and second derivatives of every column (uniform step h [s], >= 4 rows).
-Eigen::MatrixXd first_derivative(const Eigen::MatrixXd& x, double h);
-Eigen::MatrixXd second_derivative(const Eigen::MatrixXd& x, double h);
+/// `periodic`: central differences at the ends too, with the periodic
+/// continuation described in LowPassOptions::periodic.
+Eigen::MatrixXd first_derivative(const Eigen::MatrixXd& x, double h, bool periodic = false);
+Eigen::MatrixXd second_derivative(const Eigen::MatrixXd& x, double h, bool periodic = false);
 
 }  // namespace arthrosim::musculoskeletal

@@ -55,6 +55,7 @@ void replace_in_file(const std::filesystem::path& p, const std::string& from, co
 TEST(TrialDescription, ReadsBundledSyntheticTrial) {
   const TrialDescription d = read_trial_description(kTrial);
   EXPECT_TRUE(d.synthetic);
+  EXPECT_TRUE(d.periodic);
   EXPECT_NE(d.description.find("SYNTHETIC"), std::string::npos);
   EXPECT_DOUBLE_EQ(d.subject_mass_kg, 61.0);
   EXPECT_DOUBLE_EQ(d.subject_height_m, 1.65);
@@ -147,6 +148,16 @@ TEST(GaitTrial, BundledSyntheticTrial) {
   // ~56 deg in ~0.14 s around toe-off: several rad/s).
   EXPECT_GT(t.qd.col(kKneeFlexion).cwiseAbs().maxCoeff(), 3.0);
   EXPECT_LT(t.qd.col(kKneeFlexion).cwiseAbs().maxCoeff(), 10.0);
+  // Periodic trial: the first and last rows are the same instant of the cycle,
+  // and the pelvis braking at heel strike is kept at the first frame: the
+  // unfiltered file gives -2.56 m/s^2 there (periodic second difference of
+  // pelvis_tx), the 6 Hz filter changes it by a few tenths, while odd-reflection
+  // padding would flatten it to about -0.1 m/s^2.
+  EXPECT_TRUE(t.periodic);
+  EXPECT_LT((t.qd.row(0) - t.qd.row(114)).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((t.qdd.row(0) - t.qdd.row(114)).cwiseAbs().maxCoeff(), 1e-9);
+  std::printf("pelvis_tx acceleration at heel strike: %.2f m/s^2\n", t.qdd(0, kPelvisTx));
+  EXPECT_NEAR(t.qdd(0, kPelvisTx), -2.56, 0.5);
 }
 
 // Resampling to another rate keeps the duration and the force level.
@@ -214,6 +225,7 @@ TEST(GaitTrial, DifferentRatesPerFile) {
 // resampled onto the trial grid; no pelvis columns are needed then.
 TEST(GaitTrial, KneeLoadsGivenDirectly) {
   const auto dir = scratch_copy("given_loads");
+  replace_in_file(dir / "trial.yaml", "periodic: true", "periodic: false");
   common::StorageTable loads;
   loads.name = "knee loads";
   loads.labels = {"time", "fx", "fy", "fz", "mx", "my", "mz"};
@@ -293,6 +305,14 @@ TEST(GaitTrial, BadFilesGiveFileLineErrors) {
     const std::string m = message_of([&] { load_gait_trial((dir / "trial.yaml").string()); });
     EXPECT_NE(m.find("ik.mot:16: error:"), std::string::npos) << m;
     EXPECT_NE(m.find("pelvis_tilt"), std::string::npos) << m;
+  }
+  {
+    // 1.14 s is not a whole number of samples at 30 Hz: a periodic trial cannot
+    // be resampled onto a grid that ends on its last row.
+    GaitTrialOptions o;
+    o.rate_hz = 30.0;
+    const std::string m = message_of([&] { load_gait_trial(kTrial, o); });
+    EXPECT_NE(m.find("trial.yaml:6: error: periodic: true needs"), std::string::npos) << m;
   }
   EXPECT_THROW(read_trial_description("/nonexistent/trial.yaml"), common::InputError);
 }
