@@ -56,6 +56,7 @@ struct PackedTriangle {
 struct Ray {
   Vec3 o, d, inv_d;
   double t_max;
+  HitSide side = HitSide::kBoth;
 };
 
 // Moller-Trumbore ray/triangle intersection. Accepts t in [0, t_max] and
@@ -72,6 +73,9 @@ inline bool moller_trumbore(const PackedTriangle& tri, const Ray& ray, double* t
   const double det = tri.e1.dot(p);
   // |det| = |d . (e1 x e2)| = sin(angle to plane) * |e1 x e2| for unit d.
   if (!(std::abs(det) > kParallelTolerance * tri.twice_area)) return false;  // also catches zero-area triangles
+  // det = e1 . (d x e2) = -d . (e1 x e2): positive when the ray meets the front side.
+  if (ray.side == HitSide::kFront && det < 0.0) return false;
+  if (ray.side == HitSide::kBack && det > 0.0) return false;
   const double inv_det = 1.0 / det;
   const Vec3 s = ray.o - tri.a;
   const double u = s.dot(p) * inv_det;
@@ -385,7 +389,13 @@ RayHit make_hit(int triangle, const Ray& ray, double t, double u,
 
 std::optional<RayHit> TriangleTree::first_hit(const Vec3& origin, const Vec3& direction,
                                               double max_distance) const {
-  const Ray ray = make_ray(origin, direction, max_distance, "first_hit");
+  return first_hit(origin, direction, max_distance, HitSide::kBoth);
+}
+
+std::optional<RayHit> TriangleTree::first_hit(const Vec3& origin, const Vec3& direction, double max_distance,
+                                              HitSide side) const {
+  Ray ray = make_ray(origin, direction, max_distance, "first_hit");
+  ray.side = side;
   if (max_distance < 0.0) return std::nullopt;
   RayTraversal traversal{&impl_->data};
   impl_->data.tree.traversal_with_priority(ray, traversal);
@@ -395,11 +405,17 @@ std::optional<RayHit> TriangleTree::first_hit(const Vec3& origin, const Vec3& di
 
 std::optional<RayHit> TriangleTree::hit_triangle(int triangle, const Vec3& origin, const Vec3& direction,
                                                  double max_distance) const {
+  return hit_triangle(triangle, origin, direction, max_distance, HitSide::kBoth);
+}
+
+std::optional<RayHit> TriangleTree::hit_triangle(int triangle, const Vec3& origin, const Vec3& direction,
+                                                 double max_distance, HitSide side) const {
   if (triangle < 0 || triangle >= static_cast<int>(impl_->data.packed.size())) {
     throw std::out_of_range("TriangleTree::hit_triangle: triangle " + std::to_string(triangle) +
                             " outside [0, " + std::to_string(impl_->data.packed.size()) + ")");
   }
-  const Ray ray = make_ray(origin, direction, max_distance, "hit_triangle");
+  Ray ray = make_ray(origin, direction, max_distance, "hit_triangle");
+  ray.side = side;
   double t, u, v;
   if (!moller_trumbore(impl_->data.packed[triangle], ray, &t, &u, &v)) return std::nullopt;
   return make_hit(triangle, ray, t, u, v);

@@ -23,6 +23,11 @@ struct ClosestPoint {
   double distance = 0.0;    ///< |query - point| [m]
 };
 
+/// Which triangle sides a ray may hit. Front: the ray travels against the
+/// triangle normal (direction . n < 0, it arrives from the side the normal
+/// points to); back: direction . n > 0.
+enum class HitSide { kBoth, kFront, kBack };
+
 /// Immutable AABB tree over a triangle mesh (the mesh is copied in).
 class TriangleTree {
  public:
@@ -41,6 +46,11 @@ class TriangleTree {
   /// no heap allocation). A zero/non-finite direction throws NumericalError.
   std::optional<RayHit> first_hit(const Vec3& origin, const Vec3& direction,
                                   double max_distance = 1e30) const;
+  /// As above, but only triangles seen from `side` count (others are passed
+  /// through, so the result is the first hit of that side, not the first hit
+  /// filtered afterwards).
+  std::optional<RayHit> first_hit(const Vec3& origin, const Vec3& direction, double max_distance,
+                                  HitSide side) const;
   /// Closest point on the surface to p (ties: the lower triangle index). An
   /// empty mesh gives triangle -1 and an infinite distance.
   ClosestPoint closest_point(const Vec3& p) const;
@@ -52,6 +62,8 @@ class TriangleTree {
   /// to test a cached guess before a tree query.
   std::optional<RayHit> hit_triangle(int triangle, const Vec3& origin, const Vec3& direction,
                                      double max_distance = 1e30) const;
+  std::optional<RayHit> hit_triangle(int triangle, const Vec3& origin, const Vec3& direction,
+                                     double max_distance, HitSide side) const;
 
  private:
   struct Impl;

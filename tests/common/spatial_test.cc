@@ -377,6 +377,41 @@ TEST(Spatial, ConcurrentQueriesMatchSerialOnes) {
   EXPECT_EQ(serial_d, parallel_d);
 }
 
+TEST(Spatial, HitSideSelectsFrontOrBackFaces) {
+  // Closed outward sphere: a ray from outside through the centre meets the
+  // near wall from the front and the far wall from the back.
+  const TriangleMesh m = test_sphere();
+  const TriangleTree tree(m);
+  const Points3 N = triangle_normals(m);
+  std::mt19937_64 rng(8);
+  for (int r = 0; r < 300; ++r) {
+    const Vec3 u = random_unit(rng);
+    const Vec3 o = 0.1 * u, d = -u;
+    const auto any = tree.first_hit(o, d);
+    const auto front = tree.first_hit(o, d, 1e30, HitSide::kFront);
+    const auto back = tree.first_hit(o, d, 1e30, HitSide::kBack);
+    ASSERT_TRUE(any && front && back);
+    EXPECT_EQ(front->triangle, any->triangle);
+    EXPECT_LT(N.row(front->triangle).dot(d.transpose()), 0.0);
+    EXPECT_GT(N.row(back->triangle).dot(d.transpose()), 0.0);
+    EXPECT_GT(back->distance, front->distance);
+    // Brute force over the filtered triangles: the same far-wall triangle.
+    double best = kInf;
+    int best_tri = -1;
+    for (int t = 0; t < m.num_triangles(); ++t) {
+      if (N.row(t).dot(d.transpose()) <= 0.0) continue;
+      double tt;
+      Vec3 w;
+      if (brute_ray_triangle(m, t, o, d, 1e30, &tt, &w) && tt < best) best = tt, best_tri = t;
+    }
+    EXPECT_EQ(back->triangle, best_tri);
+    EXPECT_NEAR(back->distance, best, 1e-12 * best);
+    // The single-triangle test applies the same rule.
+    EXPECT_FALSE(tree.hit_triangle(front->triangle, o, d, 1e30, HitSide::kBack).has_value());
+    EXPECT_TRUE(tree.hit_triangle(back->triangle, o, d, 1e30, HitSide::kBack).has_value());
+  }
+}
+
 TEST(Spatial, EmptyAndSingleTriangleMeshes) {
   const TriangleTree empty{TriangleMesh{}};
   EXPECT_FALSE(empty.first_hit(Vec3::Zero(), Vec3(1, 0, 0)).has_value());
