@@ -463,6 +463,32 @@ TEST(Hdf5Kill, ChildKilledWhileSleepingLeavesReportedFrames) {
   run_kill_case(20, 2000, 4, 0, "sleeping");  // capacity grows by doubling here
 }
 
+// A killed run's file can be reopened for writing and appending resumes after
+// the last complete frame (what a restarted stage would do); closing then
+// shrinks the dataset to exactly the frames written.
+TEST(Hdf5Kill, AppendingResumesAfterKill) {
+  run_kill_case(12, 2000, 4, 0, "resume");
+  const fs::path file = temp_dir() / "killed_resume.h5";
+  std::int64_t before = 0;
+  {
+    H5File f(file.string(), H5File::Mode::kReadWrite);
+    before = f.dims("frames/time")[0];
+    ASSERT_GE(before, 12);
+    EXPECT_GT(f.extent("frames/time")[0], before);  // capacity allocated ahead by the child
+    auto times = f.appender("frames/time", {});
+    EXPECT_EQ(times.num_frames(), before);
+    times.append(-1.0);
+    times.append(-2.0);
+  }
+  H5File f(file.string(), H5File::Mode::kRead);
+  const Eigen::VectorXd t = f.read_vector("frames/time");
+  ASSERT_EQ(t.size(), before + 2);
+  EXPECT_EQ(f.extent("frames/time")[0], before + 2);
+  for (std::int64_t k = 0; k < before; ++k) EXPECT_EQ(t(k), 0.01 * static_cast<double>(k));
+  EXPECT_EQ(t(before), -1.0);
+  EXPECT_EQ(t(before + 1), -2.0);
+}
+
 TEST(Hdf5Kill, ChildKilledInsideWritesLeavesReportedFrames) {
   // Repeated with different N so the kill lands at different points of the
   // append/flush sequence (often inside HDF5), with 4 frames per chunk and
