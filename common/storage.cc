@@ -214,9 +214,17 @@ StorageTable parse_storage(std::istream& in, const std::string& source, const Ro
   // ---- data rows ----
   std::vector<double> values;
   int rows = 0;
+  int blank_line = 0;  // first blank line after the last row read
   while (next_line()) {
     const std::vector<std::string> tokens = split_ws(line);
-    if (tokens.empty()) continue;  // blank lines (e.g. trailing) are allowed
+    if (tokens.empty()) {
+      // Trailing blank lines are allowed; blank lines between rows are not,
+      // so that row r is always on line data_line + r.
+      if (blank_line == 0) blank_line = line_no;
+      continue;
+    }
+    if (blank_line != 0) fail(blank_line, "expected a data row, found a blank line between data rows");
+    if (rows == 0) table.data_line = line_no;
     if (tokens.size() != n_cols) {
       fail(line_no, "expected " + std::to_string(n_cols) + " values (one per column label), found " +
                         std::to_string(tokens.size()));

@@ -17,7 +17,8 @@
 //    must match the data (error otherwise). The writer writes version=1
 //    (old) or version=3 (OpenSim 4), and nRows/nColumns in both styles.
 //  Data rows are split at any whitespace; "nan"/"inf" are accepted as
-//  numbers (callers that cannot handle them use check_finite).
+//  numbers (callers that cannot handle them use check_finite). Blank lines
+//  may follow the last row but not separate rows.
 //
 // Units: inside arthrosim angles are radians. When the file says
 // inDegrees=yes, read_storage converts every *rotational* column from degrees
@@ -47,6 +48,10 @@ struct StorageTable {
   /// e.g. DataType, OpenSimVersion (written back sorted by key).
   std::map<std::string, std::string> metadata;
   StorageStyle style = StorageStyle::kOpenSim4;
+  /// Set by the reader: line number (1-based) of the first data row; rows are
+  /// contiguous (blank lines only after the last row), so row r is on line
+  /// data_line + r. 0 when there are no rows or the table was not read.
+  int data_line = 0;
 
   int num_rows() const { return static_cast<int>(data.rows()); }
   int num_columns() const { return static_cast<int>(data.cols()); }

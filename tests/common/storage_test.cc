@@ -60,6 +60,7 @@ TEST(Storage, ReadsOldStyleAndConvertsDegreesOnRotationalColumns) {
   ASSERT_EQ(t.num_rows(), 3);
   ASSERT_EQ(t.num_columns(), 5);
   EXPECT_EQ(t.time(), Eigen::Vector3d(0.0, 0.01, 0.02));
+  EXPECT_EQ(t.data_line, 12);  // row r is on line 12 + r
   // Rotational: converted (a single multiplication by pi/180 -> exact match
   // with the same expression).
   EXPECT_EQ(t.column("knee_angle_r"), Eigen::Vector3d(-5.0 * kDeg, -10.0 * kDeg, 90 * kDeg));
@@ -224,6 +225,9 @@ TEST(Storage, ErrorsNameFileAndLine) {
   EXPECT_EQ(error_of("name\nendheader\n\n"),
             "test.mot:3: error: expected a line of column labels after endheader, found the end of the file");
   EXPECT_EQ(error_of("name\nendheader\ntime\ta\ta\n"), "test.mot:3: error: duplicate column label 'a' (columns 2 and 3)");
+  // A blank line between rows (rows must be contiguous; trailing blanks are fine).
+  EXPECT_EQ(error_of("endheader\ntime\ta\n0\t1\n\n1\t2\n\n"),
+            "test.mot:4: error: expected a data row, found a blank line between data rows");
   // Missing file.
   try {
     read_storage((temp_dir() / "missing.mot").string());
