@@ -167,9 +167,10 @@ void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_W
     }
     if (!hit) {
       // 2. distance bound from a cached clearance.
+      const Vec3 mid = c + 0.5 * d_max * dir;  // midpoint of the ray segment
       const double D = data.clearance[i];
       if (std::isfinite(D) &&
-          (c - Vec3(data.clearance_centre_B.row(i).transpose())).norm() + d_max < D) {
+          (mid - Vec3(data.clearance_centre_B.row(i).transpose())).norm() + 0.5 * d_max < D) {
         ++data.stats.skipped;
         data.last_hit[i] = -1;
         continue;
@@ -181,8 +182,8 @@ void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_W
         hit = h;
       } else {
         data.last_hit[i] = -1;
-        data.clearance[i] = tree.closest_point(c).distance;
-        data.clearance_centre_B.row(i) = c.transpose();
+        data.clearance[i] = tree.closest_point(mid).distance;
+        data.clearance_centre_B.row(i) = mid.transpose();
         continue;
       }
     }

@@ -19,11 +19,12 @@
 // Search acceleration (results are the same as a full tree query per triangle):
 //  1. the last hit triangle of i and its edge neighbours are tried first with
 //     an exact ray/triangle test (TriangleTree::hit_triangle);
-//  2. for a triangle that had no hit, the distance D from its centre to the
-//     target surface is cached with the centre position c0 (target frame);
-//     while |c - c0| + d_max < D no target point can be within d_max of c, so
-//     the ray cannot hit and the query is skipped (a rigorous bound: the
-//     segment of length d_max from c stays inside the ball of radius D about c0).
+//  2. for a triangle that had no hit, the distance D from the midpoint m0 of
+//     its ray segment (c - d_max/2 n) to the target surface is cached (target
+//     frame); while |m - m0| + d_max/2 < D for the current midpoint m, the
+//     whole segment lies inside the target-free ball of radius D about m0, so
+//     the ray cannot hit and the query is skipped (rigorous; it also skips
+//     triangles separated from the target by a gap, not only distant ones).
 //  3. otherwise a full first_hit query (and a closest-point refresh on a miss).
 #include <Eigen/Geometry>
 #include <memory>
@@ -128,7 +129,7 @@ struct ContactSearchStats {
 struct ContactPairData {
   std::vector<int> last_hit;           ///< per casting triangle, -1 none
   std::vector<double> clearance;       ///< cached distance D (NaN = unknown)
-  common::Points3 clearance_centre_B;  ///< c0 of the cached distance
+  common::Points3 clearance_centre_B;  ///< ray midpoint m0 of the cached distance
   ContactResult result;
   ContactSearchStats stats;
   /// Forget cached guesses (results are unchanged by this; only speed).

@@ -253,13 +253,14 @@ Eigen::VectorXd read_thickness_file(const Reader& rd, const XMLElement* e, const
 }
 
 // Per-vertex thickness rows "x_mm,y_mm,z_mm,thickness_mm" (one per mesh vertex
-// in order; an optional first header line), checked against the mesh vertices
+// in order; '#' comment lines and one header line before the rows are skipped), checked against the mesh vertices
 // to 1e-6 m; the per-triangle thickness is the mean of its three vertices.
 Eigen::VectorXd read_thickness_csv(const Reader& rd, const XMLElement* e, const std::string& path,
                                    const common::TriangleMesh& mesh) {
   std::ifstream in(path);
   std::string line;
   int line_no = 0, row = 0;
+  bool seen_line = false;
   Eigen::VectorXd tv(mesh.num_vertices());
   while (std::getline(in, line)) {
     ++line_no;
@@ -268,8 +269,10 @@ Eigen::VectorXd read_thickness_csv(const Reader& rd, const XMLElement* e, const 
       if (ch == ',') ch = ' ';
     std::istringstream ls(line);
     double x, y, z, t;
+    const bool first = !seen_line;
+    seen_line = true;
     if (!(ls >> x >> y >> z >> t)) {
-      if (row == 0 && line_no == 1) continue;  // header
+      if (first) continue;  // the header line
       throw InputError(path, line_no, "expected x_mm,y_mm,z_mm,thickness_mm, found '" + line + "'");
     }
     if (row >= mesh.num_vertices())

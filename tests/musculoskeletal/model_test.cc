@@ -366,7 +366,7 @@ std::string contact_files() {
   // Re-read so the csv rows follow the welded STL vertex order.
   const auto back = arthrosim::common::read_mesh((dir / "tibia_plane.stl").string());
   std::ofstream csv(dir / "tibia_plane_thickness.csv");
-  csv << "x_mm,y_mm,z_mm,thickness_mm\n";
+  csv << "# per-vertex thickness of tibia_plane.stl\nx_mm,y_mm,z_mm,thickness_mm\n";
   csv.precision(17);
   for (int i = 0; i < back.num_vertices(); ++i)
     csv << back.V(i, 0) * 1e3 << "," << back.V(i, 1) * 1e3 << "," << back.V(i, 2) * 1e3 << ","
@@ -428,4 +428,38 @@ TEST(ModelForces, ContactJacobianPassesTaylorTest) {
   for (const char* c : {"knee_flexion", "knee_adduction", "knee_rotation", "knee_tx", "knee_ty", "knee_tz"})
     knee.push_back(m.tree.coordinate_index(c));
   expect_taylor_second_order(m, q, opt, knee);
+}
+
+#include "musculoskeletal/settle.h"
+
+TEST(Settle, TibiaOnPlaneReachesEquilibriumFromDifferentStarts) {
+  const std::string dir = contact_files();
+  const auto m = msk::parse_model(model_xml(std::string(kSoftTissue) + kContact), "inline.urdf", dir);
+  auto d = msk::make_data(m);
+  msk::SettleOptions opt;
+  opt.muscle_tone = 0.0;
+  // Flexion held; the patella (no patellofemoral contact in this model) held too.
+  for (const char* c : {"knee_flexion", "pf_flexion", "pf_adduction", "pf_rotation", "pf_tx", "pf_ty", "pf_tz"})
+    opt.fixed.push_back(m.tree.coordinate_index(c));
+  std::vector<Eigen::VectorXd> solutions;
+  for (double start : {0.0, 1.0}) {
+    Eigen::VectorXd q0 = Eigen::VectorXd::Zero(m.num_coordinates());
+    q0[m.tree.coordinate_index("knee_tx")] = 0.001 * start;
+    q0[m.tree.coordinate_index("knee_rotation")] = 0.03 * start;
+    const auto res = msk::settle(m, d, q0, opt);
+    std::printf("%s\n", res.message.c_str());
+    ASSERT_EQ(res.status, msk::SettleStatus::kConverged) << res.message;
+    EXPECT_LE(res.max_force_residual, opt.force_tolerance);
+    EXPECT_LE(res.max_moment_residual, opt.moment_tolerance);
+    // Independent re-evaluation at the returned point.
+    auto d2 = msk::make_data(m);
+    msk::evaluate_forces(m, d2, res.q, {}, Eigen::VectorXd::Zero(4));
+    for (const char* c : {"knee_tx", "knee_ty", "knee_tz"})
+      EXPECT_LE(std::abs(d2.Q[m.tree.coordinate_index(c)]), opt.force_tolerance);
+    EXPECT_GT(d2.contacts[0].result.force_on_target_W.norm(), 1.0);  // loaded contact
+    solutions.push_back(res.q);
+  }
+  // Same equilibrium from both starts (to the accuracy the residual tolerance
+  // allows: 0.1 N over a stiffness >~1e4 N/m -> 1e-5 m).
+  EXPECT_LT((solutions[0] - solutions[1]).head(6).cwiseAbs().maxCoeff(), 2e-4);
 }

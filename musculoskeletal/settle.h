@@ -1,0 +1,64 @@
+#pragma once
+// Passive settle: static equilibrium of the free coordinates with some
+// coordinates held fixed (e.g. the knee flexion angle and the prescribed hip
+// and ankle angles):
+//   find q_s such that Q_s(q_f, q_s) = 0,
+// where Q are the generalized forces of ligaments, contact and a constant muscle
+// tone (activation a_tone on every muscle, as COMAK's settle step uses
+// 0.02 F_max). Gravity and inertia are not included (a static, unloaded joint).
+//
+// Method: damped Newton (Levenberg-Marquardt) on the scaled residual
+//   r = S_r Q_s,  S_r = 1 for prismatic (N), 1/L for revolute (N m / L) rows,
+// with variables scaled x = S_x q_s (rad, m / L), L = length_scale. Each
+// iteration solves (J^T J + lambda diag(J^T J)) dx = -J^T r with J = dr/dx from
+// the model's central-difference dQ/dq, limits the step (max_step_rad,
+// max_step_m), accepts it if |r| decreases (else lambda x 10), and stops when
+// max |Q_s| is below the force and moment tolerances.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "musculoskeletal/model.h"
+
+namespace arthrosim::musculoskeletal {
+
+struct SettleOptions {
+  /// Coordinates held at their initial values (indices into q) in addition to
+  /// the model's prescribed ones; everything else is solved for.
+  std::vector<int> fixed;
+  /// Activation applied to every muscle [-], 0..1 (COMAK settles with 0.02).
+  double muscle_tone = 0.02;
+  /// Convergence: max |Q| of prismatic free coordinates [N] ...
+  double force_tolerance = 0.1;
+  /// ... and of revolute free coordinates [N m].
+  double moment_tolerance = 0.005;
+  /// Iteration limit.
+  int max_iterations = 100;
+  /// Largest change per iteration [rad] and [m].
+  double max_step_rad = 0.05, max_step_m = 0.002;
+  /// Length that converts moments to forces in the scaling [m] (~joint size).
+  double length_scale = 0.03;
+  /// Initial Levenberg-Marquardt damping [-].
+  double initial_damping = 1e-3;
+  /// Options of the force evaluation (terms, FD step).
+  ForceOptions forces;
+};
+
+enum class SettleStatus { kConverged, kMaxIterations, kStalled };
+
+struct SettleResult {
+  SettleStatus status = SettleStatus::kMaxIterations;
+  int iterations = 0;
+  Eigen::VectorXd q;               ///< final coordinates (all)
+  double max_force_residual = 0;   ///< max |Q| over free prismatic coordinates [N]
+  double max_moment_residual = 0;  ///< max |Q| over free revolute coordinates [N m]
+  std::vector<double> history;     ///< |r| (scaled) per iteration
+  std::string message;             ///< what happened, with the residuals
+};
+
+/// Solves for equilibrium starting at q0. Never throws on non-convergence:
+/// the status and message say so (callers decide); throws on bad input.
+SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& q0,
+                    const SettleOptions& options);
+
+}  // namespace arthrosim::musculoskeletal
