@@ -189,6 +189,9 @@ std::vector<std::string> read_string_data(hid_t file_type, size_t n, ReadFn read
     const size_t len = H5Tget_size(file_type);
     Hid mem(H5Tcopy(H5T_C_S1), H5Tclose);
     H5Tset_size(mem.get(), len);
+    // NULLPAD in memory: a NULLTERM memory type would drop the last character
+    // of a full-length NULLPAD string (h5py's fixed-length bytes).
+    H5Tset_strpad(mem.get(), H5T_STR_NULLPAD);
     std::vector<char> buf(n * len);
     if (read(mem.get(), buf.data()) < 0) return {};
     for (size_t i = 0; i < n; ++i) {

@@ -168,6 +168,27 @@ TEST(Hdf5, RoundTripEveryTypeAndRank) {
   EXPECT_EQ(f.list("v"), (std::vector<std::string>{"double", "int", "row"}));
 }
 
+// Files written by other tools: tests/common/data/h5py_interop.h5 was made by
+// h5py 3.7 (Debian 12) with
+//   f['fixed'] = np.array([b'femur', b'tibia', b'patellar'], dtype='S8')
+//   f['f32'] = np.arange(6, dtype=np.float32).reshape(2, 3)
+//   f['i64'] = np.arange(4, dtype=np.int64)
+//   f.attrs['fixed_attr'] = np.bytes_('hello')   # fixed length 5, NULLPAD
+//   f.attrs['f32'] = np.float32(0.5); f.attrs['i32'] = np.int32(7)
+// Fixed-length strings that fill their whole length ('patellar' in S8,
+// 'hello' in 5 bytes) must come back whole; float32/int64 convert.
+TEST(Hdf5, ReadsFilesWrittenByH5py) {
+  H5File f(std::string(ARTHROSIM_SOURCE_DIR) + "/tests/common/data/h5py_interop.h5", H5File::Mode::kRead);
+  EXPECT_EQ(f.read_strings("fixed"), (std::vector<std::string>{"femur", "tibia", "patellar"}));
+  Eigen::MatrixXd expected(2, 3);
+  expected << 0, 1, 2, 3, 4, 5;
+  EXPECT_EQ(f.read_matrix("f32"), expected);
+  EXPECT_EQ(f.read_vector_int("i64"), Eigen::Vector4i(0, 1, 2, 3));
+  EXPECT_EQ(f.attribute_string("/", "fixed_attr"), "hello");
+  EXPECT_EQ(f.attribute_double("/", "f32"), 0.5);
+  EXPECT_EQ(f.attribute_int("/", "i32"), 7);
+}
+
 TEST(Hdf5, OverwriteReplacesDataset) {
   const fs::path p = temp_dir() / "overwrite.h5";
   H5File f(p.string(), H5File::Mode::kTruncate);
