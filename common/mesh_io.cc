@@ -389,6 +389,7 @@ TriangleMesh parse_obj_impl(const std::string& data, const std::string& name, co
     } else if (tok == "f") {
       std::vector<long long> poly;
       while (tk.next_on_line(&tok)) {
+        if (tok[0] == '#') break;  // trailing comment
         const std::string_view first = tok.substr(0, tok.find('/'));
         const long long idx = to_integer(first, name, line, "face vertex index");
         if (idx == 0) throw InputError(name, line, "OBJ: expected a non-zero face index (1-based or negative), found 0");

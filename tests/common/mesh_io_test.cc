@@ -186,7 +186,7 @@ TEST(MeshIo, ObjPolygonsNegativeIndicesAndIgnoredStatements) {
       "g group\ns off\nusemtl m\n"
       "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
       "v 2 0 0\nv 3 0 0\nv 3 1 0\nv 2.5 2 0\nv 2 1 0\n"
-      "f -5//1 -4//1 -3//1 -2//1 -1//1\n";
+      "f -5//1 -4//1 -3//1 -2//1 -1//1 # trailing comment\n";
   const TriangleMesh m = parse_obj(obj, "inline.obj");
   ASSERT_EQ(m.num_vertices(), 9);
   ASSERT_EQ(m.num_triangles(), 2 + 3);
