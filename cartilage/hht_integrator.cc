@@ -137,11 +137,15 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
     req.kq = 1.0;
     req.kv = opts_.quasi_static ? 0.0 : kv;
     req.ka = opts_.quasi_static ? 0.0 : ka;
+    // Tangent reuse (modified Newton): assemble the matrix only when a new
+    // factorisation will be needed.
+    const bool reuse = opts_.reuse_factorization && factor_valid_ && factor_h_ == h && !refactor_next_;
     auto ta = Clock::now();
     try {
-      sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
+      sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, reuse ? nullptr : &K_);
     } catch (const common::NumericalError& e) {
       stats_.assembly_s += since(ta);
+      factor_valid_ = false;
       reason = e.what();
       return false;
     }
@@ -177,14 +181,31 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
       return true;
     }
     if (k >= opts_.max_newton_iterations) {
+      factor_valid_ = false;
       std::ostringstream s;
       s << "Newton did not converge in " << opts_.max_newton_iterations << " iterations (residual " << r
         << " N, first " << r_ref << " N, last increment " << last_inc << " m)";
       reason = s.str();
       return false;
     }
-    constrain_matrix(K_);
-    if (!factorize(K_, reason)) return false;
+    if (reuse && k > 0 && r > opts_.refactor_ratio * rec.residual_norms[k - 1]) {
+      // Contraction too slow with the old factorisation: re-evaluate the
+      // tangent at this iterate and refactorise.
+      auto tb = Clock::now();
+      sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
+      stats_.assembly_s += since(tb);
+      refactor_next_ = true;
+    }
+    if (!reuse || refactor_next_) {
+      constrain_matrix(K_);
+      if (!factorize(K_, reason)) {
+        factor_valid_ = false;
+        return false;
+      }
+      factor_valid_ = true;
+      factor_h_ = h;
+      refactor_next_ = false;
+    }
     auto ts = Clock::now();
     dq = solver_->solve(-G);
     stats_.solve_s += since(ts);

@@ -63,6 +63,12 @@ struct IntegratorOptions {
   double roundoff_increment_rel = 1e-11;  ///< see "round-off stagnation"
   double roundoff_residual_drop = 1e-3;   ///< required ||G|| / ||G^(0)||
   bool extrapolate_predictor = true;      ///< quasi-static secant predictor
+  /// Modified Newton: keep the last factorisation across iterations and steps
+  /// (same step size) while the residual contracts by refactor_ratio per
+  /// iteration; otherwise re-assemble and refactorise. Off by default
+  /// (full Newton, quadratic convergence).
+  bool reuse_factorization = false;
+  double refactor_ratio = 0.25;
   int max_halvings = 10;           ///< consecutive halvings before giving up
   int steps_before_growth = 4;     ///< successful steps before doubling dt back
   LinearSolverChoice solver = LinearSolverChoice::kAuto;
@@ -127,6 +133,8 @@ class HhtIntegrator {
   Eigen::VectorXd q_, v_, a_, F_;  // F_: F at the current accepted state
   Eigen::VectorXd dq_prev_;          // last accepted step's change (predictor)
   double h_prev_ = 0, q_scale_ = 0;
+  bool factor_valid_ = false, refactor_next_ = false;
+  double factor_h_ = 0;
   Eigen::SparseMatrix<double> K_;
   std::vector<int> zero_index_, diag_index_;
   std::unique_ptr<SparseDirectSolver> solver_;
