@@ -11,11 +11,13 @@
 // input outline) until none exceeds the target, then protected from further
 // splits and collapses: the outline polyline is preserved exactly. Without it,
 // border edges may also be collapsed (CGAL's default), so the outline is
-// resampled and may cut corners of the input polyline.
+// resampled and may cut corners of the input polyline. Sharp edges
+// (feature_angle) are handled exactly like the boundary.
 #include "common/remesh.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/border.h>
+#include <CGAL/Polygon_mesh_processing/detect_features.h>
 #include <CGAL/Polygon_mesh_processing/remesh.h>
 #include <CGAL/Surface_mesh.h>
 
@@ -128,21 +130,44 @@ TriangleMesh isotropic_remesh(const TriangleMesh& mesh, const RemeshOptions& opt
   SurfaceMesh sm = to_surface_mesh(mesh);
   const double L = options.target_edge_length;
 
+  if (!(options.feature_angle >= 0.0) || options.feature_angle >= M_PI) {
+    throw InputError(label(mesh), 0, "isotropic_remesh: expected feature_angle in [0, pi) [rad], found " +
+                                         std::to_string(options.feature_angle));
+  }
+  // Constrained edges: the boundary, plus sharp edges when asked for.
+  auto constrained = sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:arthrosim_constrained", false).first;
+  std::vector<SurfaceMesh::Edge_index> constrained_edges;
+  PMP::border_halfedges(sm.faces(), sm, boost::make_function_output_iterator([&](SurfaceMesh::Halfedge_index h) {
+                          constrained[sm.edge(h)] = true;
+                        }));
+  if (options.feature_angle > 0.0) {
+    auto sharp = sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:arthrosim_sharp", false).first;
+    PMP::detect_sharp_edges(sm, options.feature_angle * 180.0 / M_PI, sharp);
+    for (auto e : sm.edges())
+      if (sharp[e]) constrained[e] = true;
+    sm.remove_property_map(sharp);
+  }
+  for (auto e : sm.edges())
+    if (constrained[e]) constrained_edges.push_back(e);
+
   if (options.protect_boundary) {
-    std::vector<SurfaceMesh::Edge_index> border;
-    PMP::border_halfedges(sm.faces(), sm, boost::make_function_output_iterator([&](SurfaceMesh::Halfedge_index h) {
-                            border.push_back(sm.edge(h));
-                          }));
-    if (!border.empty()) PMP::split_long_edges(border, L, sm);
+    // Protected edges must not exceed 4/3 L (CGAL precondition): split them
+    // first at midpoints, which keeps them on the input polyline; sub-edges
+    // inherit the constrained flag.
+    if (!constrained_edges.empty())
+      PMP::split_long_edges(constrained_edges, L, sm, CGAL::parameters::edge_is_constrained_map(constrained));
     PMP::isotropic_remeshing(sm.faces(), L, sm,
                              CGAL::parameters::number_of_iterations(options.iterations)
                                  .number_of_relaxation_steps(options.relaxation_steps)
+                                 .edge_is_constrained_map(constrained)
                                  .protect_constraints(true));
   } else {
     PMP::isotropic_remeshing(sm.faces(), L, sm,
                              CGAL::parameters::number_of_iterations(options.iterations)
-                                 .number_of_relaxation_steps(options.relaxation_steps));
+                                 .number_of_relaxation_steps(options.relaxation_steps)
+                                 .edge_is_constrained_map(constrained));
   }
+  sm.remove_property_map(constrained);
   TriangleMesh out = from_surface_mesh(sm, mesh.name);
   if (stats) {
     *stats = edge_length_statistics(out);

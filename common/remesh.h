@@ -21,6 +21,13 @@ struct RemeshOptions {
   /// also be split and collapsed during remeshing (CGAL's default): boundary
   /// vertices stay on the input outline, but collapses can cut its corners.
   bool protect_boundary = true;
+  /// Feature edges [rad]: edges whose dihedral angle (between the normals of
+  /// their two triangles) exceeds this are treated like the boundary (split
+  /// along themselves, then protected when protect_boundary; never flipped,
+  /// end points never smoothed), so sharp rims of closed layers stay sharp.
+  /// 0 disables. Range 0 or [0.2, 1.5]; ~0.5 (30 deg) for CAD-like shapes.
+  /// Keep 0 for smooth but coarse inputs (their facet creases would be kept).
+  double feature_angle = 0.0;
 };
 
 /// Statistics of a remeshing run.
