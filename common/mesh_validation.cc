@@ -98,7 +98,8 @@ bool ValidationReport::ok() const {
 }
 
 bool ValidationReport::has_warnings() const {
-  return unreferenced_vertices.count > 0 || (!require_closed && boundary_edges.count > 0);
+  return unreferenced_vertices.count > 0 || non_manifold_vertices.count > 0 ||
+         (!require_closed && boundary_edges.count > 0);
 }
 
 std::string ValidationReport::summary() const {
@@ -125,6 +126,8 @@ std::string ValidationReport::summary() const {
        "edges " + list_edges(boundary_edges.first, boundary_edges.count));
   line(false, unreferenced_vertices.count, "unreferenced vertices",
        "vertices " + list_indices(unreferenced_vertices.first, unreferenced_vertices.count));
+  line(false, non_manifold_vertices.count, "non-manifold vertices (more than one fan of triangles)",
+       "vertices " + list_indices(non_manifold_vertices.first, non_manifold_vertices.count));
   if (ok() && !has_warnings()) s << "\n  no problems found";
   return s.str();
 }
@@ -194,6 +197,40 @@ ValidationReport validate(const TriangleMesh& mesh, const ValidationOptions& opt
 
   for (int i = 0; i < nv; ++i)
     if (!referenced[i]) note(&r.unreferenced_vertices, i, max_ex);
+
+  // Non-manifold vertices: per vertex v, group its triangles into fans joined
+  // through the edges at v (union-find restricted to v's triangles); more than
+  // one fan is a non-manifold vertex.
+  {
+    std::vector<std::vector<int>> vt(nv);
+    for (int t = 0; t < nt; ++t)
+      if (topo[t])
+        for (int k = 0; k < 3; ++k) vt[mesh.F(t, k)].push_back(t);
+    std::vector<int> parent(nt);
+    std::iota(parent.begin(), parent.end(), 0);
+    auto find = [&](int x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    for (int v = 0; v < nv; ++v) {
+      const auto& tris = vt[v];
+      if (tris.size() < 2) continue;
+      for (int t : tris) parent[t] = t;
+      // Triangles of v keyed by their other vertices: two triangles of v that
+      // share another vertex w share the edge (v, w).
+      std::vector<std::pair<int, int>> other;  // (w, triangle)
+      for (int t : tris)
+        for (int k = 0; k < 3; ++k)
+          if (mesh.F(t, k) != v) other.push_back({mesh.F(t, k), t});
+      std::sort(other.begin(), other.end());
+      for (size_t i = 1; i < other.size(); ++i)
+        if (other[i].first == other[i - 1].first) parent[find(other[i].second)] = find(other[i - 1].second);
+      const int root = find(tris[0]);
+      bool one_fan = true;
+      for (int t : tris) one_fan = one_fan && find(t) == root;
+      if (!one_fan) note(&r.non_manifold_vertices, v, max_ex);
+    }
+  }
   return r;
 }
 

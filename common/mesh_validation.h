@@ -5,8 +5,8 @@
 // Errors (ValidationReport::ok() is false): out-of-range indices, NaN/Inf
 // coordinates, degenerate triangles, duplicate triangles, non-manifold edges,
 // inconsistent orientation, and open boundary edges when a closed surface is
-// required. Warnings: unreferenced vertices, and open boundaries when a closed
-// surface is not required (they are counted but are no error then).
+// required. Warnings: unreferenced vertices, non-manifold vertices, and open
+// boundaries when a closed surface is not required (counted, but no error).
 #include <array>
 #include <string>
 #include <vector>
@@ -51,6 +51,10 @@ struct ValidationReport {
   EdgeIssues inconsistent_edges;         ///< edges traversed in the same direction by 2 triangles
   EdgeIssues boundary_edges;             ///< edges used by exactly 1 triangle
   IndexIssues unreferenced_vertices;     ///< vertices no triangle uses (warning)
+  /// Vertices whose triangles form more than one edge-connected fan (e.g. two
+  /// surfaces touching at a point; warning: representable and remeshable, but
+  /// usually a segmentation artefact).
+  IndexIssues non_manifold_vertices;
 
   /// No errors (warnings allowed). Boundary edges are errors only if require_closed.
   bool ok() const;

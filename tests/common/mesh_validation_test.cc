@@ -248,6 +248,37 @@ TEST(MeshValidation, NonManifoldIsReportedNotRepaired) {
   EXPECT_THROW(validate_or_throw(r.mesh), InputError);
 }
 
+TEST(MeshValidation, NonManifoldVertexIsAWarning) {
+  // Two triangles touching at vertex 0 (a bow tie), and two tetrahedra sharing
+  // one vertex: both have manifold edges but a vertex with two fans.
+  TriangleMesh bow;
+  bow.V.resize(5, 3);
+  bow.V << 0, 0, 0, 1, 0, 0, 1, 1, 0, -1, 0, 0, -1, -1, 0;
+  bow.F.resize(2, 3);
+  bow.F << 0, 1, 2, 0, 3, 4;
+  ValidationReport r = validate(bow);
+  EXPECT_TRUE(r.ok());
+  EXPECT_TRUE(r.has_warnings());
+  EXPECT_EQ(r.non_manifold_vertices.count, 1);
+  EXPECT_EQ(r.non_manifold_vertices.first, std::vector<int>{0});
+  EXPECT_NE(r.summary().find("warning: 1 non-manifold vertices"), std::string::npos) << r.summary();
+  TriangleMesh two;
+  two.V.resize(7, 3);
+  two.V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, -1, 0, 0, 0, -1, 0, 0, 0, -1;
+  two.F.resize(8, 3);
+  two.F << 0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3,  // tetrahedron (0,1,2,3)
+      0, 5, 4, 0, 4, 6, 0, 6, 5, 4, 5, 6;       // tetrahedron (0,4,5,6)
+  ValidationOptions closed;
+  closed.require_closed = true;
+  r = validate(two, closed);
+  EXPECT_EQ(r.non_manifold_vertices.count, 1);
+  EXPECT_EQ(r.non_manifold_edges.count, 0);
+  EXPECT_EQ(r.boundary_edges.count, 0);
+  EXPECT_EQ(r.inconsistent_edges.count, 0);
+  // A clean closed mesh has none.
+  EXPECT_EQ(validate(sphere()).non_manifold_vertices.count, 0);
+}
+
 TEST(MeshValidation, MobiusStripIsLeftUnchangedAsUnorientable) {
   // A Mobius strip: 10 quads around a loop with a half twist (20 triangles).
   const int n = 10;
