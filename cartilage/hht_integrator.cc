@@ -1,5 +1,6 @@
 #include "cartilage/hht_integrator.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -39,6 +40,18 @@ HhtIntegrator::HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& op
       const int i = P.innerIndexPtr()[k];
       if (c[i] || c[j]) (i == j ? diag_index_ : zero_index_).push_back(k);
     }
+  // Transpose map of the (structurally symmetric) pattern, for the symmetric
+  // part (K + K^T)/2 handed to CHOLMOD when the tangent is not symmetric.
+  transpose_index_.resize(P.nonZeros());
+  for (int j = 0; j < P.outerSize(); ++j)
+    for (int k = P.outerIndexPtr()[j]; k < P.outerIndexPtr()[j + 1]; ++k) {
+      const int i = P.innerIndexPtr()[k];
+      const int* begin = P.innerIndexPtr() + P.outerIndexPtr()[i];
+      const int* end = P.innerIndexPtr() + P.outerIndexPtr()[i + 1];
+      const int* it = std::lower_bound(begin, end, j);
+      if (it == end || *it != j) throw common::InputError("HHT: tangent pattern is not structurally symmetric");
+      transpose_index_[k] = static_cast<int>(it - P.innerIndexPtr());
+    }
   LinearSolverKind kind = LinearSolverKind::kUmfpack;
   if (opts_.solver == LinearSolverChoice::kCholmod ||
       (opts_.solver == LinearSolverChoice::kAuto && sys_.tangent_symmetric()))
@@ -57,6 +70,18 @@ void HhtIntegrator::constrain_matrix(Eigen::SparseMatrix<double>& K) const {
 
 bool HhtIntegrator::factorize(Eigen::SparseMatrix<double>& K, std::string& reason) {
   auto t0 = Clock::now();
+  if (solver_->kind() == LinearSolverKind::kCholmod && !sys_.tangent_symmetric()) {
+    // Symmetric approximation of a non-symmetric tangent: (K + K^T)/2.
+    // Newton then converges linearly at a rate set by the skew part.
+    double* v = K.valuePtr();
+    for (size_t k = 0; k < transpose_index_.size(); ++k) {
+      const size_t t = static_cast<size_t>(transpose_index_[k]);
+      if (t > k) {
+        const double m = 0.5 * (v[k] + v[t]);
+        v[k] = v[t] = m;
+      }
+    }
+  }
   if (!solver_->analyzed()) {
     solver_->analyze(K);
     ++stats_.symbolic_analyses;

@@ -47,7 +47,9 @@ namespace arthrosim::cartilage {
 
 enum class LinearSolverChoice {
   kAuto,     ///< CHOLMOD when every term is symmetric, else UMFPACK
-  kCholmod,  ///< force CHOLMOD (switches to UMFPACK, counted, if not SPD)
+  kCholmod,  ///< force CHOLMOD; a non-symmetric tangent is replaced by its
+             ///< symmetric part (K + K^T)/2 (more Newton iterations); switches
+             ///< to UMFPACK, counted, on a matrix that is not SPD
   kUmfpack,  ///< force UMFPACK
 };
 
@@ -136,7 +138,7 @@ class HhtIntegrator {
   bool factor_valid_ = false, refactor_next_ = false;
   double factor_h_ = 0;
   Eigen::SparseMatrix<double> K_;
-  std::vector<int> zero_index_, diag_index_;
+  std::vector<int> zero_index_, diag_index_, transpose_index_;
   std::unique_ptr<SparseDirectSolver> solver_;
   IntegratorStatistics stats_;
 };

@@ -10,22 +10,26 @@
 // Variants:
 //   QuasiStatic/UMFPACK  - static equilibrium F(q) = 0 in one load step, full
 //                          (non-symmetric) Newton matrix, UMFPACK LU.
-//   QuasiStatic/CHOLMOD  - same, CHOLMOD on the symmetric lower-triangle image
-//                          of the Newton matrix (a symmetric approximation of
+//   QuasiStatic/CHOLMOD  - same, CHOLMOD on the symmetric part (K + K^T)/2 of
+//                          the Newton matrix (a symmetric approximation of
 //                          the follower-pressure tangent: more iterations).
-//   HHT/N/reuse          - dynamic, HHT alpha = -0.2, dt = 1e-4 s, from rest
+//   HHT/N/reuse/cholmod/r - dynamic, HHT alpha = -0.2, dt = 1e-4 s, from rest
 //                          with the pressure applied at t = 0, N steps (or
 //                          until the largest weighted nodal change over a step
 //                          is < 1e-9 m); prints the last step's change and
 //                          the deflection. reuse = 1: modified Newton
-//                          (factorisation kept while the residual contracts).
+//                          (factorisation kept while the residual contracts);
+//                          cholmod = 1: CHOLMOD on (K + K^T)/2, else UMFPACK;
+//                          residual_rtol = 10^-r.
 // Each prints wall time, steps, Newton iterations per step, time per
 // factorisation, and the max deflection along the reference normal.
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <cmath>
 #include <ctime>
 #include <cstdio>
+#include <string>
 
 #include "../cartilage/shell_test_meshes.h"
 #include "cartilage/hht_integrator.h"
@@ -95,7 +99,7 @@ void BM_OsmoticQuasiStatic(benchmark::State& state) {
     s.initialize(0, p.model->reference_state());
     s.advance_to(1.0);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    report(state, cholmod ? "quasi-static CHOLMOD (symmetric approximation)" : "quasi-static UMFPACK", p, s, wall, cpu_seconds() - c0);
+    report(state, cholmod ? "quasi-static CHOLMOD on (K + K^T)/2" : "quasi-static UMFPACK", p, s, wall, cpu_seconds() - c0);
   }
 }
 BENCHMARK(BM_OsmoticQuasiStatic)->Arg(0)->Arg(1)->Iterations(1)->Unit(benchmark::kSecond);
@@ -106,8 +110,9 @@ void BM_OsmoticHht(benchmark::State& state) {
     const double c0 = cpu_seconds();
     OsmoticPatch p(true);
     IntegratorOptions o;  // alpha = -0.2, dt = 1e-4 s (seed)
-    o.solver = LinearSolverChoice::kUmfpack;
+    o.solver = state.range(2) == 1 ? LinearSolverChoice::kCholmod : LinearSolverChoice::kUmfpack;
     o.reuse_factorization = state.range(1) == 1;
+    o.residual_rtol = std::pow(10.0, -static_cast<double>(state.range(3)));
     HhtIntegrator s(*p.model, o);
     s.initialize(0, p.model->reference_state());
     Eigen::VectorXd prev = s.q();
@@ -123,11 +128,19 @@ void BM_OsmoticHht(benchmark::State& state) {
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("HHT: after %d steps (t = %.4f s) the max weighted change per step is %.2e m (%s)\n", n, s.time(),
                 change, change <= 1e-9 ? "steady" : "not yet steady");
-    report(state, o.reuse_factorization ? "HHT alpha=-0.2 dt=1e-4, factorisation reuse" : "HHT alpha=-0.2 dt=1e-4",
-           p, s, wall, cpu_seconds() - c0);
+    const std::string name = std::string("HHT alpha=-0.2 dt=1e-4") +
+                             (o.reuse_factorization ? ", factorisation reuse" : ", full Newton") +
+                             (state.range(2) == 1 ? ", CHOLMOD on (K + K^T)/2" : ", UMFPACK") +
+                             ", residual_rtol 1e-" + std::to_string(state.range(3));
+    report(state, name.c_str(), p, s, wall, cpu_seconds() - c0);
   }
 }
-BENCHMARK(BM_OsmoticHht)->Args({10, 0})->Args({10, 1})->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_OsmoticHht)
+    ->Args({10, 0, 0, 8})
+    ->Args({10, 1, 0, 8})
+    ->Args({200, 1, 1, 8})
+    ->Iterations(1)
+    ->Unit(benchmark::kSecond);
 
 }  // namespace
 }  // namespace arthrosim::cartilage
