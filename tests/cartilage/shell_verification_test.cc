@@ -85,6 +85,20 @@ TEST(ShellPatch, MembraneFiniteStrainDistortedMesh) {
   }
   std::printf("membrane patch: max error %.3e m relative %.3e\n", err, err / scale);
   EXPECT_LT(err / scale, 1e-8);
+  // Strain output (ShellElement::strain): at any point of any element the
+  // local in-plane strain has the invariants of E2, E33 is the plane-stress
+  // value and the transverse shears vanish. The local e1 axis differs per
+  // distorted element, so invariants are compared (1e-10: Newton tolerance).
+  for (int e = 0; e < model.num_elements(); ++e) {
+    Eigen::Matrix3d frame;
+    const auto E = model.element(e).strain(model.gather(e, solver.q()), 0.3, -0.6, 0.5, &frame);
+    EXPECT_NEAR(E(0) + E(1), E2.trace(), 1e-10);
+    EXPECT_NEAR(E(0) * E(1) - E(3) * E(3), E2.determinant(), 1e-10);
+    EXPECT_NEAR(E(2), E33, 1e-10);
+    EXPECT_NEAR(E(4), 0.0, 1e-10);
+    EXPECT_NEAR(E(5), 0.0, 1e-10);
+    EXPECT_NEAR(std::abs(frame.col(2).z()), 1.0, 1e-12);
+  }
 }
 
 // Bending patch test (linear theory, tangent at the reference): boundary
