@@ -760,6 +760,15 @@ const Scenario* Scene::scenario(std::string_view name) const {
   return nullptr;
 }
 
+const Scenario& Scene::require_scenario(std::string_view name) const {
+  if (const Scenario* s = scenario(name)) return *s;
+  std::string have;
+  for (const Scenario& s : scenarios) have += (have.empty() ? "" : ", ") + s.name;
+  throw InputError(file.string(), 0,
+                   "expected a scenario named '" + std::string(name) + "' under surface.scenarios, "
+                   "found " + (have.empty() ? std::string("none") : have));
+}
+
 std::vector<std::string> Scene::musculoskeletal_effects() const {
   if (!comak) return {};
   return comak->list("effects");

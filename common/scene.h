@@ -185,6 +185,9 @@ struct Scene {
   bool wants(Output output) const;
   /// The scenario called `name`, or nullptr.
   const Scenario* scenario(std::string_view name) const;
+  /// The scenario called `name` (e.g. from a stage's --scenario); InputError
+  /// naming the scene file and the scenarios it has when there is none.
+  const Scenario& require_scenario(std::string_view name) const;
   /// comak's effect list (empty when there is no comak block).
   std::vector<std::string> musculoskeletal_effects() const;
 };

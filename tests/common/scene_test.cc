@@ -128,6 +128,15 @@ TEST_F(SceneTest, FullExampleParsesEveryBlock) {
   ASSERT_NE(osm, nullptr);
   ASSERT_NE(gait, nullptr);
   EXPECT_EQ(s.scenario("nope"), nullptr);
+  EXPECT_EQ(&s.require_scenario("gait"), gait);
+  try {
+    s.require_scenario("gait_osmotic");
+    ADD_FAILURE() << "no error for a missing scenario";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              s.file.string() + ": error: expected a scenario named 'gait_osmotic' under "
+                                "surface.scenarios, found osmotic, gait");
+  }
   EXPECT_EQ(s.scenarios[0].name, "osmotic");  // file order kept
   EXPECT_EQ(osm->line, 17);
   EXPECT_EQ(osm->effects,
