@@ -327,15 +327,17 @@ void ShellElement::internal_force(const Vector24& q, Vector24& f, Matrix24* K,
                                   Eigen::Matrix<double, 5, 1>* alpha_out) const {
   const Eigen::Map<const Eigen::Matrix<double, 3, 8>> Qt(q.data());
   const Corners C = sample_corners(Qt, Q0t_, h_);
-  std::vector<Level> levels;
-  levels.reserve(zeta_points_.size());
-  for (double z : zeta_points_) levels.push_back(sample_level(Qt, Q0t_, h_, z));
+  // Fixed-size work arrays (at most 3 zeta levels x 4 points): no heap
+  // allocation per call.
+  constexpr int kMaxQp = 12;
+  std::array<Level, 3> levels;
+  for (size_t l = 0; l < zeta_points_.size(); ++l) levels[l] = sample_level(Qt, Q0t_, h_, zeta_points_[l]);
 
   const int nq = static_cast<int>(qp_.size());
   // Pass 1: compatible/ANS strains in the local frame; EAS right-hand sides.
-  Eigen::Matrix<double, 6, Eigen::Dynamic> eps_loc(6, nq);
-  std::vector<Eigen::Matrix<double, 6, 24>> Bnat(nq), Bloc(nq);
-  std::vector<Vector8> p1(nq), p2(nq);
+  Eigen::Matrix<double, 6, kMaxQp> eps_loc;
+  std::array<Eigen::Matrix<double, 6, 24>, kMaxQp> Bnat, Bloc;
+  std::array<Vector8, kMaxQp> p1, p2;
   Eigen::Matrix<double, kNumEas, 1> Lv = Eigen::Matrix<double, kNumEas, 1>::Zero();
   Eigen::Matrix<double, kNumEas, 24> P = Eigen::Matrix<double, kNumEas, 24>::Zero();
   for (int g = 0; g < nq; ++g) {
@@ -344,10 +346,12 @@ void ShellElement::internal_force(const Vector24& q, Vector24& f, Matrix24* K,
     point_strain(Qt, Q0t_, h_, levels[qp.level], C, qp.xi, qp.eta, qp.zeta, eps_nat, Bnat[g], p1[g],
                  p2[g]);
     eps_loc.col(g) = qp.T * eps_nat;
-    Bloc[g] = qp.T * Bnat[g];
     const Eigen::Matrix<double, kNumEas, 6> GD = qp.Gamma.transpose() * D_ * qp.dV;
     Lv += GD * eps_loc.col(g);
-    if (K) P += GD * Bloc[g];
+    if (K) {
+      Bloc[g].noalias() = qp.T * Bnat[g];
+      P.noalias() += GD * Bloc[g];
+    }
   }
   // Condensed EAS parameters: dPi/dalpha = L + H alpha = 0.
   const Eigen::Matrix<double, kNumEas, 1> alpha = -H_inv_ * Lv;
