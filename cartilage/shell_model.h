@@ -140,7 +140,7 @@ class ShellModel : public TimeIntegrable {
   /// k_N_m3: foundation modulus [N/m^3] (seed 002: 0.7 N/mm^3 = 7e8 N/m^3).
   ShellTerm& add_foundation_springs(double k_N_m3, BoneMotion bone = BoneMotion::fixed());
   /// Matching dampers: force c A_i d(delta_i)/dt n_i(t), active while
-  /// delta_i > 0 when compressive_only (the seed's spring-dampers are
+  /// delta_i >= 0 when compressive_only (the seed's spring-dampers are
   /// compressive elements). c_N_s_m3 [N s/m^3].
   ShellTerm& add_foundation_damping(double c_N_s_m3, BoneMotion bone = BoneMotion::fixed(),
                                     bool compressive_only = true);
