@@ -134,40 +134,46 @@ TriangleMesh isotropic_remesh(const TriangleMesh& mesh, const RemeshOptions& opt
     throw InputError(label(mesh), 0, "isotropic_remesh: expected feature_angle in [0, pi) [rad], found " +
                                          std::to_string(options.feature_angle));
   }
-  // Constrained edges: the boundary, plus sharp edges when asked for.
-  auto constrained = sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:arthrosim_constrained", false).first;
-  std::vector<SurfaceMesh::Edge_index> constrained_edges;
-  PMP::border_halfedges(sm.faces(), sm, boost::make_function_output_iterator([&](SurfaceMesh::Halfedge_index h) {
-                          constrained[sm.edge(h)] = true;
-                        }));
-  if (options.feature_angle > 0.0) {
+  const auto params = CGAL::parameters::number_of_iterations(options.iterations)
+                          .number_of_relaxation_steps(options.relaxation_steps);
+  if (options.feature_angle == 0.0) {
+    // Boundary only: CGAL treats border edges as constrained by itself.
+    if (options.protect_boundary) {
+      std::vector<SurfaceMesh::Edge_index> border;
+      PMP::border_halfedges(sm.faces(), sm, boost::make_function_output_iterator([&](SurfaceMesh::Halfedge_index h) {
+                              border.push_back(sm.edge(h));
+                            }));
+      if (!border.empty()) PMP::split_long_edges(border, L, sm);
+      PMP::isotropic_remeshing(sm.faces(), L, sm, params.protect_constraints(true));
+    } else {
+      PMP::isotropic_remeshing(sm.faces(), L, sm, params);
+    }
+  } else {
+    // Boundary plus sharp edges, in an explicit constrained-edge map.
+    auto constrained = sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:arthrosim_constrained", false).first;
+    PMP::border_halfedges(sm.faces(), sm, boost::make_function_output_iterator([&](SurfaceMesh::Halfedge_index h) {
+                            constrained[sm.edge(h)] = true;
+                          }));
     auto sharp = sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:arthrosim_sharp", false).first;
     PMP::detect_sharp_edges(sm, options.feature_angle * 180.0 / M_PI, sharp);
-    for (auto e : sm.edges())
+    std::vector<SurfaceMesh::Edge_index> constrained_edges;
+    for (auto e : sm.edges()) {
       if (sharp[e]) constrained[e] = true;
+      if (constrained[e]) constrained_edges.push_back(e);
+    }
     sm.remove_property_map(sharp);
+    if (options.protect_boundary) {
+      // Protected edges must not exceed 4/3 L (CGAL precondition): split them
+      // first at midpoints, which keeps them on the input polylines; sub-edges
+      // inherit the constrained flag.
+      if (!constrained_edges.empty())
+        PMP::split_long_edges(constrained_edges, L, sm, CGAL::parameters::edge_is_constrained_map(constrained));
+      PMP::isotropic_remeshing(sm.faces(), L, sm, params.edge_is_constrained_map(constrained).protect_constraints(true));
+    } else {
+      PMP::isotropic_remeshing(sm.faces(), L, sm, params.edge_is_constrained_map(constrained));
+    }
+    sm.remove_property_map(constrained);
   }
-  for (auto e : sm.edges())
-    if (constrained[e]) constrained_edges.push_back(e);
-
-  if (options.protect_boundary) {
-    // Protected edges must not exceed 4/3 L (CGAL precondition): split them
-    // first at midpoints, which keeps them on the input polyline; sub-edges
-    // inherit the constrained flag.
-    if (!constrained_edges.empty())
-      PMP::split_long_edges(constrained_edges, L, sm, CGAL::parameters::edge_is_constrained_map(constrained));
-    PMP::isotropic_remeshing(sm.faces(), L, sm,
-                             CGAL::parameters::number_of_iterations(options.iterations)
-                                 .number_of_relaxation_steps(options.relaxation_steps)
-                                 .edge_is_constrained_map(constrained)
-                                 .protect_constraints(true));
-  } else {
-    PMP::isotropic_remeshing(sm.faces(), L, sm,
-                             CGAL::parameters::number_of_iterations(options.iterations)
-                                 .number_of_relaxation_steps(options.relaxation_steps)
-                                 .edge_is_constrained_map(constrained));
-  }
-  sm.remove_property_map(constrained);
   TriangleMesh out = from_surface_mesh(sm, mesh.name);
   if (stats) {
     *stats = edge_length_statistics(out);
