@@ -57,6 +57,12 @@ const std::vector<OptionSpec>& schema_table() {
       // --- prepare -------------------------------------------------------------
       {"prepare", "edge_length_mm", T::kNumber, U::kMillimetre, "3", false, 0.2, 20, "", false,
        "target edge length of the remeshed cartilage surfaces"},
+      {"prepare", "mesh_unit", T::kText, U::kNone, "mm", false, 0, 0, "mm|cm|m", false,
+       "length unit of the model's mesh files (STL carries none)"},
+      {"prepare", "max_cast_distance_mm", T::kNumber, U::kMillimetre, "10", false, 1, 50, "", false,
+       "longest ray cast from cartilage to bone when measuring thickness"},
+      {"prepare", "remesh_iterations", T::kInteger, U::kNone, "5", false, 1, 20, "", false,
+       "isotropic remeshing iterations"},
       // --- comak ---------------------------------------------------------------
       {"comak", "effects", T::kEffectList, U::kNone, "", true, 0, 0, "", false,
        "musculoskeletal effects to simulate"},

@@ -263,10 +263,16 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.inputs.emplace_back("model", scene.model);
     s.options = scene.prepare.canonical();
     add_path_inputs(scene.prepare, s);
-    s.outputs = {out_dir / kPrepared};
-    s.arguments = {"--model", scene.model.string(), "--edge-length-mm",
-                   scene.prepare.value("edge_length_mm").canonical, "--out",
-                   (out_dir / kPrepared).string()};
+    // arthrosim-prepare writes prepared.xdmf next to prepared.h5.
+    s.outputs = {out_dir / kPrepared, out_dir / "prepared.xdmf"};
+    // Every prepare key of the schema maps to one flag, values as written
+    // (arthrosim-prepare takes millimetres).
+    s.arguments = {"--model", scene.model.string(),
+                   "--edge-length-mm", scene.prepare.value("edge_length_mm").canonical,
+                   "--unit", scene.prepare.value("mesh_unit").canonical,
+                   "--max-cast-distance-mm", scene.prepare.value("max_cast_distance_mm").canonical,
+                   "--remesh-iterations", scene.prepare.value("remesh_iterations").canonical,
+                   "--out", (out_dir / kPrepared).string()};
     plan.push_back(std::move(s));
   }
   if (want_comak) {

@@ -217,10 +217,12 @@ TEST_F(SceneTest, CanonicalTextIgnoresSpelling) {
   const Scene c = load("model: ../models/knee\noutputs: [prepared_model]\n");  // default 3
   const Scene d = load("model: ../models/knee\noutputs: [prepared_model]\n"
                        "prepare: {edge_length_mm: 2.5}\n");
-  EXPECT_EQ(a.prepare.canonical_text(), "prepare.edge_length_mm = 3\n");
+  EXPECT_EQ(a.prepare.canonical_text(),
+            "prepare.edge_length_mm = 3\nprepare.max_cast_distance_mm = 10\n"
+            "prepare.mesh_unit = mm\nprepare.remesh_iterations = 5\n");
   EXPECT_EQ(a.prepare.canonical_text(), b.prepare.canonical_text());
   EXPECT_EQ(a.prepare.canonical_text(), c.prepare.canonical_text());
-  EXPECT_EQ(d.prepare.canonical_text(), "prepare.edge_length_mm = 2.5\n");
+  EXPECT_EQ(d.prepare.value("edge_length_mm").canonical, "2.5");
   const Scene e = load("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
                        "    x: {effects: [inertia, mesh_contact], end_time_s: 0.0001}\n");
   const std::string t = e.scenarios[0].options.canonical_text();

@@ -45,6 +45,7 @@ content() {
   done
 }
 if [ -n "$out" ]; then content "$@" > "$out"; fi
+if [ "$stage" = arthrosim-prepare ]; then echo xdmf > "${out%.h5}.xdmf"; fi
 if [ -n "$outdir" ]; then content "$@" > "$outdir/report.html"; content "$@" > "$outdir/summary.json"; fi
 echo "$stage: done"
 )SH";
@@ -185,9 +186,10 @@ TEST_F(RunnerTest, StagesFollowFromOutputs) {
             gait.options.end());
   // Prepare's command line carries the edge length as written, in mm.
   const StageStep prep = plan_stages(scene(three_scenarios("[prepared_model]", "2.5")), out)[0];
-  const std::vector<std::string> prep_args = {"--model", (root_ / "models" / "knee").string(),
-                                              "--edge-length-mm", "2.5", "--out",
-                                              (out / "prepared.h5").string()};
+  const std::vector<std::string> prep_args = {
+      "--model", (root_ / "models" / "knee").string(), "--edge-length-mm", "2.5", "--unit", "mm",
+      "--max-cast-distance-mm", "10", "--remesh-iterations", "5", "--out",
+      (out / "prepared.h5").string()};
   EXPECT_EQ(prep.arguments, prep_args);
 }
 
@@ -296,13 +298,16 @@ TEST_F(RunnerTest, MissingOrEditedOutputReruns) {
   fs::remove(root_ / "out" / "prepared.h5");
   RunReport r = run(s);
   EXPECT_EQ(reason(r, "prepare"), "output prepared.h5 missing");
+  fs::remove(root_ / "out" / "prepared.xdmf");  // the sidecar counts as an output too
+  r = run(s);
+  EXPECT_EQ(reason(r, "prepare"), "output prepared.xdmf missing");
   std::ofstream(root_ / "out" / "prepared.h5", std::ios::app) << "tampered\n";
   r = run(s);
   EXPECT_EQ(reason(r, "prepare"), "output prepared.h5 changed since the stage wrote it");
   fs::remove(root_ / "out" / ".stamps" / "prepare.txt");
   r = run(s);
   EXPECT_EQ(reason(r, "prepare"), "no record of a previous successful run");
-  EXPECT_EQ(calls().size(), 4u);
+  EXPECT_EQ(calls().size(), 5u);
 }
 
 TEST_F(RunnerTest, FailingStageStopsTheRunAndKeepsEarlierOutputs) {
