@@ -342,12 +342,12 @@ struct ParametricKnee::Impl {
       }
       case KneeCartilage::kTibiaMedial:
       case KneeCartilage::kTibiaLateral:
-        return ramp(d.tibia_centre_thickness, region(c, p, n), mm(6.0));
+        return ramp(d.tibia_centre_thickness, region(c, p, n), mm(8.0));
       case KneeCartilage::kPatella: {
         const double ez = (p.z() - d.patella_z) / mm(4.0);
         const double peak = d.patella_facet_thickness +
                             (d.patella_ridge_thickness - d.patella_facet_thickness) * std::exp(-0.5 * ez * ez);
-        return ramp(peak, region(c, p, n), mm(6.0));
+        return ramp(peak, region(c, p, n), mm(10.0));
       }
     }
     return 0.0;

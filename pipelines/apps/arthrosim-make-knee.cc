@@ -39,7 +39,8 @@ int main(int argc, char** argv) {
       "Sample runs:\n"
       "  arthrosim-make-knee --edge-length-mm 3 --out data/models/knee_parametric/coarse\n"
       "  arthrosim-make-knee --edge-length-mm 2 --out data/models/knee_parametric/medium\n"
-      "  arthrosim-make-knee --edge-length-mm 1 --out knee_fine     # ~30k femoral cartilage triangles\n");
+      "On demand (benchmarks, about a minute):\n"
+      "  arthrosim-make-knee --edge-length-mm 1 --out knee_fine\n");
   CLI11_PARSE(app, argc, argv);
 
   try {
