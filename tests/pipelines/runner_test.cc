@@ -101,12 +101,16 @@ class RunnerTest : public ::testing::Test {
     return out;
   }
 
+
+ public:
   static std::vector<std::string> names(const std::vector<StageStep>& plan) {
     std::vector<std::string> n;
     for (const StageStep& s : plan) n.push_back(s.name);
     return n;
   }
 
+
+ protected:
   static StageStatus status(const RunReport& r, const std::string& stage) {
     for (const StageOutcome& o : r.stages) {
       if (o.name == stage) return o.status;
@@ -425,6 +429,34 @@ TEST_F(RunnerTest, ReportRunsPostWithEverySurfaceOutput) {
                         "kinematics.h5"}) {
     EXPECT_NE(post_line.find(f), std::string::npos) << f << " not passed to post: " << post_line;
   }
+}
+
+// The bundled scenes parse and plan as issue 8 requires: the osmotic scene
+// runs no musculoskeletal stage and asks for no mesh contact; the walking
+// scene without osmotic pressure does not ask for the pressure term.
+TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
+  const fs::path dir = fs::path(ARTHROSIM_SOURCE_DIR) / "data" / "scenes";
+  const fs::path out = "/nonexistent/out";
+  using V = std::vector<std::string>;
+  const Scene demo = common::load_scene(dir / "demo.yaml");
+  EXPECT_EQ(RunnerTest::names(plan_stages(demo, out)), V{"prepare"});
+  EXPECT_EQ(demo.scenarios.size(), 3u);  // described, not yet run
+
+  const Scene osmotic = common::load_scene(dir / "osmotic.yaml");
+  EXPECT_EQ(RunnerTest::names(plan_stages(osmotic, out)), (V{"prepare", "surface.osmotic"}));
+  EXPECT_FALSE(osmotic.require_scenario("osmotic").wants("mesh_contact"));
+  EXPECT_TRUE(osmotic.require_scenario("osmotic").wants("osmotic_pressure"));
+
+  const Scene gait = common::load_scene(dir / "gait.yaml");
+  EXPECT_EQ(RunnerTest::names(plan_stages(gait, out)), (V{"prepare", "comak", "surface.gait"}));
+  EXPECT_FALSE(gait.require_scenario("gait").wants("osmotic_pressure"));
+  EXPECT_TRUE(gait.require_scenario("gait").wants("mesh_contact"));
+
+  const Scene both = common::load_scene(dir / "gait_osmotic.yaml");
+  EXPECT_EQ(RunnerTest::names(plan_stages(both, out)),
+            (V{"prepare", "comak", "surface.gait_osmotic"}));
+  EXPECT_TRUE(both.require_scenario("gait_osmotic").wants("osmotic_pressure"));
+  EXPECT_TRUE(both.require_scenario("gait_osmotic").wants("mesh_contact"));
 }
 
 }  // namespace
