@@ -39,7 +39,8 @@ std::string first_indices(const std::vector<int>& idx, size_t max_count = 5) {
 
 // Reads a mesh, repairs what is safe, validates; throws InputError naming the
 // file with the validation summary if the repaired mesh is still invalid.
-TriangleMesh load_checked(const std::string& path, const PrepareOptions& options, std::vector<std::string>* repairs) {
+TriangleMesh load_checked(const std::string& path, const PrepareOptions& options, std::vector<std::string>* repairs,
+                          std::vector<std::string>* warnings) {
   common::MeshReadOptions ro;
   ro.unit = options.unit;
   TriangleMesh raw = common::read_mesh(path, ro);
@@ -62,6 +63,15 @@ TriangleMesh load_checked(const std::string& path, const PrepareOptions& options
   common::throw_if_invalid(after, path + " (after the safe repairs: " +
                                       (repairs->empty() ? std::string("none") : std::to_string(repairs->size())) +
                                       ")");
+  // Warnings of the validation (e.g. non-manifold vertices) are passed on;
+  // open boundaries are expected for cartilage and reported for bones elsewhere.
+  if (after.has_warnings()) {
+    std::istringstream lines(after.summary());
+    std::string line;
+    while (std::getline(lines, line))
+      if (line.find("warning") != std::string::npos && line.find("boundary") == std::string::npos)
+        warnings->push_back(path + ":" + line);
+  }
   if (fixed.report.unorientable_components > 0)
     throw InputError(path, 0, "expected an orientable surface, found " +
                                   std::to_string(fixed.report.unorientable_components) +
@@ -162,7 +172,7 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
     PreparedBone bone;
     bone.name = name;
     bone.source_file = path;
-    bone.mesh = load_checked(path, options, &bone.repairs);
+    bone.mesh = load_checked(path, options, &bone.repairs, &model.warnings);
     bone.closed = common::build_topology(bone.mesh).boundary_vertices.empty();
     if (!bone.closed)
       model.warnings.push_back(path + ": bone surface is open (fine for thickness casting; the inside-bone "
@@ -180,7 +190,7 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
     s.name = name;
     s.bone = bone.name;
     s.source_file = path;
-    TriangleMesh input = load_checked(path, options, &s.repairs);
+    TriangleMesh input = load_checked(path, options, &s.repairs, &model.warnings);
     if (!common::build_topology(input).boundary_vertices.size())
       throw InputError(path, 0, "expected an open articular surface patch, found a closed surface "
                                 "(export the articular surface, not the cartilage volume)");

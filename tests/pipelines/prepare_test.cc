@@ -247,6 +247,32 @@ TEST(Prepare, NonManifoldCartilageIsAClearError) {
   EXPECT_NE(text.find("non-manifold"), std::string::npos) << text;
 }
 
+TEST(Prepare, NonManifoldVertexIsReportedAsAWarning) {
+  // A small extra triangle touching the patch at one outline vertex only (two
+  // surfaces meeting at a point): representable and remeshable, so it is a
+  // warning naming the file, not an error.
+  const std::string dir = scratch_model("bowtie");
+  TriangleMesh m = common::read_stl(dir + "tibia_medial_cartilage.stl");
+  const auto topo = common::build_topology(m);
+  const int a = topo.boundary_vertices.front();
+  const Vec3 out = (m.vertex(a) - common::bounding_box(m).center()).normalized();
+  const int n = m.num_vertices();
+  m.V.conservativeResize(n + 2, 3);
+  m.V.row(n) = (m.vertex(a) + 1.5e-3 * out + Vec3(0, 0, 0.8e-3)).transpose();
+  m.V.row(n + 1) = (m.vertex(a) + 1.5e-3 * out - Vec3(0, 0, 0.8e-3)).transpose();
+  m.F.conservativeResize(m.num_triangles() + 1, 3);
+  m.F.row(m.num_triangles() - 1) << a, n, n + 1;
+  // Orient the fin like its neighbourhood (normal up).
+  const Vec3 fn = (m.vertex(n) - m.vertex(a)).cross(m.vertex(n + 1) - m.vertex(a));
+  if (fn.y() < 0) m.F.row(m.num_triangles() - 1) << a, n + 1, n;
+  common::write_stl(m, dir + "tibia_medial_cartilage.stl");
+  const PreparedModel model = prepare_model(find_model_files(dir), PrepareOptions{});
+  bool found = false;
+  for (const auto& w : model.warnings)
+    found = found || (w.find("tibia_medial_cartilage.stl") != std::string::npos && w.find("non-manifold") != std::string::npos);
+  EXPECT_TRUE(found) << "no non-manifold vertex warning";
+}
+
 TEST(Prepare, MissingBoneIsAClearError) {
   const std::string dir = scratch_model("missing_bone");
   fs::remove(dir + "tibia_bone.stl");
