@@ -643,11 +643,17 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
 
   const bool need_rigid = opt.method == CpdMethod::kRigid || opt.prealign != CpdPrealign::kNone;
   RigidState pre{MatrixXd::Identity(D, D), 1.0, VectorXd::Zero(D)};
+  CpdOptions stage2 = opt;
   if (need_rigid) {
     CpdOptions ro = opt;
     if (opt.method != CpdMethod::kRigid) ro.estimate_scale = true;
     RigidRun rr = rigid_stage(X, Y, ro, &res.prealign_candidate);
     pre = rr.st;
+    // The next stage starts from the pre-alignment's final sigma2 (its residual misfit) rather
+    // than the from-scratch value: a large restart sigma2 would first blur the aligned sets
+    // (the non-rigid GMM contracts towards the centroid) and can end in another optimum.
+    if (opt.method != CpdMethod::kRigid && opt.sigma2_initial <= 0.0) stage2.sigma2_initial =
+        std::max(rr.em.sigma2, std::max(opt.sigma2_floor, std::numeric_limits<double>::min()));
     if (opt.method == CpdMethod::kRigid) {
       res.status = rr.em.status;
       res.iterations = rr.em.iterations;
@@ -685,7 +691,7 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
       TYo = (Y * B.transpose()).rowwise() + t.transpose();
       return (mo.xPx - (mo.A * B.transpose()).trace()) / (mo.Np * D);
     };
-    const EmOutcome em = run_em(X, TY, opt, mstep, [] { return 0.0; });
+    const EmOutcome em = run_em(X, TY, stage2, mstep, [] { return 0.0; });
     res.status = em.status;
     res.iterations = em.iterations;
     res.sigma2 = em.sigma2;
@@ -746,7 +752,7 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
                          e.P1.dot(TYo.rowwise().squaredNorm());
       return num / (Np * D);
     };
-    const EmOutcome em = run_em(X, TY, opt, mstep, [&] { return reg; });
+    const EmOutcome em = run_em(X, TY, stage2, mstep, [&] { return reg; });
     res.status = em.status;
     res.iterations = em.iterations;
     res.sigma2 = em.sigma2;

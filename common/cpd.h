@@ -80,7 +80,8 @@ struct CpdOptions {
   /// Also stop (status kSigmaFloor) when s^2 (normalised units) falls below this: the sets
   /// then coincide to ~1e-6 of their size and further EM steps only divide by ~0.
   double sigma2_floor = 1e-12;
-  /// Initial s^2 in normalised units; <= 0 means the paper's sum|x_n - y_m|^2 / (D M N).
+  /// Initial s^2 in normalised units; <= 0 means the paper's sum|x_n - y_m|^2 / (D M N), except
+  /// that an affine/non-rigid stage after a pre-alignment starts from the pre-alignment's final s^2.
   double sigma2_initial = 0.0;
   /// Normalise X and Y separately to zero mean and unit RMS radius (as the reference
   /// code does, so beta, lambda and sigma are in units of the set size), then express
