@@ -53,6 +53,10 @@ struct Stamp {
   std::map<std::string, std::string> inputs;   // label -> sha
   std::map<std::string, std::string> options;  // block.key -> canonical value
   std::map<std::string, std::string> outputs;  // file name -> sha
+  /// The stage's command line with machine-specific paths replaced by names
+  /// (<model>, <scene>, $OUT/...), so a change in how the runner calls a
+  /// stage reruns it while moving the repository or output folder does not.
+  std::string arguments;
 };
 
 fs::path stamp_path(const fs::path& out_dir, const std::string& stage) {
@@ -75,6 +79,7 @@ bool read_stamp(const fs::path& file, Stamp& stamp) {
     }
     if (f[0] == "key" && f.size() == 2) stamp.key = f[1];
     if (f[0] == "executable" && f.size() == 2) stamp.executable = f[1];
+    if (f[0] == "arguments" && f.size() == 2) stamp.arguments = f[1];
     if (f[0] == "input" && f.size() == 3) stamp.inputs[f[1]] = f[2];
     if (f[0] == "option" && f.size() == 3) stamp.options[f[1]] = f[2];
     if (f[0] == "output" && f.size() == 3) stamp.outputs[f[1]] = f[2];
@@ -95,6 +100,7 @@ void write_stamp(const fs::path& file, const StageStep& step, const Stamp& stamp
     out << "stage\t" << step.name << "\n";
     out << "key\t" << stamp.key << "\n";
     out << "executable\t" << stamp.executable << "\n";
+    out << "arguments\t" << stamp.arguments << "\n";
     for (const auto& [k, v] : stamp.inputs) out << "input\t" << k << "\t" << v << "\n";
     for (const auto& [k, v] : stamp.options) out << "option\t" << k << "\t" << v << "\n";
     for (const auto& [k, v] : stamp.outputs) out << "output\t" << k << "\t" << v << "\n";
@@ -104,13 +110,32 @@ void write_stamp(const fs::path& file, const StageStep& step, const Stamp& stamp
 }
 
 // The stage key and its parts, computed from the files as they are now.
-Stamp current_state(const StageStep& step, const fs::path& executable) {
+std::string portable_arguments(const StageStep& step, const fs::path& out_dir,
+                               const fs::path& scene_file) {
+  std::string out;
+  for (const std::string& a : step.arguments) {
+    std::string word = a;
+    for (const auto& [label, path] : step.inputs) {
+      if (fs::path(a) == path) word = "<" + label + ">";
+    }
+    if (fs::path(a) == scene_file) word = "<scene>";
+    const std::string prefix = out_dir.string() + "/";
+    if (a == out_dir.string()) word = "$OUT";
+    if (a.rfind(prefix, 0) == 0) word = "$OUT/" + a.substr(prefix.size());
+    out += (out.empty() ? "" : " ") + word;
+  }
+  return out;
+}
+
+Stamp current_state(const StageStep& step, const fs::path& executable, const fs::path& out_dir,
+                    const fs::path& scene_file) {
   Stamp s;
   s.executable = common::sha256_file(executable);
   for (const auto& [label, path] : step.inputs) s.inputs[label] = common::sha256_path(path);
   for (const auto& [k, v] : step.options) s.options[k] = v;
-  std::string text = "arthrosim stage key v1\nstage\t" + step.name + "\nexecutable\t" +
-                     s.executable + "\n";
+  s.arguments = portable_arguments(step, out_dir, scene_file);
+  std::string text = "arthrosim stage key v2\nstage\t" + step.name + "\nexecutable\t" +
+                     s.executable + "\narguments\t" + s.arguments + "\n";
   for (const auto& [k, v] : s.inputs) text += "input\t" + k + "\t" + v + "\n";
   for (const auto& [k, v] : s.options) text += "option\t" + k + "\t" + v + "\n";
   s.key = common::sha256_hex(text);
@@ -154,6 +179,11 @@ std::string why_run(const StageStep& step, const Stamp& now, const Stamp* last) 
   }
   for (const auto& [k, v] : last->inputs) {
     if (!now.inputs.count(k)) why.push_back("input no longer used: " + k);
+  }
+  // Options reach stages partly as flags; report the command line only when
+  // the options do not already explain the difference.
+  if (now.arguments != last->arguments && changed_options.empty()) {
+    why.push_back("command line changed: " + last->arguments + " -> " + now.arguments);
   }
   if (now.executable != last->executable) {
     why.push_back("code changed: " + step.executable + " is not the build that wrote the output");
@@ -426,7 +456,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       continue;
     }
 
-    const Stamp now = current_state(step, exe);
+    const Stamp now = current_state(step, exe, out_dir, scene.file);
     outcome.key = now.key;
     Stamp last;
     const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);

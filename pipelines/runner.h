@@ -17,7 +17,8 @@
 // surface -> every scenario; report -> post (and therefore every scenario).
 //
 // Reuse: a stage's key is SHA-256 over (the contents of its input files, its
-// canonical options text from the scene, the bytes of its executable). After
+// canonical options text from the scene, the bytes of its executable, its
+// command line with paths replaced by names such as <model> and $OUT/...). After
 // a successful run the runner writes DIR/.stamps/<stage>.txt with the key, its
 // parts and the hashes of the outputs. The next run skips the stage when the
 // key is the same and every output still has the recorded hash; otherwise it

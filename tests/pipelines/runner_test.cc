@@ -314,6 +314,38 @@ TEST_F(RunnerTest, MissingOrEditedOutputReruns) {
   EXPECT_EQ(calls().size(), 5u);
 }
 
+TEST_F(RunnerTest, StampRecordsAPortableCommandLine) {
+  const Scene s = scene(three_scenarios("[kinematics]"));
+  ASSERT_EQ(run(s).status, RunStatus::kOk);
+  const fs::path stamp = root_ / "out" / ".stamps" / "comak.txt";
+  std::ifstream in(stamp);
+  std::stringstream text;
+  text << in.rdbuf();
+  in.close();
+  const std::string line =
+      "arguments\t--model <model> --prepared $OUT/prepared.h5 --trial <trial> --scene <scene> "
+      "--out $OUT/kinematics.h5\n";
+  ASSERT_NE(text.str().find(line), std::string::npos) << text.str();
+  // The folder moved elsewhere: still up to date (no machine paths in keys).
+  fs::rename(root_ / "out", root_ / "moved");
+  options_.out_dir = root_ / "moved";
+  for (const StageOutcome& o : run(s).stages) EXPECT_EQ(o.status, StageStatus::kSkipped) << o.name;
+  fs::rename(root_ / "moved", root_ / "out");
+  options_.out_dir = root_ / "out";
+  // A runner that called the stage differently (here: the stamp says so)
+  // reruns it and says what changed.
+  std::string edited = text.str();
+  edited.replace(edited.find(line), line.size(),
+                 "arguments\t--model <model> --trial <trial> --out $OUT/kinematics.h5\n");
+  std::ofstream(stamp) << edited;
+  const RunReport r = run(s);
+  EXPECT_EQ(status(r, "prepare"), StageStatus::kSkipped);
+  EXPECT_EQ(reason(r, "comak"),
+            "command line changed: --model <model> --trial <trial> --out $OUT/kinematics.h5 -> "
+            "--model <model> --prepared $OUT/prepared.h5 --trial <trial> --scene <scene> --out "
+            "$OUT/kinematics.h5");
+}
+
 TEST_F(RunnerTest, FailingStageStopsTheRunAndKeepsEarlierOutputs) {
   write_stage("arthrosim-comak", "#!/bin/sh\necho 'comak: Ipopt failed at frame 7' >&2\nexit 3\n");
   const Scene s = scene(three_scenarios("[surface]"));
