@@ -107,6 +107,13 @@ const std::vector<OptionSpec>& schema_table() {
        "foundation damping per unit area and unit compression rate (foundation_damping)"},
       {"surface", "osmotic_pressure_mpa", T::kNumber, U::kMegapascal, "0.2", false, 0, 100, "",
        true, "pressure on the internal face of the shells (osmotic_pressure)"},
+      {"surface", "steady_state", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
+       "solve directly for the steady state at end_time_s (static equilibrium: every listed "
+       "term is built, velocities and accelerations are zero there) instead of time stepping"},
+      {"surface", "linear_solver", T::kText, U::kNone, "auto", false, 0, 0, "auto|cholmod|umfpack",
+       true,
+       "sparse solver of the Newton steps: auto (CHOLMOD when every tangent is symmetric, else "
+       "UMFPACK), cholmod (on the symmetric part (K + K^T)/2), umfpack"},
       // --- one scenario --------------------------------------------------------
       {"scenario", "description", T::kText, U::kNone, "", false, 0, 0, "", false,
        "free text for reports"},

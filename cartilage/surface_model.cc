@@ -1,0 +1,141 @@
+#include "cartilage/surface_model.h"
+
+#include <cmath>
+
+#include "common/effects.h"
+#include "common/error.h"
+
+namespace arthrosim::cartilage {
+
+std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, const SurfaceParameters& parameters,
+                                                const std::vector<std::string>& effects, const BoneMotion& bone,
+                                                common::EffectLedger* ledger) {
+  // Check the whole list first, so that an unsupported effect stops the run
+  // before anything is built or recorded.
+  for (const std::string& e : effects) {
+    const bool supported = e == "foundation_springs" || e == "foundation_damping" || e == "osmotic_pressure" ||
+                           e == "periphery_fixed" || e == "inertia";
+    if (!supported) {
+      if (!common::find_effect(e)) throw common::InputError("surface " + surface.name + ": unknown effect '" + e + "'");
+      throw common::InputError("surface " + surface.name + ": effect '" + e +
+                               "' is requested but the surface stage of this build cannot simulate it (it "
+                               "simulates foundation_springs, foundation_damping, osmotic_pressure, "
+                               "periphery_fixed, inertia); remove it from the scenario");
+    }
+  }
+  if (!(parameters.shell_thickness_m > 0))
+    throw common::InputError("surface " + surface.name + ": shell thickness must be > 0");
+  if (surface.normals.rows() != surface.mesh.num_nodes())
+    throw common::InputError("surface " + surface.name + ": " + std::to_string(surface.normals.rows()) +
+                             " normals for " + std::to_string(surface.mesh.num_nodes()) + " nodes");
+  common::QuadMesh mesh = surface.mesh;
+  mesh.name = surface.name;
+  auto model = std::make_unique<ShellModel>(
+      mesh, surface.normals, Eigen::VectorXd::Constant(mesh.num_nodes(), parameters.shell_thickness_m),
+      parameters.material);
+  model->attach_ledger(ledger);
+  model->add_internal_forces();
+  // Order of construction follows the scenario's list; the terms are
+  // independent (their sum is the residual).
+  for (const std::string& e : effects) {
+    if (e == "foundation_springs") {
+      model->add_foundation_springs(parameters.foundation_stiffness_N_m3, bone);
+    } else if (e == "foundation_damping") {
+      model->add_foundation_damping(parameters.foundation_damping_N_s_m3, bone, true);
+    } else if (e == "osmotic_pressure") {
+      const double p = parameters.osmotic_pressure_Pa;
+      model->add_pressure("osmotic_pressure", -1.0, [p](double) { return p; });
+    } else if (e == "periphery_fixed") {
+      model->add_periphery_fixed(bone);
+    } else if (e == "inertia") {
+      model->add_inertia();
+    }
+  }
+  return model;
+}
+
+NodeBasis node_strain_basis(const ShellModel& model) {
+  const int N = model.num_nodes();
+  NodeBasis b;
+  b.a1.resize(N, 3);
+  b.a2.resize(N, 3);
+  b.n.resize(N, 3);
+  for (int i = 0; i < N; ++i) {
+    const Eigen::Vector3d n = model.reference_director(i).normalized();
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+    if (std::abs(axis.dot(n)) > 0.9) axis = Eigen::Vector3d::UnitY();
+    const Eigen::Vector3d a1 = (axis - axis.dot(n) * n).normalized();
+    b.a1.row(i) = a1.transpose();
+    b.a2.row(i) = n.cross(a1).transpose();
+    b.n.row(i) = n.transpose();
+  }
+  return b;
+}
+
+NodalStrains nodal_strains(const ShellModel& model, const NodeBasis& basis, const Eigen::VectorXd& q) {
+  const int N = model.num_nodes();
+  const int M = model.num_elements();
+  Eigen::MatrixXd sum = Eigen::MatrixXd::Zero(N, 3);
+  Eigen::VectorXi count = Eigen::VectorXi::Zero(N);
+  // Corner natural coordinates, counter-clockwise (ShellElement node order).
+  static const double kXi[4] = {-1, 1, 1, -1};
+  static const double kEta[4] = {-1, -1, 1, 1};
+  std::vector<Eigen::Matrix<double, 4, 3>> per_element(M);
+#pragma omp parallel for schedule(static)
+  for (int e = 0; e < M; ++e) {
+    const Vector24 qe = model.gather(e, q);
+    for (int k = 0; k < 4; ++k) {
+      Eigen::Matrix3d frame;
+      const Eigen::Matrix<double, 6, 1> s = model.element(e).strain(qe, kXi[k], kEta[k], 0.0, &frame);
+      Eigen::Matrix2d El;
+      El << s(0), s(3), s(3), s(1);
+      const Eigen::Matrix<double, 3, 2> P = frame.leftCols<2>();
+      const Eigen::Matrix3d W = P * El * P.transpose();  // world components
+      const int node = model.quads()(e, k);
+      const Eigen::Vector3d a1 = basis.a1.row(node).transpose(), a2 = basis.a2.row(node).transpose();
+      per_element[e].row(k) << a1.dot(W * a1), a2.dot(W * a2), a1.dot(W * a2);
+    }
+  }
+  // Serial, fixed-order sum: deterministic whatever the thread count.
+  for (int e = 0; e < M; ++e)
+    for (int k = 0; k < 4; ++k) {
+      const int node = model.quads()(e, k);
+      sum.row(node) += per_element[e].row(k);
+      ++count(node);
+    }
+  NodalStrains out;
+  out.E.resize(N, 3);
+  out.e1.resize(N);
+  out.e2.resize(N);
+  out.e1_dir.resize(N, 3);
+  for (int i = 0; i < N; ++i) {
+    const Eigen::RowVector3d E = count(i) > 0 ? Eigen::RowVector3d(sum.row(i) / count(i)) : Eigen::RowVector3d::Zero();
+    out.E.row(i) = E;
+    // Principal values of [[a, c], [c, b]]: m +- sqrt(((a - b)/2)^2 + c^2),
+    // first direction at angle theta = atan2(2c, a - b)/2 from a1.
+    const double a = E(0), b = E(1), c = E(2);
+    const double m = 0.5 * (a + b), r = std::hypot(0.5 * (a - b), c);
+    out.e1(i) = m + r;
+    out.e2(i) = m - r;
+    const double theta = 0.5 * std::atan2(2 * c, a - b);
+    Eigen::Vector3d d = std::cos(theta) * basis.a1.row(i).transpose() + std::sin(theta) * basis.a2.row(i).transpose();
+    if (d.dot(basis.a1.row(i).transpose()) < 0) d = -d;
+    out.e1_dir.row(i) = d.normalized().transpose();
+  }
+  return out;
+}
+
+Eigen::VectorXd nodal_deflection(const ShellModel& model, const Eigen::VectorXd& q) {
+  Eigen::VectorXd w(model.num_nodes());
+  for (int i = 0; i < model.num_nodes(); ++i)
+    w(i) = (q.segment<3>(6 * i) - model.reference_position(i)).dot(model.reference_director(i).normalized());
+  return w;
+}
+
+Eigen::MatrixXd nodal_displacement(const ShellModel& model, const Eigen::VectorXd& q) {
+  Eigen::MatrixXd u(model.num_nodes(), 3);
+  for (int i = 0; i < model.num_nodes(); ++i) u.row(i) = (q.segment<3>(6 * i) - model.reference_position(i)).transpose();
+  return u;
+}
+
+}  // namespace arthrosim::cartilage

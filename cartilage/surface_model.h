@@ -1,0 +1,85 @@
+#pragma once
+// Building blocks of the deformable-surface stage (issue 5; seed
+// seeds/002_3ffcc11eb7a447d9.txt, "Deformable Cartilage Model" and
+// "Simulation of Superficial Cartilage Mechanics"):
+//  - build_surface_model: one ShellModel for one cartilage (or generic) quad
+//    surface with exactly the effects a scenario lists, each recorded in the
+//    EffectLedger by the model at construction;
+//  - nodal_strains: per-node in-plane Green-Lagrange strain, principal strains
+//    and the first principal direction (docs/surface_output.md).
+//
+// Geometry convention (prepared model, docs/prepared_model.md): node normals
+// point away from the bone, towards the joint space; quads are
+// counter-clockwise seen from the joint space. The shell director is the node
+// normal, so the internal face (towards the bone) is zeta = -1, and a positive
+// osmotic pressure on it pushes the surface outwards (the cartilage swells).
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cartilage/shell_model.h"
+#include "common/mesh.h"
+
+namespace arthrosim::common {
+class EffectLedger;
+}
+
+namespace arthrosim::cartilage {
+
+/// One surface to simulate.
+struct SurfaceInput {
+  std::string name;            ///< e.g. "femur"; part name in the ledger
+  common::QuadMesh mesh;       ///< nodes [m], quads counter-clockwise seen from the joint space
+  common::Points3 normals;     ///< unit node normals (N x 3), away from the bone
+  std::vector<int> periphery;  ///< outline nodes (sorted); may be empty for generic meshes
+};
+
+/// Material and effect parameters (SI). Defaults: seed 002 values (the
+/// scene's defaults, common/scene.cc, are the same).
+struct SurfaceParameters {
+  ShellMaterial material;                   ///< E 400 MPa, nu 0.3, rho 1000 kg/m^3
+  double shell_thickness_m = 1e-3;          ///< constant shell thickness [m], > 0
+  double foundation_stiffness_N_m3 = 7e8;   ///< k [N/m^3] (0.7 N/mm^3)
+  double foundation_damping_N_s_m3 = 7e15;  ///< c [N s/m^3] (7e6 N s/mm^3)
+  double osmotic_pressure_Pa = 0.2e6;       ///< on the internal face [Pa]
+};
+
+/// Builds the shell model of one surface with its internal forces and the
+/// listed effects (foundation_springs, foundation_damping, osmotic_pressure,
+/// periphery_fixed, inertia). Each term is recorded in `ledger` (part =
+/// surface name) by the model when it is constructed. Any other effect name
+/// (imposed_kinematics, mesh_contact: not simulated by this build) throws
+/// InputError naming it before anything is built: an effect is never silently
+/// ignored. `bone` moves the foundation anchors and the fixed periphery.
+std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, const SurfaceParameters& parameters,
+                                                const std::vector<std::string>& effects, const BoneMotion& bone,
+                                                common::EffectLedger* ledger);
+
+/// Per-node tangent basis of the strain output: a1 = the world axis x
+/// projected onto the plane normal to the reference director n and
+/// normalised (the world axis y when |x . n| > 0.9), a2 = n x a1.
+struct NodeBasis {
+  common::Points3 a1, a2, n;  ///< N x 3 each, unit
+};
+NodeBasis node_strain_basis(const ShellModel& model);
+
+/// Strains at the nodes (mid-surface, zeta = 0) for the state q.
+struct NodalStrains {
+  Eigen::MatrixXd E;       ///< N x 3: E_a1a1, E_a2a2, E_a1a2 (tensor components) in NodeBasis
+  Eigen::VectorXd e1, e2;  ///< principal in-plane strains, e1 >= e2
+  Eigen::MatrixXd e1_dir;  ///< N x 3 unit vector (world) of e1; sign: a1 . dir >= 0
+};
+
+/// Each element's in-plane strain tensor (E11, E22, E12 in its local frame,
+/// ShellElement::strain at the corner node, zeta = 0) is rotated into world
+/// components, projected on the node's basis, and averaged with equal weights
+/// over the elements sharing the node.
+NodalStrains nodal_strains(const ShellModel& model, const NodeBasis& basis, const Eigen::VectorXd& q);
+
+/// Deflection along the reference director per node: (r_i - r_i0) . n_i [m].
+Eigen::VectorXd nodal_deflection(const ShellModel& model, const Eigen::VectorXd& q);
+/// Displacement r_i - r_i0 per node (N x 3) [m].
+Eigen::MatrixXd nodal_displacement(const ShellModel& model, const Eigen::VectorXd& q);
+
+}  // namespace arthrosim::cartilage

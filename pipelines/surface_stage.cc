@@ -1,0 +1,336 @@
+#include "pipelines/surface_stage.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+
+#include "cartilage/hht_integrator.h"
+#include "cartilage/surface_model.h"
+#include "common/effects.h"
+#include "common/error.h"
+#include "common/finite.h"
+#include "common/hdf5.h"
+#include "common/log.h"
+#include "common/metadata.h"
+#include "common/progress.h"
+#include "common/scene.h"
+#include "common/xdmf.h"
+
+namespace arthrosim::pipelines {
+namespace {
+
+using cartilage::HhtIntegrator;
+using cartilage::ShellModel;
+using common::H5File;
+
+double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+/// Reads one cartilage surface of the prepared model (docs/prepared_model.md).
+cartilage::SurfaceInput read_prepared_surface(const H5File& f, const std::string& name) {
+  const std::string g = "/surfaces/" + name + "/quads/";
+  cartilage::SurfaceInput s;
+  s.name = name;
+  s.mesh.name = name;
+  s.mesh.V = f.read_matrix(g + "nodes", 3);
+  const Eigen::MatrixXi Q = f.read_matrix_int(g + "quads", 4);
+  s.mesh.Q = Q;
+  s.normals = f.read_matrix(g + "normals", 3);
+  const Eigen::VectorXi P = f.read_vector_int(g + "periphery");
+  s.periphery.assign(P.data(), P.data() + P.size());
+  const int N = static_cast<int>(s.mesh.V.rows());
+  if (s.normals.rows() != N)
+    throw common::InputError(f.path() + ": error: dataset " + g + "normals: expected " + std::to_string(N) +
+                             " rows (one per node), found " + std::to_string(s.normals.rows()));
+  if (Q.size() > 0 && (Q.minCoeff() < 0 || Q.maxCoeff() >= N))
+    throw common::InputError(f.path() + ": error: dataset " + g + "quads: node index out of range [0, " +
+                             std::to_string(N) + ")");
+  if (!s.mesh.V.allFinite() || !s.normals.allFinite())
+    throw common::InputError(f.path() + ": error: dataset " + g + "nodes or " + g + "normals holds NaN/Inf");
+  return s;
+}
+
+struct SurfaceRun {
+  cartilage::SurfaceInput input;
+  std::unique_ptr<ShellModel> model;
+  std::unique_ptr<HhtIntegrator> integrator;
+  cartilage::NodeBasis basis;
+  std::vector<H5File::Appender> frame_out;   // displacement, deflection, E, e1, e1_dir, e2
+  std::vector<H5File::Appender> solver_out;  // time, dt, iterations, residual, tolerance, rejections, wall
+  long last_iterations = 0, last_rejections = 0;
+  SurfaceSummary summary;
+};
+
+}  // namespace
+
+SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
+  const double t_start = now_s();
+  const common::Scene scene = common::load_scene(options.scene);
+  const common::Scenario* sc = nullptr;
+  if (!options.scenario.empty()) {
+    sc = &scene.require_scenario(options.scenario);
+  } else {
+    if (scene.scenarios.size() != 1)
+      throw common::InputError(options.scene + ": error: the scene has " + std::to_string(scene.scenarios.size()) +
+                               " scenarios; choose one with --scenario");
+    sc = &scene.scenarios.front();
+  }
+  const common::OptionBlock& o = sc->options;
+
+  // ---- parameters (SI from the scene) ------------------------------------
+  cartilage::SurfaceParameters par;
+  par.material.youngs_modulus_Pa = o.si("youngs_modulus_mpa");
+  par.material.poisson_ratio = o.si("poisson_ratio");
+  par.material.density_kg_m3 = o.si("density_kg_per_m3");
+  par.shell_thickness_m = o.si("shell_thickness_mm");
+  par.foundation_stiffness_N_m3 = o.si("foundation_stiffness_n_per_mm3");
+  par.foundation_damping_N_s_m3 = o.si("foundation_damping_n_s_per_mm3");
+  par.osmotic_pressure_Pa = o.si("osmotic_pressure_mpa");
+  if (!o.has("end_time_s"))
+    throw common::InputError(scene.file.string(), sc->line,
+                             "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
+  const double end_time = o.si("end_time_s");
+  const double dt = o.si("time_step_s");
+  const bool steady = o.flag("steady_state");
+  const bool quasi_static = steady || !sc->wants("inertia");
+  if (steady && !(end_time > 0))
+    throw common::InputError(scene.file.string(), sc->line, "steady_state needs end_time_s > 0");
+  double interval = o.si("output_interval_ms");
+  if (steady) interval = end_time;
+  if (interval < dt) interval = dt;
+
+  cartilage::IntegratorOptions iopt;
+  iopt.quasi_static = quasi_static;
+  iopt.alpha = o.si("hht_alpha");
+  iopt.dt_s = steady ? end_time : dt;
+  const std::string& solver = o.text("linear_solver");
+  iopt.solver = solver == "cholmod"   ? cartilage::LinearSolverChoice::kCholmod
+                : solver == "umfpack" ? cartilage::LinearSolverChoice::kUmfpack
+                                      : cartilage::LinearSolverChoice::kAuto;
+
+  // ---- models -------------------------------------------------------------
+  const H5File prepared(options.prepared, H5File::Mode::kRead);
+  const std::vector<std::string> names = prepared.read_strings("/surfaces/names");
+  common::EffectLedger ledger("surface:" + sc->name);
+  std::vector<SurfaceRun> runs;
+  for (const std::string& name : o.list("surfaces")) {
+    if (std::find(names.begin(), names.end(), name) == names.end()) {
+      std::string have;
+      for (const auto& n : names) have += (have.empty() ? "" : ", ") + n;
+      throw common::InputError(scene.file.string(), o.value("surfaces").line,
+                               "surface '" + name + "' is not in the prepared model " + options.prepared +
+                                   " (it has: " + have + ")");
+    }
+    SurfaceRun r;
+    r.input = read_prepared_surface(prepared, name);
+    r.model = cartilage::build_surface_model(r.input, par, sc->effects, cartilage::BoneMotion::fixed(), &ledger);
+    r.basis = cartilage::node_strain_basis(*r.model);
+    r.summary.name = name;
+    r.summary.nodes = r.model->num_nodes();
+    r.summary.elements = r.model->num_elements();
+    runs.push_back(std::move(r));
+  }
+  ledger.require_only(sc->effects);
+  common::log_info(ledger.to_text());
+
+  // ---- output file: static part -------------------------------------------
+  H5File out(options.out, H5File::Mode::kTruncate);
+  {
+    std::vector<const char*> argv;
+    for (const auto& a : options.argv) argv.push_back(a.c_str());
+    common::write_metadata(out, common::collect_run_metadata("arthrosim-surface", static_cast<int>(argv.size()),
+                                                             argv.data(), options.scene, o.canonical_text()));
+  }
+  out.set_attribute("/", "schema", "arthrosim surface output 1");
+  out.set_attribute("/", "scenario", sc->name);
+  out.set_attribute("/", "prepared_model", options.prepared);
+  out.set_attribute("/", "mode", steady ? "steady_state" : (quasi_static ? "quasi_static" : "hht"));
+  out.set_attribute("/", "status", "running");
+  common::write_effect_ledger(out, ledger);
+  const auto n_frames_expected = static_cast<std::int64_t>(std::floor(end_time / interval + 1e-9)) + 1 +
+                                 (std::fmod(end_time, interval) > 1e-12 * interval ? 1 : 0);
+  const auto n_steps_expected = static_cast<std::int64_t>(std::ceil(end_time / (steady ? end_time : dt) - 1e-9));
+  H5File::Appender time_out = out.appender("/time", {}, {n_frames_expected, 0});
+  for (SurfaceRun& r : runs) {
+    const std::string g = "/surfaces/" + r.summary.name + "/";
+    const std::int64_t N = r.model->num_nodes();
+    out.write(g + "nodes", r.input.mesh.V);
+    out.write(g + "quads", Eigen::MatrixXi(r.input.mesh.Q));
+    out.write(g + "normals", Eigen::MatrixXd(r.basis.n));
+    out.write(g + "basis_a1", Eigen::MatrixXd(r.basis.a1));
+    out.write(g + "basis_a2", Eigen::MatrixXd(r.basis.a2));
+    std::vector<int> fixed(r.model->constrained().size() / 6);
+    for (size_t i = 0; i < fixed.size(); ++i) fixed[i] = r.model->constrained()[6 * i] ? 1 : 0;
+    out.write(g + "fixed", fixed);
+    const common::H5AppendOptions fo{n_frames_expected, 0};
+    r.frame_out.push_back(out.appender(g + "displacement", {N, 3}, fo));
+    r.frame_out.push_back(out.appender(g + "deflection", {N}, fo));
+    r.frame_out.push_back(out.appender(g + "strain/E", {N, 3}, fo));
+    r.frame_out.push_back(out.appender(g + "strain/e1", {N}, fo));
+    r.frame_out.push_back(out.appender(g + "strain/e1_dir", {N, 3}, fo));
+    r.frame_out.push_back(out.appender(g + "strain/e2", {N}, fo));
+    const std::string s = "/solver/" + r.summary.name + "/";
+    const common::H5AppendOptions so{n_steps_expected, 0};
+    r.solver_out.push_back(out.appender(s + "time", {}, so));
+    r.solver_out.push_back(out.appender(s + "dt", {}, so));
+    r.solver_out.push_back(out.appender_int(s + "newton_iterations", {}, so));
+    r.solver_out.push_back(out.appender(s + "residual_N", {}, so));
+    r.solver_out.push_back(out.appender(s + "residual_tolerance_N", {}, so));
+    r.solver_out.push_back(out.appender_int(s + "rejections", {}, so));
+    r.solver_out.push_back(out.appender(s + "wall_s", {}, so));
+  }
+  out.flush();
+
+  std::vector<double> times;
+  const std::string xdmf_path = std::filesystem::path(options.out).replace_extension(".xdmf").string();
+  auto write_sidecar = [&]() {
+    common::XdmfSeries series;
+    series.times = times;
+    for (const SurfaceRun& r : runs) {
+      const std::string g = "/surfaces/" + r.summary.name + "/";
+      common::XdmfSurface s;
+      s.name = r.summary.name;
+      s.geometry_dataset = g + "nodes";
+      s.topology_dataset = g + "quads";
+      s.cell_type = common::XdmfCellType::kQuadrilateral;
+      s.fields = {{"displacement", g + "displacement"}, {"deflection", g + "deflection"},
+                  {"E", g + "strain/E"},                {"e1", g + "strain/e1"},
+                  {"e1_dir", g + "strain/e1_dir"},      {"e2", g + "strain/e2"}};
+      series.surfaces.push_back(std::move(s));
+    }
+    common::write_xdmf(xdmf_path, out, series);
+  };
+  // One frame: every surface's fields, then /time (so /time counts complete frames).
+  auto write_frame = [&](double t) {
+    for (SurfaceRun& r : runs) {
+      const Eigen::VectorXd& q = r.integrator->q();
+      const Eigen::MatrixXd u = cartilage::nodal_displacement(*r.model, q);
+      const Eigen::VectorXd w = cartilage::nodal_deflection(*r.model, q);
+      const cartilage::NodalStrains st = cartilage::nodal_strains(*r.model, r.basis, q);
+      common::check_finite(u, "surface " + r.summary.name + ": displacement at t = " + std::to_string(t));
+      common::check_finite(st.E, "surface " + r.summary.name + ": strain at t = " + std::to_string(t));
+      r.frame_out[0].append(u);
+      r.frame_out[1].append(w);
+      r.frame_out[2].append(st.E);
+      r.frame_out[3].append(st.e1);
+      r.frame_out[4].append(st.e1_dir);
+      r.frame_out[5].append(st.e2);
+      Eigen::Index imax = 0;
+      w.cwiseAbs().maxCoeff(&imax);
+      r.summary.max_deflection_m = w(imax);
+      r.summary.e1_min = st.e1.minCoeff();
+      r.summary.e1_max = st.e1.maxCoeff();
+    }
+    time_out.append(t);
+    times.push_back(t);
+    write_sidecar();
+  };
+
+  // ---- integrate ----------------------------------------------------------
+  for (SurfaceRun& r : runs) {
+    r.integrator = std::make_unique<HhtIntegrator>(*r.model, iopt);
+    r.integrator->initialize(0.0, r.model->reference_state());
+  }
+  common::log_info("scenario " + sc->name + ": " +
+                   (steady ? std::string("steady state (static equilibrium at t = ") + std::to_string(end_time) + " s)"
+                           : (quasi_static ? "quasi-static" : "HHT alpha " + std::to_string(iopt.alpha)) +
+                                 std::string(", dt ") + std::to_string(dt) + " s to " + std::to_string(end_time) +
+                                 " s"));
+  write_frame(0.0);
+  common::ProgressOptions popt;
+  if (!options.progress) popt.mode = common::ProgressOptions::Mode::kOff;
+  common::Progress progress("surface " + sc->name, std::max<std::int64_t>(n_steps_expected, 1), popt);
+  const double step = steady ? end_time : dt;
+  double t = 0;
+  int k_out = 1;
+  try {
+    while (t < end_time * (1 - 1e-12)) {
+      const double t_out = std::min(k_out * interval, end_time);
+      while (t < t_out * (1 - 1e-12)) {
+        const double t_next = std::min(t + step, t_out);
+        for (SurfaceRun& r : runs) {
+          const double w0 = now_s();
+          r.integrator->advance_to(t_next);
+          const double wall = now_s() - w0;
+          const cartilage::IntegratorStatistics& s = r.integrator->statistics();
+          const cartilage::StepRecord& rec = s.log.back();
+          const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
+          r.summary.final_residual_N = rl;
+          r.summary.residual_tolerance_N = std::max(iopt.residual_rtol * r0, iopt.residual_atol_N);
+          r.solver_out[0].append(t_next);
+          r.solver_out[1].append(rec.dt);
+          r.solver_out[2].append(static_cast<int>(s.newton_iterations - r.last_iterations));
+          r.solver_out[3].append(rl);
+          r.solver_out[4].append(r.summary.residual_tolerance_N);
+          r.solver_out[5].append(static_cast<int>(s.rejected_steps - r.last_rejections));
+          r.solver_out[6].append(wall);
+          r.last_iterations = s.newton_iterations;
+          r.last_rejections = s.rejected_steps;
+        }
+        t = t_next;
+        progress.step();
+      }
+      write_frame(t);
+      ++k_out;
+    }
+  } catch (const std::exception& e) {
+    out.set_attribute("/", "status", std::string("failed: ") + e.what());
+    out.flush();
+    throw;
+  }
+  progress.finish();
+
+  // ---- statistics -----------------------------------------------------------
+  SurfaceStageResult res;
+  res.scenario = sc->name;
+  res.frames = static_cast<int>(times.size());
+  for (SurfaceRun& r : runs) {
+    for (auto& a : r.frame_out) a.close();
+    for (auto& a : r.solver_out) a.close();
+    const cartilage::IntegratorStatistics& s = r.integrator->statistics();
+    const std::string sg = "/solver/" + r.summary.name;
+    out.set_attribute(sg, "steps", static_cast<std::int64_t>(s.steps));
+    out.set_attribute(sg, "newton_iterations", static_cast<std::int64_t>(s.newton_iterations));
+    out.set_attribute(sg, "rejected_steps", static_cast<std::int64_t>(s.rejected_steps));
+    out.set_attribute(sg, "factorizations", static_cast<std::int64_t>(s.factorizations));
+    out.set_attribute(sg, "symbolic_analyses", static_cast<std::int64_t>(s.symbolic_analyses));
+    out.set_attribute(sg, "solver_switches", static_cast<std::int64_t>(s.solver_switches));
+    out.set_attribute(sg, "linear_solver", s.linear_solver);
+    out.set_attribute(sg, "assembly_s", s.assembly_s);
+    out.set_attribute(sg, "factorization_s", s.factorization_s);
+    out.set_attribute(sg, "solve_s", s.solve_s);
+    out.set_attribute(sg, "total_s", s.total_s);
+    std::string rej;
+    for (const auto& x : s.rejections) rej += x + "\n";
+    out.set_attribute(sg, "rejections", rej);
+    const std::string g = "/surfaces/" + r.summary.name;
+    out.set_attribute(g, "max_deflection_m", r.summary.max_deflection_m);
+    out.set_attribute(g, "e1_min", r.summary.e1_min);
+    out.set_attribute(g, "e1_max", r.summary.e1_max);
+    out.set_attribute(g, "final_residual_N", r.summary.final_residual_N);
+    out.set_attribute(g, "residual_tolerance_N", r.summary.residual_tolerance_N);
+    res.steps += s.steps;
+    res.newton_iterations += s.newton_iterations;
+    res.rejected_steps += s.rejected_steps;
+    res.factorizations += s.factorizations;
+    res.assembly_s += s.assembly_s;
+    res.factorization_s += s.factorization_s;
+    res.solve_s += s.solve_s;
+    res.surfaces.push_back(r.summary);
+  }
+  time_out.close();
+  res.wall_s = now_s() - t_start;
+  out.set_attribute("/solver", "wall_s", res.wall_s);
+  out.set_attribute("/", "status", "completed");
+  out.flush();
+  write_sidecar();
+  res.status = SurfaceStageStatus::kCompleted;
+  return res;
+}
+
+}  // namespace arthrosim::pipelines

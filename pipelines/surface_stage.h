@@ -1,0 +1,49 @@
+#pragma once
+// The deformable-surface stage (arthrosim-surface, issue 5): reads a prepared
+// model (docs/prepared_model.md) and a scene scenario (docs/scenes.md), builds
+// one ANCF shell model per cartilage surface with exactly the scenario's
+// effects (cartilage/surface_model.h), integrates it (HHT, quasi-static, or a
+// direct steady-state solve) and writes the output HDF5 + XDMF sidecar
+// (schema: docs/surface_output.md).
+#include <string>
+#include <vector>
+
+namespace arthrosim::pipelines {
+
+struct SurfaceStageOptions {
+  std::string prepared;    ///< prepared-model HDF5
+  std::string kinematics;  ///< kinematics HDF5 ("" = none)
+  std::string scene;       ///< scene YAML
+  std::string scenario;    ///< scenario name ("" = the scene's only scenario)
+  std::string out;         ///< output HDF5; the XDMF sidecar gets the same stem
+  bool progress = true;    ///< progress lines on stderr
+  std::vector<std::string> argv;  ///< command line, for the run metadata
+};
+
+enum class SurfaceStageStatus { kCompleted, kFailed };
+
+/// What one surface ended with (last written frame).
+struct SurfaceSummary {
+  std::string name;
+  int nodes = 0, elements = 0;
+  double max_deflection_m = 0;  ///< largest |deflection| (signed value of that node)
+  double e1_min = 0, e1_max = 0;  ///< range of the first principal strain
+  double final_residual_N = 0;    ///< residual norm of the last accepted step
+  double residual_tolerance_N = 0;  ///< the tolerance that step met
+};
+
+struct SurfaceStageResult {
+  SurfaceStageStatus status = SurfaceStageStatus::kFailed;
+  std::string scenario;
+  std::vector<SurfaceSummary> surfaces;
+  long steps = 0, newton_iterations = 0, rejected_steps = 0, factorizations = 0;
+  int frames = 0;
+  double wall_s = 0, assembly_s = 0, factorization_s = 0, solve_s = 0;
+};
+
+/// Runs the stage. Throws common::InputError on bad input (naming file and
+/// dataset or scene line) and common::NumericalError when the solver gives
+/// up (after the halvings); frames written until then stay in the file.
+SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options);
+
+}  // namespace arthrosim::pipelines
