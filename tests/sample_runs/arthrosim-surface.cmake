@@ -1,0 +1,13 @@
+# Sample run of arthrosim-surface --help: the bundled osmotic scenario on the
+# coarse prepared knee (about 10 s; the prepare step is a fixture).
+add_test(NAME sample.arthrosim-surface.prepare_coarse
+  COMMAND arthrosim-prepare --model ${CMAKE_SOURCE_DIR}/data/models/knee_parametric/coarse
+          --out ${CMAKE_BINARY_DIR}/surface_sample_prepared_coarse.h5)
+set_tests_properties(sample.arthrosim-surface.prepare_coarse PROPERTIES LABELS sample TIMEOUT 120
+  FIXTURES_SETUP surface_prepared_coarse)
+add_test(NAME sample.arthrosim-surface.osmotic
+  COMMAND arthrosim-surface --prepared ${CMAKE_BINARY_DIR}/surface_sample_prepared_coarse.h5
+          --scene ${CMAKE_SOURCE_DIR}/data/scenes/osmotic.yaml --scenario osmotic
+          --out ${CMAKE_BINARY_DIR}/surface_sample_osmotic.h5)
+set_tests_properties(sample.arthrosim-surface.osmotic PROPERTIES LABELS sample TIMEOUT 300
+  FIXTURES_REQUIRED surface_prepared_coarse)
