@@ -899,6 +899,9 @@ KneeGeometry ParametricKnee::generate(const KneeGeneratorOptions& options) const
   if (!(h >= mm(0.2) && h <= mm(2.0)))
     throw common::InputError("knee generator", 0,
                              "expected grid spacing in [0.2, 2] mm, found " + std::to_string(h * 1e3) + " mm");
+  if (options.remesh_iterations < 1 || options.remesh_iterations > 20)
+    throw common::InputError("knee generator", 0, "expected remesh iterations in [1, 20], found " +
+                                                      std::to_string(options.remesh_iterations));
   const Impl* m = impl_;
   const ParametricKnee& shape = *this;
 

@@ -161,6 +161,9 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
   if (!(options.max_cast_distance >= 1e-3 && options.max_cast_distance <= 50e-3))
     throw InputError("prepare", 0, "expected max cast distance in [1, 50] mm, found " +
                                        std::to_string(options.max_cast_distance * 1e3) + " mm");
+  if (options.remesh_iterations < 1 || options.remesh_iterations > 20)
+    throw InputError("prepare", 0, "expected remesh iterations in [1, 20], found " +
+                                       std::to_string(options.remesh_iterations));
   PreparedModel model;
   model.folder = files.folder;
   std::map<std::string, int> bone_index;

@@ -44,6 +44,7 @@ int main(int argc, char** argv) {
       "Sample runs:\n"
       "  arthrosim-prepare --model data/models/knee_parametric/coarse --edge-length-mm 3 --out prepared_coarse.h5\n"
       "  arthrosim-prepare --model data/models/knee_parametric/medium --edge-length-mm 2 --out prepared_medium.h5\n"
+      "Your own segmentation (files named as above):\n"
       "  arthrosim-prepare --model my_segmentation/ --unit mm --edge-length-mm 1 --out prepared.h5\n");
   CLI11_PARSE(app, argc, argv);
 
