@@ -1,0 +1,121 @@
+// cartilage/surface_model.h: model building with exactly the listed effects,
+// and the nodal strain post-processing against closed forms.
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "cartilage/surface_model.h"
+#include "common/effects.h"
+#include "common/error.h"
+#include "shell_test_meshes.h"
+
+namespace arthrosim::cartilage {
+namespace {
+
+SurfaceInput plate_input(const Eigen::Matrix3d& R_WP, double distortion) {
+  SurfaceInput s;
+  s.name = "plate";
+  s.mesh = testing::plate_mesh(6, 4, 0.03, 0.02, distortion);
+  s.mesh.V = (s.mesh.V * R_WP.transpose()).eval();  // rows: p_W = R_WP p_P
+  s.normals = quad_mesh_vertex_normals(s.mesh);
+  return s;
+}
+
+// Homogeneous deformation r = X_W0 + A (X - X_W0) of a flat plate (any
+// orientation, distorted elements): the bilinear element reproduces it
+// exactly, so every node's strain is the closed form E = (A^T A - I)/2
+// projected on its basis (a1, a2), and e1, e2, e1_dir are the eigen-pairs of
+// that 2 x 2 tensor. Tolerance 1e-12: only round-off of O(1) quantities.
+TEST(SurfaceStrain, HomogeneousDeformationGivesClosedFormAtEveryNode) {
+  for (double distortion : {0.0, 0.25}) {
+    const Eigen::Matrix3d R_WP =
+        (Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized())).toRotationMatrix();
+    const SurfaceInput s = plate_input(R_WP, distortion);
+    auto model = build_surface_model(s, SurfaceParameters{}, {}, BoneMotion::fixed(), nullptr);
+    const NodeBasis b = node_strain_basis(*model);
+    // In-plate stretch 3% / -1% and shear 2%, expressed in world components.
+    Eigen::Matrix3d A_P = Eigen::Matrix3d::Identity();
+    A_P(0, 0) = 1.03;
+    A_P(1, 1) = 0.99;
+    A_P(0, 1) = 0.02;
+    const Eigen::Matrix3d A_W = R_WP * A_P * R_WP.transpose();
+    Eigen::VectorXd q = model->reference_state();
+    for (int i = 0; i < model->num_nodes(); ++i) {
+      q.segment<3>(6 * i) = A_W * model->reference_position(i);
+      // Director: the deformed normal (unit, so no thickness strain).
+      q.segment<3>(6 * i + 3) = (R_WP * (A_P.col(0).cross(A_P.col(1))).normalized()).eval();
+    }
+    const Eigen::Matrix3d E_W = 0.5 * (A_W.transpose() * A_W - Eigen::Matrix3d::Identity());
+    const NodalStrains st = nodal_strains(*model, b, q);
+    for (int i = 0; i < model->num_nodes(); ++i) {
+      const Eigen::Vector3d a1 = b.a1.row(i).transpose(), a2 = b.a2.row(i).transpose(), n = b.n.row(i).transpose();
+      ASSERT_NEAR(a1.norm(), 1, 1e-14);
+      ASSERT_NEAR(a1.dot(n), 0, 1e-14);
+      ASSERT_NEAR(a2.dot(a1), 0, 1e-14);
+      const double exx = a1.dot(E_W * a1), eyy = a2.dot(E_W * a2), exy = a1.dot(E_W * a2);
+      ASSERT_NEAR(st.E(i, 0), exx, 1e-12) << "node " << i << " distortion " << distortion;
+      ASSERT_NEAR(st.E(i, 1), eyy, 1e-12);
+      ASSERT_NEAR(st.E(i, 2), exy, 1e-12);
+      Eigen::Matrix2d E2;
+      E2 << exx, exy, exy, eyy;
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(E2);
+      ASSERT_NEAR(st.e1(i), es.eigenvalues()(1), 1e-12);
+      ASSERT_NEAR(st.e2(i), es.eigenvalues()(0), 1e-12);
+      const Eigen::Vector3d v = es.eigenvectors()(0, 1) * a1 + es.eigenvectors()(1, 1) * a2;
+      const Eigen::Vector3d d = st.e1_dir.row(i).transpose();
+      ASSERT_NEAR(d.norm(), 1, 1e-12);
+      ASSERT_NEAR(std::abs(d.dot(v)), 1, 1e-9);  // same axis (eigenvalues differ by ~0.04)
+      ASSERT_GE(d.dot(a1), 0);
+    }
+    // Deflection and displacement of the same state: in-plane motion only.
+    EXPECT_LT(nodal_deflection(*model, q).cwiseAbs().maxCoeff(), 1e-15);
+    EXPECT_NEAR(nodal_displacement(*model, q).row(7).norm(),
+                ((A_W - Eigen::Matrix3d::Identity()) * model->reference_position(7)).norm(), 1e-15);
+  }
+}
+
+// The basis falls back to the world y axis where the normal is along x.
+TEST(SurfaceStrain, BasisFallsBackToYWhenNormalIsAlongX) {
+  const Eigen::Matrix3d R_WP = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const SurfaceInput s = plate_input(R_WP, 0.0);  // plate normal +z -> +x
+  auto model = build_surface_model(s, SurfaceParameters{}, {}, BoneMotion::fixed(), nullptr);
+  const NodeBasis b = node_strain_basis(*model);
+  EXPECT_NEAR(std::abs(b.n(0, 0)), 1.0, 1e-12);
+  EXPECT_NEAR(b.a1(0, 1), 1.0, 1e-12);
+}
+
+// Exactly the listed effects are built and recorded, per surface.
+TEST(SurfaceModel, BuildsExactlyTheListedEffects) {
+  const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.0);
+  common::EffectLedger ledger("test");
+  auto model = build_surface_model(s, SurfaceParameters{}, {"osmotic_pressure", "periphery_fixed"},
+                                   BoneMotion::fixed(), &ledger);
+  EXPECT_TRUE(ledger.built("osmotic_pressure"));
+  EXPECT_EQ(ledger.count("osmotic_pressure"), model->num_elements());
+  EXPECT_TRUE(ledger.built("periphery_fixed"));
+  EXPECT_EQ(ledger.count("periphery_fixed"), 2 * (6 + 4));  // boundary nodes of a 6 x 4 grid
+  for (const char* e : {"foundation_springs", "foundation_damping", "inertia", "mesh_contact", "imposed_kinematics"})
+    EXPECT_FALSE(ledger.built(e)) << e;
+  EXPECT_FALSE(model->has_inertia());
+  const std::vector<std::string> expected = {"internal_forces", "osmotic_pressure", "periphery_fixed"};
+  EXPECT_EQ(model->built_terms(), expected);
+}
+
+TEST(SurfaceModel, EffectsItCannotBuildAreErrorsNotOmissions) {
+  const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.0);
+  common::EffectLedger ledger("test");
+  for (const char* e : {"mesh_contact", "imposed_kinematics", "no_such_effect"}) {
+    try {
+      build_surface_model(s, SurfaceParameters{}, {"foundation_springs", e}, BoneMotion::fixed(), &ledger);
+      FAIL() << e;
+    } catch (const common::InputError& err) {
+      EXPECT_NE(std::string(err.what()).find(e), std::string::npos) << err.what();
+    }
+  }
+  EXPECT_TRUE(ledger.records().empty());  // nothing was built before the error
+}
+
+}  // namespace
+}  // namespace arthrosim::cartilage
