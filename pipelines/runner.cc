@@ -18,7 +18,9 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "common/effects.h"
 #include "common/hashing.h"
+#include "common/hdf5.h"
 
 namespace arthrosim::pipelines {
 namespace fs = std::filesystem;
@@ -314,6 +316,7 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.inputs.emplace_back("trial", *scene.trial);
     s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
     s.options = scene.comak->canonical();
+    s.effects = scene.comak->list("effects");
     add_path_inputs(*scene.comak, s);
     s.outputs = {out_dir / kKinematics};
     s.arguments = {"--model", scene.model.string(), "--prepared", (out_dir / kPrepared).string(),
@@ -334,6 +337,7 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
         s.arguments.insert(s.arguments.end(), {"--kinematics", (out_dir / kKinematics).string()});
       }
       s.options = sc.options.canonical();
+      s.effects = sc.effects;
       add_path_inputs(sc.options, s);
       s.outputs = {out_dir / surface_file(sc.name)};
       s.arguments.insert(s.arguments.end(), {"--scene", scene_file.string(), "--scenario", sc.name,
@@ -505,6 +509,28 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
           outcome.reason = "exited with status 0 but did not write " + o.string();
           break;
         }
+      }
+    }
+    if (outcome.status != StageStatus::kFailed && step.effects) {
+      // The stage's own account of what it built must match the scene.
+      try {
+        const common::H5File h5(step.outputs.front().string(), common::H5File::Mode::kRead);
+        const common::EffectLedger ledger = common::read_effect_ledger(h5);
+        std::string built;
+        for (const common::EffectTotal& t : ledger.totals()) {
+          built += (built.empty() ? "" : ", ") + t.effect + " " + std::to_string(t.count);
+        }
+        log << step.name << ": effects built: " << (built.empty() ? "none" : built) << "\n";
+        const std::vector<std::string> extra = ledger.unrequested(*step.effects);
+        if (!extra.empty()) {
+          std::string names;
+          for (const std::string& e : extra) names += (names.empty() ? "" : ", ") + e;
+          outcome.status = StageStatus::kFailed;
+          outcome.reason = "built effect(s) the scene did not ask for: " + names;
+        }
+      } catch (const common::InputError& e) {
+        outcome.status = StageStatus::kFailed;
+        outcome.reason = std::string("has no readable effect ledger: ") + e.what();
       }
     }
     if (outcome.status == StageStatus::kFailed) {

@@ -16,6 +16,10 @@
 // Outputs -> stages: prepared_model -> prepare; kinematics -> comak;
 // surface -> every scenario; report -> post (and therefore every scenario).
 //
+// Effects: a comak or surface stage whose output's effect ledger holds a term
+// the scene did not ask for fails (and is not stamped), so "only the effects a
+// scene calls for" is checked on every run, not only in tests.
+//
 // Reuse: a stage's key is SHA-256 over (the contents of its input files, its
 // canonical options text from the scene, the bytes of its executable, its
 // command line with paths replaced by names such as <model> and $OUT/...). After
@@ -27,6 +31,7 @@
 // exclusive lock on DIR/.arthrosim.lock, so two runs never share a folder.
 #include <filesystem>
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -47,6 +52,11 @@ struct StageStep {
   /// ("block.key", canonical value), sorted: the options the stage reads.
   std::vector<std::pair<std::string, std::string>> options;
   std::string needed_for;  ///< why it is in the plan, e.g. "output prepared_model"
+  /// For stages that build physics terms (comak, surface.*): the effects the
+  /// scene asks for. After the stage exits 0 the runner reads the effect
+  /// ledger (/effects, common/effects.h) from outputs[0] and fails the stage
+  /// if the ledger is missing or holds a term not in this list.
+  std::optional<std::vector<std::string>> effects;
 };
 
 /// The stages `scene` needs, in execution order, writing into `out_dir`.

@@ -15,6 +15,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/effects.h"
+#include "common/hdf5.h"
 #include "common/scene.h"
 
 namespace arthrosim::pipelines {
@@ -44,7 +46,19 @@ content() {
     prev="$a"
   done
 }
-if [ -n "$out" ]; then content "$@" > "$out"; fi
+scenario=""; prev=""
+for a in "$@"; do
+  case "$prev" in --scenario) scenario="$a" ;; esac
+  prev="$a"
+done
+# comak and surface outputs start with an HDF5 file holding an effect ledger
+# (written by the test; extra bytes after an HDF5 file's end leave it readable).
+ledger="$ARTHROSIM_FAKE_LEDGERS/$stage.h5"
+if [ -n "$scenario" ] && [ -f "$ARTHROSIM_FAKE_LEDGERS/$stage-$scenario.h5" ]; then
+  ledger="$ARTHROSIM_FAKE_LEDGERS/$stage-$scenario.h5"
+fi
+if [ -n "$out" ] && [ -f "$ledger" ]; then cp "$ledger" "$out"; content "$@" >> "$out";
+elif [ -n "$out" ]; then content "$@" > "$out"; fi
 if [ "$stage" = arthrosim-prepare ]; then echo xdmf > "${out%.h5}.xdmf"; fi
 if [ -n "$outdir" ]; then content "$@" > "$outdir/report.html"; content "$@" > "$outdir/summary.json"; fi
 echo "$stage: done"
@@ -68,10 +82,23 @@ class RunnerTest : public ::testing::Test {
     }
     log_file_ = root_ / "calls.log";
     setenv("ARTHROSIM_FAKE_LOG", log_file_.c_str(), 1);
+    // Fake comak and surface stages report building nothing by default.
+    fs::create_directories(root_ / "ledgers");
+    setenv("ARTHROSIM_FAKE_LEDGERS", (root_ / "ledgers").c_str(), 1);
+    write_ledger("arthrosim-comak", common::EffectLedger("comak"));
+    write_ledger("arthrosim-surface", common::EffectLedger("surface"));
     options_.out_dir = root_ / "out";
     options_.stage_dir = root_ / "bin";
   }
   void TearDown() override { fs::remove_all(root_); }
+
+  // The ledger a fake stage copies into its output ("arthrosim-surface" or
+  // "arthrosim-surface-<scenario>").
+  void write_ledger(const std::string& name, const common::EffectLedger& ledger) {
+    common::H5File f((root_ / "ledgers" / (name + ".h5")).string(),
+                     common::H5File::Mode::kTruncate);
+    common::write_effect_ledger(f, ledger);
+  }
 
   void write_stage(const std::string& name, const std::string& script) {
     const fs::path p = root_ / "bin" / name;
@@ -344,6 +371,39 @@ TEST_F(RunnerTest, StampRecordsAPortableCommandLine) {
             "command line changed: --model <model> --trial <trial> --out $OUT/kinematics.h5 -> "
             "--model <model> --prepared $OUT/prepared.h5 --trial <trial> --scene <scene> --out "
             "$OUT/kinematics.h5");
+}
+
+TEST_F(RunnerTest, StageThatBuildsAnUnrequestedTermFails) {
+  // The gait scenario asks for foundation_springs, imposed_kinematics and
+  // mesh_contact; its (fake) stage reports building osmotic_pressure as well.
+  common::EffectLedger good("surface:osmotic");
+  good.record("foundation_springs", 5817, "femur");
+  good.record("osmotic_pressure", 5568, "femur");
+  write_ledger("arthrosim-surface-osmotic", good);
+  common::EffectLedger bad("surface:gait");
+  bad.record("foundation_springs", 5817, "femur");
+  bad.record("osmotic_pressure", 5568, "femur");
+  write_ledger("arthrosim-surface-gait", bad);
+  std::string printed;
+  const RunReport r = run(scene(three_scenarios("[surface]")), &printed);
+  EXPECT_EQ(r.status, RunStatus::kStageFailed);
+  EXPECT_EQ(status(r, "surface.osmotic"), StageStatus::kRan);
+  EXPECT_NE(printed.find("surface.osmotic: effects built: foundation_springs 5817, "
+                         "osmotic_pressure 5568"),
+            std::string::npos)
+      << printed;
+  EXPECT_EQ(status(r, "surface.gait"), StageStatus::kFailed);
+  EXPECT_EQ(reason(r, "surface.gait"), "built effect(s) the scene did not ask for: osmotic_pressure");
+  EXPECT_EQ(status(r, "surface.gait_osmotic"), StageStatus::kNotReached);
+  EXPECT_FALSE(fs::exists(root_ / "out" / ".stamps" / "surface.gait.txt"));
+  EXPECT_TRUE(fs::exists(root_ / "out" / ".stamps" / "surface.osmotic.txt"));
+}
+
+TEST_F(RunnerTest, StageWithoutEffectLedgerFails) {
+  fs::remove(root_ / "ledgers" / "arthrosim-comak.h5");  // comak writes a plain file
+  const RunReport r = run(scene(three_scenarios("[kinematics]")));
+  EXPECT_EQ(r.status, RunStatus::kStageFailed);
+  EXPECT_EQ(reason(r, "comak").rfind("has no readable effect ledger: ", 0), 0u) << reason(r, "comak");
 }
 
 TEST_F(RunnerTest, FailingStageStopsTheRunAndKeepsEarlierOutputs) {
