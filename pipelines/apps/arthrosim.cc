@@ -30,6 +30,8 @@ Sample runs (from the repository root, after scripts/build.sh):
       show the plan and what would run or be skipped, and why
   build/bin/arthrosim run data/scenes/demo.yaml --out out/demo --force
       rerun every stage of the plan
+  build/bin/arthrosim run data/scenes/osmotic.yaml --out out/osmotic
+      the seed's osmotic scenario: prepare, then the surface stage (no COMAK)
   build/bin/arthrosim schema
       every scene key with its type, unit, default and range, and every effect
 

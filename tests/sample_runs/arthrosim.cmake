@@ -33,3 +33,16 @@ if(EXISTS ${CMAKE_SOURCE_DIR}/pipelines/apps/arthrosim-prepare.cc)
     FIXTURES_REQUIRED arthrosim_demo DEPENDS sample.arthrosim.demo_reuse
     PASS_REGULAR_EXPRESSION "prepare: would skip .*dry run finished: prepare would be reused")
 endif()
+
+# `arthrosim run data/scenes/osmotic.yaml`: prepare, then the osmotic surface
+# scenario; no musculoskeletal stage, no mesh contact (the runner checks the
+# stage's effect ledger and prints it). Registered once arthrosim-surface is
+# in the tree. gait.yaml and gait_osmotic.yaml need arthrosim-comak.
+if(EXISTS ${CMAKE_SOURCE_DIR}/pipelines/apps/arthrosim-surface.cc)
+  add_test(NAME sample.arthrosim.osmotic
+    COMMAND arthrosim run data/scenes/osmotic.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_osmotic --force
+    WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+  set_tests_properties(sample.arthrosim.osmotic PROPERTIES LABELS sample TIMEOUT 600
+    PASS_REGULAR_EXPRESSION "plan: prepare surface.osmotic\n.*surface.osmotic: effects built: foundation_springs [0-9]+, foundation_damping [0-9]+, osmotic_pressure [0-9]+, periphery_fixed [0-9]+, inertia [0-9]+\n.*arthrosim: finished: prepare ran .*surface.osmotic ran"
+    FAIL_REGULAR_EXPRESSION "mesh_contact|comak")
+endif()
