@@ -1,0 +1,592 @@
+#include "musculoskeletal/comak.h"
+
+#include <IpIpoptApplication.hpp>
+#include <IpTNLP.hpp>
+#include <IpoptConfig.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/finite.h"
+#include "common/log.h"
+#include "common/metadata.h"
+
+namespace arthrosim::musculoskeletal {
+
+namespace {
+
+int require_coordinate(const Model& m, const std::string& name) {
+  const int i = m.tree.coordinate_index(name);
+  if (i < 0)
+    throw common::InputError(m.source + ": error: COMAK needs the coordinate '" + name +
+                             "', the model has none");
+  return i;
+}
+
+const Joint* joint_of(const Model& m, int coordinate) {
+  for (const Joint& j : m.tree.joints)
+    if (j.coordinate == coordinate) return &j;
+  return nullptr;
+}
+
+const char* ipopt_status_name(int s) {
+  switch (s) {
+    case Ipopt::Solve_Succeeded: return "Solve_Succeeded";
+    case Ipopt::Solved_To_Acceptable_Level: return "Solved_To_Acceptable_Level";
+    case Ipopt::Infeasible_Problem_Detected: return "Infeasible_Problem_Detected";
+    case Ipopt::Search_Direction_Becomes_Too_Small: return "Search_Direction_Becomes_Too_Small";
+    case Ipopt::Diverging_Iterates: return "Diverging_Iterates";
+    case Ipopt::User_Requested_Stop: return "User_Requested_Stop";
+    case Ipopt::Feasible_Point_Found: return "Feasible_Point_Found";
+    case Ipopt::Maximum_Iterations_Exceeded: return "Maximum_Iterations_Exceeded";
+    case Ipopt::Restoration_Failed: return "Restoration_Failed";
+    case Ipopt::Error_In_Step_Computation: return "Error_In_Step_Computation";
+    case Ipopt::Maximum_CpuTime_Exceeded: return "Maximum_CpuTime_Exceeded";
+    case Ipopt::Not_Enough_Degrees_Of_Freedom: return "Not_Enough_Degrees_Of_Freedom";
+    case Ipopt::Invalid_Problem_Definition: return "Invalid_Problem_Definition";
+    case Ipopt::Invalid_Option: return "Invalid_Option";
+    case Ipopt::Invalid_Number_Detected: return "Invalid_Number_Detected";
+    case Ipopt::Unrecoverable_Exception: return "Unrecoverable_Exception";
+    case Ipopt::NonIpopt_Exception_Thrown: return "NonIpopt_Exception_Thrown";
+    case Ipopt::Insufficient_Memory: return "Insufficient_Memory";
+    default: return "Internal_Error";
+  }
+}
+
+std::string frame_name(const ComakFrameInput& in) {
+  std::ostringstream s;
+  s << "COMAK frame " << in.index << " (t = " << in.time << " s)";
+  return s.str();
+}
+
+}  // namespace
+
+const char* to_string(ComakFrameStatus s) {
+  return s == ComakFrameStatus::kConverged ? "converged" : "failed";
+}
+
+// ---------------------------------------------------------------- problem --
+
+ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
+    : model_(model), options_(options) {
+  if (!(options.activation_min >= 0.0 && options.activation_min < 1.0))
+    throw common::InputError("COMAK: activation_min must be in [0, 1), found " +
+                             std::to_string(options.activation_min));
+  if (!(options.length_scale > 0) || !(options.force_tolerance > 0) || !(options.muscle_stress > 0))
+    throw common::InputError("COMAK: length_scale, force_tolerance and muscle_stress must be > 0");
+  if (options.retries < 0 || options.retries > 2)
+    throw common::InputError("COMAK: retries must be 0, 1 or 2, found " +
+                             std::to_string(options.retries));
+  flexion_ = require_coordinate(model, "knee_flexion");
+  hip_[0] = require_coordinate(model, "hip_flexion");
+  hip_[1] = require_coordinate(model, "hip_adduction");
+  hip_[2] = require_coordinate(model, "hip_rotation");
+  ankle_ = require_coordinate(model, "ankle_flexion");
+  tibia_ = model.tree.body_index("tibia");
+  if (tibia_ < 0) throw common::InputError(model.source + ": error: COMAK needs a body 'tibia'");
+  free_ = model.free_coordinates;
+  if (std::find(free_.begin(), free_.end(), flexion_) == free_.end())
+    throw common::InputError(model.source + ": error: knee_flexion must be a free coordinate");
+  for (int c : free_) {
+    if (c != flexion_) secondary_.push_back(c);
+    const Joint* j = joint_of(model, c);
+    revolute_.push_back(j && j->type == JointType::kRevolute);
+  }
+  const int nf = static_cast<int>(free_.size());
+  row_scale_.resize(nf);
+  for (int k = 0; k < nf; ++k) row_scale_[k] = revolute_[k] ? 1.0 / options.length_scale : 1.0;
+
+  // Volume weights from the path length at q = 0 (stand-in for l_opt).
+  const int nm = static_cast<int>(model.muscles.size());
+  V_.resize(nm);
+  w_ = Eigen::VectorXd::Ones(nm);
+  KinematicsData kin;
+  forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), kin);
+  for (int i = 0; i < nm; ++i) {
+    const PathState p = evaluate_path(model.muscles[i].path, kin.X_WB);
+    V_[i] = model.muscles[i].max_isometric_force * p.length / options.muscle_stress;
+  }
+  for (const auto& [name, w] : options.muscle_weights) {
+    const int i = model.muscle_index(name);
+    if (i < 0) throw common::InputError("COMAK: weight given for unknown muscle '" + name + "'");
+    if (!(w > 0)) throw common::InputError("COMAK: weight of muscle '" + name + "' must be > 0");
+    w_[i] = w;
+  }
+}
+
+Eigen::VectorXd ComakProblem::coordinates(const ComakFrameInput& in,
+                                          const Eigen::VectorXd& q_source) const {
+  Eigen::VectorXd q = q_source.size() == model_.num_coordinates()
+                          ? q_source
+                          : Eigen::VectorXd::Zero(model_.num_coordinates());
+  q[flexion_] = in.knee_flexion;
+  for (int k = 0; k < 3; ++k) q[hip_[k]] = in.hip_angles[k];
+  q[ankle_] = in.ankle_flexion;
+  return q;
+}
+
+Eigen::VectorXd ComakProblem::external_generalized_force(const ModelData& data,
+                                                         const ComakFrameInput& in) const {
+  Eigen::VectorXd Q = Eigen::VectorXd::Zero(model_.num_coordinates());
+  const Pose& X_WT = data.kinematics.X_WB[tibia_];
+  const Eigen::Matrix3d R_WT = X_WT.linear();
+  add_point_force(model_.tree, data.kinematics, tibia_, X_WT.translation(), R_WT * in.F_ext_T, Q);
+  add_body_couple(model_.tree, data.kinematics, tibia_, R_WT * in.M_ext_T, Q);
+  return Q;
+}
+
+Eigen::VectorXd ComakProblem::residual(ModelData& data, const ComakFrameInput& in,
+                                       const Eigen::VectorXd& q, const Eigen::VectorXd& a,
+                                       const Eigen::VectorXd& e) const {
+  evaluate_forces(model_, data, q, Eigen::VectorXd(), a, options_.forces);
+  const Eigen::VectorXd Qe = external_generalized_force(data, in);
+  const int nf = static_cast<int>(free_.size());
+  Eigen::VectorXd r(nf);
+  for (int k = 0; k < nf; ++k) r[k] = data.Q[free_[k]] + Qe[free_[k]] + (e.size() ? e[k] : 0.0);
+  return r;
+}
+
+Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFrameInput& in,
+                                                const Eigen::VectorXd& q,
+                                                const Eigen::VectorXd& a) const {
+  const int nf = static_cast<int>(free_.size());
+  const int nm = static_cast<int>(model_.muscles.size());
+  const int ns = static_cast<int>(secondary_.size());
+  // dQ/ds of the internal forces (central differences in model.cc).
+  evaluate_jacobian(model_, data, q, Eigen::VectorXd(), a, options_.forces, secondary_);
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(nf, nm + ns);
+  // Activation part: exact, Q_muscles = sum a_i F_max,i r_i(q).
+  if (options_.forces.muscles) {
+    for (int i = 0; i < nm; ++i) {
+      const Eigen::VectorXd r = moment_arms(model_, data, data.muscle_paths[i]);
+      for (int k = 0; k < nf; ++k) J(k, i) = model_.muscles[i].max_isometric_force * r[free_[k]];
+    }
+  }
+  // dQ_ext/ds by central differences of the kinematics (same step).
+  const double h = options_.forces.jacobian_step;
+  ModelData work;
+  for (int c = 0; c < ns; ++c) {
+    Eigen::VectorXd qp = q, qm = q;
+    qp[secondary_[c]] += h;
+    qm[secondary_[c]] -= h;
+    forward_kinematics(model_.tree, qp, work.kinematics);
+    const Eigen::VectorXd Qp = external_generalized_force(work, in);
+    forward_kinematics(model_.tree, qm, work.kinematics);
+    const Eigen::VectorXd Qm = external_generalized_force(work, in);
+    for (int k = 0; k < nf; ++k)
+      J(k, nm + c) = data.dQ_dq(free_[k], secondary_[c]) + (Qp[free_[k]] - Qm[free_[k]]) / (2 * h);
+  }
+  return J;
+}
+
+double ComakProblem::objective(const Eigen::VectorXd& a, const Eigen::VectorXd& e) const {
+  double f = 0.0;
+  for (int i = 0; i < a.size(); ++i) f += w_[i] * V_[i] * a[i] * a[i];
+  if (e.size()) {
+    const double Vbar = (w_.array() * V_.array()).mean();
+    const double r = options_.reserve_reference;
+    for (int k = 0; k < e.size(); ++k) f += options_.reserve_weight * Vbar * (e[k] / r) * (e[k] / r);
+  }
+  return f;
+}
+
+// -------------------------------------------------------------- Ipopt NLP --
+
+namespace {
+
+// x = [a (nm), s (ns), e (ns reserves, only with reserve_actuators)].
+// g = S_k (Q + Q_ext + e)_k over the free coordinates.
+class FrameNlp : public Ipopt::TNLP {
+ public:
+  FrameNlp(const ComakProblem& p, ModelData& data, const ComakFrameInput& in,
+           const Eigen::VectorXd& x0)
+      : p_(p), data_(data), in_(in), x0_(x0) {
+    nm_ = static_cast<int>(p.model().muscles.size());
+    ns_ = static_cast<int>(p.secondary_coordinates().size());
+    nf_ = static_cast<int>(p.free_coordinates().size());
+    ne_ = p.options().reserve_actuators ? ns_ : 0;
+    q_base_ = p.coordinates(in, Eigen::VectorXd());
+    x_best_ = x0;
+  }
+
+  int n() const { return nm_ + ns_ + ne_; }
+
+  bool get_nlp_info(Ipopt::Index& n, Ipopt::Index& m, Ipopt::Index& nnz_jac,
+                    Ipopt::Index& nnz_h, IndexStyleEnum& style) override {
+    n = this->n();
+    m = nf_;
+    nnz_jac = nf_ * (nm_ + ns_) + ne_;
+    nnz_h = 0;
+    style = C_STYLE;
+    return true;
+  }
+
+  bool get_bounds_info(Ipopt::Index n, Ipopt::Number* xl, Ipopt::Number* xu, Ipopt::Index m,
+                       Ipopt::Number* gl, Ipopt::Number* gu) override {
+    for (int i = 0; i < nm_; ++i) xl[i] = p_.options().activation_min, xu[i] = 1.0;
+    for (int c = 0; c < ns_; ++c) {
+      const Joint* j = joint_of(p_.model(), p_.secondary_coordinates()[c]);
+      xl[nm_ + c] = std::max(j->lower, -1e19);
+      xu[nm_ + c] = std::min(j->upper, 1e19);
+    }
+    for (int k = 0; k < ne_; ++k) xl[nm_ + ns_ + k] = -1e19, xu[nm_ + ns_ + k] = 1e19;
+    for (int k = 0; k < m; ++k) gl[k] = gu[k] = 0.0;
+    (void)n;
+    return true;
+  }
+
+  bool get_starting_point(Ipopt::Index n, bool init_x, Ipopt::Number* x, bool init_z,
+                          Ipopt::Number*, Ipopt::Number*, Ipopt::Index, bool init_lambda,
+                          Ipopt::Number*) override {
+    if (!init_x || init_z || init_lambda) return false;
+    for (int i = 0; i < n; ++i) x[i] = x0_[i];
+    return true;
+  }
+
+  bool get_scaling_parameters(Ipopt::Number& obj_scaling, bool& use_x, Ipopt::Index n,
+                              Ipopt::Number* xs, bool& use_g, Ipopt::Index m,
+                              Ipopt::Number* gs) override {
+    obj_scaling = 1.0 / (p_.muscle_weights().array() * p_.volume_weights().array()).sum();
+    use_x = true;
+    for (int i = 0; i < n; ++i) xs[i] = 1.0;
+    const double L = p_.options().length_scale;
+    for (int c = 0; c < ns_; ++c) {
+      const int k = secondary_row(c);
+      xs[nm_ + c] = p_.revolute(k) ? 1.0 : 1.0 / L;
+    }
+    for (int k = 0; k < ne_; ++k) xs[nm_ + ns_ + k] = 1.0 / p_.options().reserve_reference;
+    // Constraints are force-equivalents [N]; 1 scaled unit = kForceUnit N.
+    use_g = true;
+    for (int k = 0; k < m; ++k) gs[k] = 1.0 / kForceUnit;
+    return true;
+  }
+
+  bool eval_f(Ipopt::Index, const Ipopt::Number* x, bool, Ipopt::Number& f) override {
+    Eigen::Map<const Eigen::VectorXd> X(x, n());
+    f = p_.objective(X.head(nm_), X.tail(ne_));
+    return std::isfinite(f);
+  }
+
+  bool eval_grad_f(Ipopt::Index, const Ipopt::Number* x, bool, Ipopt::Number* g) override {
+    for (int i = 0; i < nm_; ++i)
+      g[i] = 2.0 * p_.muscle_weights()[i] * p_.volume_weights()[i] * x[i];
+    for (int c = 0; c < ns_; ++c) g[nm_ + c] = 0.0;
+    if (ne_) {
+      const double Vbar = (p_.muscle_weights().array() * p_.volume_weights().array()).mean();
+      const double r = p_.options().reserve_reference;
+      for (int k = 0; k < ne_; ++k)
+        g[nm_ + ns_ + k] = 2.0 * p_.options().reserve_weight * Vbar * x[nm_ + ns_ + k] / (r * r);
+    }
+    return true;
+  }
+
+  bool eval_g(Ipopt::Index, const Ipopt::Number* x, bool, Ipopt::Index, Ipopt::Number* g) override {
+    try {
+      const Eigen::VectorXd r = residual_at(x);
+      for (int k = 0; k < nf_; ++k) g[k] = p_.row_scale()[k] * r[k];
+      return r.allFinite();
+    } catch (...) {
+      error_ = std::current_exception();
+      return false;
+    }
+  }
+
+  bool eval_jac_g(Ipopt::Index, const Ipopt::Number* x, bool, Ipopt::Index, Ipopt::Index,
+                  Ipopt::Index* rows, Ipopt::Index* cols, Ipopt::Number* v) override {
+    if (!v) {
+      int e = 0;
+      for (int k = 0; k < nf_; ++k)
+        for (int j = 0; j < nm_ + ns_; ++j) rows[e] = k, cols[e] = j, ++e;
+      for (int c = 0; c < ne_; ++c) rows[e] = secondary_row(c), cols[e] = nm_ + ns_ + c, ++e;
+      return true;
+    }
+    try {
+      Eigen::Map<const Eigen::VectorXd> X(x, n());
+      const Eigen::MatrixXd J = p_.residual_jacobian(data_, in_, q_of(x), X.head(nm_));
+      if (!J.allFinite()) return false;
+      int e = 0;
+      for (int k = 0; k < nf_; ++k)
+        for (int j = 0; j < nm_ + ns_; ++j) v[e++] = p_.row_scale()[k] * J(k, j);
+      for (int c = 0; c < ne_; ++c) v[e++] = p_.row_scale()[secondary_row(c)];
+      return true;
+    } catch (...) {
+      error_ = std::current_exception();
+      return false;
+    }
+  }
+
+  bool intermediate_callback(Ipopt::AlgorithmMode, Ipopt::Index iter, Ipopt::Number,
+                             Ipopt::Number, Ipopt::Number, Ipopt::Number, Ipopt::Number,
+                             Ipopt::Number, Ipopt::Number, Ipopt::Number, Ipopt::Index,
+                             const Ipopt::IpoptData*, Ipopt::IpoptCalculatedQuantities*) override {
+    iterations_ = iter;
+    return !error_;  // a non-finite evaluation stops the solve at once
+  }
+
+  void finalize_solution(Ipopt::SolverReturn, Ipopt::Index n, const Ipopt::Number* x,
+                         const Ipopt::Number*, const Ipopt::Number*, Ipopt::Index,
+                         const Ipopt::Number*, const Ipopt::Number*, Ipopt::Number,
+                         const Ipopt::IpoptData*, Ipopt::IpoptCalculatedQuantities*) override {
+    x_best_ = Eigen::Map<const Eigen::VectorXd>(x, n);
+  }
+
+  Eigen::VectorXd q_of(const Ipopt::Number* x) const {
+    Eigen::VectorXd q = q_base_;
+    for (int c = 0; c < ns_; ++c) q[p_.secondary_coordinates()[c]] = x[nm_ + c];
+    return q;
+  }
+
+  Eigen::VectorXd residual_at(const Ipopt::Number* x) {
+    Eigen::Map<const Eigen::VectorXd> X(x, n());
+    Eigen::VectorXd e = Eigen::VectorXd::Zero(ne_ ? nf_ : 0);
+    for (int c = 0; c < ne_; ++c) e[secondary_row(c)] = X[nm_ + ns_ + c];
+    return p_.residual(data_, in_, q_of(x), X.head(nm_), e);
+  }
+
+  int secondary_row(int c) const {
+    const auto& f = p_.free_coordinates();
+    return static_cast<int>(std::find(f.begin(), f.end(), p_.secondary_coordinates()[c]) - f.begin());
+  }
+
+  static constexpr double kForceUnit = 100.0;  ///< [N] per scaled constraint unit
+
+  const Eigen::VectorXd& solution() const { return x_best_; }
+  int iterations() const { return iterations_; }
+  std::exception_ptr error() const { return error_; }
+  int nm() const { return nm_; }
+  int ns() const { return ns_; }
+  int ne() const { return ne_; }
+
+ private:
+  const ComakProblem& p_;
+  ModelData& data_;
+  const ComakFrameInput& in_;
+  Eigen::VectorXd x0_, x_best_, q_base_;
+  int nm_ = 0, ns_ = 0, nf_ = 0, ne_ = 0;
+  int iterations_ = 0;
+  std::exception_ptr error_;
+};
+
+struct Attempt {
+  int status = 0;
+  int iterations = 0;
+  Eigen::VectorXd x;
+};
+
+Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput& in,
+                  const Eigen::VectorXd& x0, bool robust) {
+  Ipopt::SmartPtr<FrameNlp> nlp = new FrameNlp(p, data, in, x0);
+  Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
+  const ComakOptions& o = p.options();
+  auto& opt = *app->Options();
+  opt.SetIntegerValue("print_level", o.print_level);
+  opt.SetStringValue("sb", "yes");
+  opt.SetStringValue("hessian_approximation", "limited-memory");
+  opt.SetStringValue("nlp_scaling_method", "user-scaling");
+  opt.SetNumericValue("tol", o.ipopt_tolerance);
+  opt.SetNumericValue("acceptable_tol", o.ipopt_acceptable_tolerance);
+  opt.SetNumericValue("constr_viol_tol", o.force_tolerance);
+  opt.SetNumericValue("acceptable_constr_viol_tol", o.force_tolerance);
+  opt.SetIntegerValue("max_iter", robust ? 2 * o.max_iterations : o.max_iterations);
+  // A warm start is close to the solution: a small initial barrier keeps it
+  // there instead of pushing activations to the middle of their bounds.
+  opt.SetNumericValue("mu_init", 1e-3);
+  opt.SetIntegerValue("acceptable_iter", o.acceptable_iterations);
+  if (robust) opt.SetStringValue("mu_strategy", "adaptive");
+  if (app->Initialize() != Ipopt::Solve_Succeeded)
+    throw std::logic_error("COMAK: Ipopt failed to initialise");
+  Attempt a;
+  a.status = app->OptimizeTNLP(nlp);
+  if (nlp->error()) {
+    try {
+      std::rethrow_exception(nlp->error());
+    } catch (const std::exception& e) {
+      throw common::NumericalError(frame_name(in) + ": " + e.what());
+    }
+  }
+  a.iterations = nlp->iterations();
+  a.x = nlp->solution();
+  if (!a.x.allFinite())
+    throw common::NumericalError(frame_name(in) + ": Ipopt returned a non-finite point");
+  return a;
+}
+
+}  // namespace
+
+ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
+                                   const ComakFrameInput& in, const Eigen::VectorXd& q_start,
+                                   const Eigen::VectorXd& a_start) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Model& model = p.model();
+  const ComakOptions& o = p.options();
+  const int nm = static_cast<int>(model.muscles.size());
+  const int ns = static_cast<int>(p.secondary_coordinates().size());
+  const int nf = static_cast<int>(p.free_coordinates().size());
+  const int ne = o.reserve_actuators ? ns : 0;
+  {
+    Eigen::VectorXd in_values(12);
+    in_values << in.time, in.knee_flexion, in.hip_angles, in.ankle_flexion, in.F_ext_T, in.M_ext_T;
+    common::check_finite(in_values, frame_name(in) + ": input (time, angles, knee loads)");
+  }
+  if (a_start.size() != nm)
+    throw common::InputError("COMAK: expected " + std::to_string(nm) + " start activations");
+
+  auto make_x0 = [&](const Eigen::VectorXd& q, const Eigen::VectorXd& a) {
+    Eigen::VectorXd x = Eigen::VectorXd::Zero(nm + ns + ne);
+    for (int i = 0; i < nm; ++i) x[i] = std::clamp(a[i], o.activation_min, 1.0);
+    for (int c = 0; c < ns; ++c) {
+      const int k = p.secondary_coordinates()[c];
+      const Joint* j = joint_of(model, k);
+      x[nm + c] = std::clamp(q[k], j->lower, j->upper);
+    }
+    return x;
+  };
+
+  ComakFrameResult res;
+  auto evaluate = [&](const Attempt& at) {
+    Eigen::VectorXd q = p.coordinates(in, q_start);
+    for (int c = 0; c < ns; ++c) q[p.secondary_coordinates()[c]] = at.x[nm + c];
+    const Eigen::VectorXd a = at.x.head(nm);
+    Eigen::VectorXd e = Eigen::VectorXd::Zero(nf);
+    for (int c = 0; c < ne; ++c) {
+      const auto& f = p.free_coordinates();
+      e[std::find(f.begin(), f.end(), p.secondary_coordinates()[c]) - f.begin()] = at.x[nm + ns + c];
+    }
+    const Eigen::VectorXd r = p.residual(data, in, q, a, e);
+    common::check_finite(r, frame_name(in) + ": equilibrium residual");
+    res.q = q;
+    res.activations = a;
+    res.reserves = e;
+    res.objective = p.objective(a, ne ? e : Eigen::VectorXd());
+    res.max_force_residual = res.max_moment_residual = 0.0;
+    for (int k = 0; k < nf; ++k) {
+      double& m = p.revolute(k) ? res.max_moment_residual : res.max_force_residual;
+      m = std::max(m, std::abs(r[k]));
+    }
+    res.ipopt_status = at.status;
+    res.ipopt_status_name = ipopt_status_name(at.status);
+    const bool ipopt_ok = at.status == Ipopt::Solve_Succeeded ||
+                          at.status == Ipopt::Solved_To_Acceptable_Level;
+    const bool equilibrium = res.max_force_residual <= o.force_tolerance &&
+                             res.max_moment_residual <= o.force_tolerance * o.length_scale;
+    res.status = ipopt_ok && equilibrium ? ComakFrameStatus::kConverged : ComakFrameStatus::kFailed;
+  };
+
+  // Attempt 1: warm start.
+  const Eigen::VectorXd q0 = p.coordinates(in, q_start);
+  Attempt at = run_ipopt(p, data, in, make_x0(q0, a_start), false);
+  res.iterations += at.iterations;
+  res.attempts = 1;
+  evaluate(at);
+  // Attempt 2: from the passive settle at this flexion, activations at a_min.
+  if (res.status != ComakFrameStatus::kConverged && o.retries >= 1) {
+    SettleOptions so = o.settle;
+    so.fixed = {p.flexion_coordinate()};
+    so.forces = o.forces;
+    const SettleResult sr = settle(model, data, q0, so);
+    at = run_ipopt(p, data, in,
+                   make_x0(sr.q, Eigen::VectorXd::Constant(nm, o.activation_min)), false);
+    res.iterations += at.iterations;
+    res.attempts = 2;
+    evaluate(at);
+  }
+  // Attempt 3: warm start, adaptive barrier, doubled iteration limit.
+  if (res.status != ComakFrameStatus::kConverged && o.retries >= 2) {
+    at = run_ipopt(p, data, in, make_x0(q0, a_start), true);
+    res.iterations += at.iterations;
+    res.attempts = 3;
+    evaluate(at);
+  }
+  res.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::ostringstream s;
+  s << frame_name(in) << ": " << to_string(res.status) << " (Ipopt " << res.ipopt_status_name
+    << ", " << res.iterations << " iterations, " << res.attempts << " attempt"
+    << (res.attempts > 1 ? "s" : "") << "), objective " << res.objective << " m^3, max residual "
+    << res.max_force_residual << " N, " << res.max_moment_residual << " N m, "
+    << res.wall_time << " s";
+  res.message = s.str();
+  return res;
+}
+
+std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
+                                                int stride) {
+  const int n = loads.num_samples();
+  if (n == 0) throw common::InputError("COMAK: the trial has no samples");
+  if (last < 0) last = n - 1;
+  if (first < 0 || first >= n || last >= n || last < first || stride < 1)
+    throw common::InputError("COMAK: frame selection first " + std::to_string(first) + ", last " +
+                             std::to_string(last) + ", stride " + std::to_string(stride) +
+                             " outside the trial's frames 0.." + std::to_string(n - 1));
+  std::vector<ComakFrameInput> out;
+  for (int i = first; i <= last; i += stride) {
+    ComakFrameInput f;
+    f.index = i;
+    f.time = loads.time[i];
+    f.knee_flexion = loads.knee_flexion[i];
+    f.hip_angles = loads.hip_angles.row(i).transpose();
+    f.ankle_flexion = loads.ankle_flexion[i];
+    f.F_ext_T = loads.F_ext_T.row(i).transpose();
+    f.M_ext_T = loads.M_ext_T.row(i).transpose();
+    Eigen::VectorXd v(12);
+    v << f.time, f.knee_flexion, f.hip_angles, f.ankle_flexion, f.F_ext_T, f.M_ext_T;
+    common::check_finite(v, frame_name(f) + ": trial input (time, angles, knee loads)");
+    out.push_back(f);
+  }
+  return out;
+}
+
+ComakRunSummary run_comak(
+    const ComakProblem& p, const std::vector<ComakFrameInput>& frames,
+    const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
+        on_frame) {
+  common::register_dependency_version("ipopt", IPOPT_VERSION);
+  ComakRunSummary sum;
+  if (frames.empty()) return sum;
+  const Model& model = p.model();
+  const ComakOptions& o = p.options();
+  ModelData data = make_data(model);
+  const int nm = static_cast<int>(model.muscles.size());
+  // The first frame starts from the passive settle at its flexion.
+  SettleOptions so = o.settle;
+  so.fixed = {p.flexion_coordinate()};
+  so.forces = o.forces;
+  Eigen::VectorXd q = p.coordinates(frames.front(), Eigen::VectorXd());
+  // The patella follows the trochlea at roughly 0.7 x knee flexion (start
+  // guess of the settle; the settle moves it).
+  q[model.tree.coordinate_index("pf_flexion") >= 0 ? model.tree.coordinate_index("pf_flexion")
+                                                    : p.flexion_coordinate()] =
+      0.7 * frames.front().knee_flexion;
+  q[p.flexion_coordinate()] = frames.front().knee_flexion;
+  sum.first_settle = settle(model, data, q, so);
+  common::log_info("COMAK: first frame from the passive settle: " + sum.first_settle.message);
+  q = sum.first_settle.q;
+  Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, o.activation_min);
+  const auto t0 = std::chrono::steady_clock::now();
+  for (const ComakFrameInput& f : frames) {
+    const ComakFrameResult r = solve_comak_frame(p, data, f, q, a);
+    // Evaluate the model at the reported solution for the writer.
+    p.residual(data, f, r.q, r.activations, r.reserves);
+    ++sum.frames;
+    sum.total_iterations += r.iterations;
+    if (r.status == ComakFrameStatus::kConverged) {
+      ++sum.converged;
+      q = r.q;
+      a = r.activations;
+      common::log_debug(r.message);
+    } else {
+      ++sum.failed;
+      sum.failed_frames.push_back(f.index);
+      common::log_warn(r.message + " -- marked failed; the next frame starts from the last "
+                                   "converged one");
+    }
+    on_frame(f, r, data);
+  }
+  sum.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return sum;
+}
+
+}  // namespace arthrosim::musculoskeletal

@@ -1,0 +1,227 @@
+#pragma once
+// COMAK (Concurrent Optimization of Muscle Activations and Kinematics; Smith
+// et al. 2016; seeds/002_3ffcc11eb7a447d9.txt, "Tibiofemoral kinematics during
+// walking were predicted using ... COMAK"), solved per frame as ONE nonlinear
+// program by Ipopt (no linearised outer loop, no silent fallback; see
+// /work/shared/references.md for what the reference implementation does).
+//
+// Per frame, with the knee flexion q_f, the hip and ankle angles prescribed
+// from the trial and the external load (F_ext, M_ext) on the tibia:
+//
+//   min_{a, s, e}  sum_i w_i V_i a_i^2  +  sum_j w_r (e_j / e_ref)^2
+//   s.t.  c_k = S_k [ Q_k(q_f, s, a) + Q_ext,k(q_f, s) + e_k ] = 0,  k = the 12
+//         free knee coordinates (flexion, 5 tibial, 6 patellar);
+//         a_min <= a_i <= 1,  lower_j <= s_j <= upper_j (URDF limits).
+//
+//   a   muscle activations (force a_i F_max,i along the path, as COMAK);
+//   s   the 11 secondary coordinates (all free coordinates except flexion);
+//   e   reserve actuators on the secondary coordinates (only with
+//       options.reserve_actuators; N or N m; e_k = 0 for flexion, whose
+//       equation the muscles balance);
+//   Q   generalized forces of ligaments, muscles and elastic-foundation
+//       contact (model.h);
+//   Q_ext = J_T(o_T)^T R_WT F_ext_T + J_rot,T^T R_WT M_ext_T: the external
+//       load given in the tibia frame T about the tibia origin (the knee
+//       joint centre of the model at q = 0; it coincides with the tibia frame
+//       of knee_loads.h for a right knee) follows the tibia (applied at its
+//       origin, a material point, rotating with it);
+//   V_i muscle-volume weight F_max,i l_ref,i / 350 kPa [m^3] (COMAK's V = F_max
+//       l_opt / sigma with sigma = 350 kPa). The model files carry no optimal
+//       fibre length, so l_ref,i = the muscle's path length at q = 0 stands in
+//       for l_opt (a documented stand-in; it overweights long-tendon muscles
+//       such as the gastrocnemii relative to true fibre volume);
+//   w_i per-muscle weights (default 1).
+//
+// Scaling (docs/comak.md): moment rows are divided by a length L
+// (S_k = 1/L for revolute, 1 for prismatic rows, L = length_scale = 0.03 m),
+// so every constraint is a force-equivalent in N and one tolerance in N
+// covers both (moment tolerance = force tolerance x L). Translations are
+// handed to Ipopt as s/L (Ipopt x_scaling), so 1 unit is 30 mm, comparable to
+// 1 rad of rotation. The objective is divided by sum_i w_i V_i (so a
+// uniform activation of 1 costs 1).
+//
+// Derivatives: dc/da = S F_max,i r_i(q) (exact: the activation part is
+// linear); dc/ds from the model's dQ/dq (central differences,
+// evaluate_jacobian) plus dQ_ext/ds by central differences of the kinematics
+// (checked against finite differences of c in tests/musculoskeletal/
+// comak_test.cc); dc/de = S (exact). Hessian: Ipopt's limited-memory
+// quasi-Newton (L-BFGS) approximation of the Lagrangian's Hessian.
+//
+// Inertia: the tibia belongs to the shank of the inverse dynamics
+// (knee_loads.h), so its weight and d'Alembert force are already in
+// F_ext/M_ext; the patella's (20 g) are neglected. No separate inertial
+// option exists.
+//
+// Never silently: each frame reports Ipopt's status, iterations, objective,
+// equilibrium residuals (N, N m) and wall time. A frame counts as converged
+// only if Ipopt reports success (or "acceptable") AND the residuals are below
+// the tolerances. A failed frame is retried (ComakOptions::retries): attempt 2
+// starts from the passive settle at the frame's flexion with activations at
+// a_min; attempt 3 starts from the warm start with Ipopt's adaptive barrier
+// update and twice the iteration limit. If all fail, the frame is marked
+// failed (its last iterate is reported as such, never replaced). A non-finite
+// value stops the run with a NumericalError naming the frame.
+#include <Eigen/Core>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "musculoskeletal/knee_loads.h"
+#include "musculoskeletal/model.h"
+#include "musculoskeletal/settle.h"
+
+namespace arthrosim::musculoskeletal {
+
+struct ComakOptions {
+  /// Lower bound of every activation [-], 0 <= a_min < 1 (COMAK: 0.01).
+  double activation_min = 0.01;
+  /// Per-muscle weights w_i by muscle name [-], > 0 (absent: 1).
+  std::map<std::string, double> muscle_weights;
+  /// Muscle stress of the volume weight V = F_max l_ref / sigma [Pa].
+  double muscle_stress = 350e3;
+  /// Reserve actuators on the 11 secondary coordinates (off by default).
+  bool reserve_actuators = false;
+  /// Reserve cost w_r (e / e_ref)^2, relative to a fully active muscle of
+  /// average volume weight [-] (COMAK: 1000).
+  double reserve_weight = 1000.0;
+  /// e_ref [N for translations, N m for rotations].
+  double reserve_reference = 1.0;
+  /// Equilibrium tolerance of the force rows [N]; moment rows use
+  /// force_tolerance x length_scale [N m]. Ipopt's constr_viol_tol.
+  double force_tolerance = 0.1;
+  /// L of the scaling [m] (see header).
+  double length_scale = 0.03;
+  /// Ipopt's relative tolerance 'tol' (scaled NLP) [-].
+  double ipopt_tolerance = 1e-4;
+  /// Ipopt's 'acceptable_tol' [-] and 'acceptable_iter' (consecutive
+  /// acceptable iterates that stop the solve). The faceted contact makes the
+  /// Lagrangian's gradient jump by ~1e-2 (scaled) between neighbouring
+  /// iterates, so tol is rarely reached; an acceptable stop is reported as
+  /// such (Ipopt status 1). Measured on the coarse model, frames 5-20 of the
+  /// bundled trial: objectives within 0.1 % of a tol = 1e-8 solve (docs/comak.md).
+  double ipopt_acceptable_tolerance = 1e-2;
+  int acceptable_iterations = 5;
+  /// Ipopt iteration limit per attempt.
+  int max_iterations = 300;
+  /// Ipopt print level (0 = silent, 5 = Ipopt's default).
+  int print_level = 0;
+  /// Retry attempts after a failed first attempt: 0, 1 (from the settle
+  /// pose) or 2 (also: adaptive barrier, doubled iteration limit).
+  int retries = 2;
+  /// Force terms and the finite-difference step of dQ/dq.
+  ForceOptions forces;
+  /// Passive settle of the first frame and of retry 1 (its `fixed` is set
+  /// by the solver to the flexion).
+  SettleOptions settle;
+};
+
+/// Inputs of one frame.
+struct ComakFrameInput {
+  int index = 0;                 ///< frame number in the trial (for messages)
+  double time = 0.0;             ///< [s]
+  double knee_flexion = 0.0;     ///< [rad], prescribed
+  Eigen::Vector3d hip_angles = Eigen::Vector3d::Zero();  ///< flexion, adduction, rotation [rad]
+  double ankle_flexion = 0.0;    ///< [rad]
+  Eigen::Vector3d F_ext_T = Eigen::Vector3d::Zero();  ///< on the tibia, tibia frame [N]
+  Eigen::Vector3d M_ext_T = Eigen::Vector3d::Zero();  ///< about the tibia origin [N m]
+};
+
+enum class ComakFrameStatus { kConverged = 0, kFailed = 1 };
+
+struct ComakFrameResult {
+  ComakFrameStatus status = ComakFrameStatus::kFailed;
+  int ipopt_status = 0;          ///< Ipopt::ApplicationReturnStatus of the last attempt
+  std::string ipopt_status_name;
+  int iterations = 0;            ///< Ipopt iterations of all attempts
+  int attempts = 0;              ///< 1 + retries used
+  double objective = 0.0;        ///< sum w V a^2 + reserve terms (unscaled) [m^3]
+  double max_force_residual = 0.0;   ///< max |c| over prismatic rows [N]
+  double max_moment_residual = 0.0;  ///< max |c| over revolute rows [N m]
+  double wall_time = 0.0;        ///< [s], all attempts
+  Eigen::VectorXd q;             ///< all model coordinates
+  Eigen::VectorXd activations;   ///< one per muscle
+  Eigen::VectorXd reserves;      ///< one per free coordinate (0 when off) [N or N m]
+  std::string message;           ///< one line with the above
+};
+
+/// The NLP of one frame (exposed for tests: residual and Jacobian checks).
+class ComakProblem {
+ public:
+  ComakProblem(const Model& model, const ComakOptions& options);
+
+  /// Free coordinates (12), the secondary ones (11) and the flexion index.
+  const std::vector<int>& free_coordinates() const { return free_; }
+  const std::vector<int>& secondary_coordinates() const { return secondary_; }
+  int flexion_coordinate() const { return flexion_; }
+  int tibia_body() const { return tibia_; }
+  /// Volume weights V_i [m^3] and weights w_i.
+  const Eigen::VectorXd& volume_weights() const { return V_; }
+  const Eigen::VectorXd& muscle_weights() const { return w_; }
+  /// S_k per free coordinate and whether it is revolute.
+  const Eigen::VectorXd& row_scale() const { return row_scale_; }
+  bool revolute(int k) const { return revolute_[k]; }
+
+  /// The full coordinate vector with the frame's prescribed values and the
+  /// secondary coordinates taken from q_secondary_source.
+  Eigen::VectorXd coordinates(const ComakFrameInput& in, const Eigen::VectorXd& q_source) const;
+  /// Q_ext (all coordinates) at the kinematics in data.
+  Eigen::VectorXd external_generalized_force(const ModelData& data, const ComakFrameInput& in) const;
+  /// Unscaled residual Q + Q_ext + e over the 12 free coordinates [N, N m].
+  Eigen::VectorXd residual(ModelData& data, const ComakFrameInput& in, const Eigen::VectorXd& q,
+                           const Eigen::VectorXd& a, const Eigen::VectorXd& e) const;
+  /// d residual / d [a (muscles), s (secondary)]: 12 x (m + 11).
+  Eigen::MatrixXd residual_jacobian(ModelData& data, const ComakFrameInput& in,
+                                    const Eigen::VectorXd& q, const Eigen::VectorXd& a) const;
+  /// sum w V a^2 + reserve terms [m^3].
+  double objective(const Eigen::VectorXd& a, const Eigen::VectorXd& e) const;
+
+  const Model& model() const { return model_; }
+  const ComakOptions& options() const { return options_; }
+
+ private:
+  const Model& model_;
+  ComakOptions options_;
+  std::vector<int> free_, secondary_;
+  std::vector<bool> revolute_;
+  int flexion_ = -1, tibia_ = -1;
+  int hip_[3] = {-1, -1, -1};
+  int ankle_ = -1;
+  Eigen::VectorXd V_, w_, row_scale_;
+};
+
+/// Solves one frame from the start point (q_start: all coordinates, its
+/// secondary entries are used; a_start: activations). settle_q: a passive
+/// settle pose used by retry 1 (may be empty: then the retry settles from
+/// q_start). Throws common::NumericalError naming the frame on NaN/Inf.
+ComakFrameResult solve_comak_frame(const ComakProblem& problem, ModelData& data,
+                                   const ComakFrameInput& input, const Eigen::VectorXd& q_start,
+                                   const Eigen::VectorXd& a_start);
+
+/// Frame inputs of a knee-load series (frames first..last, every stride-th).
+/// Throws InputError for a left leg trial on this right-knee model or an
+/// empty/out-of-range selection, NumericalError naming the frame on NaN.
+std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
+                                                int stride);
+
+struct ComakRunSummary {
+  int frames = 0, converged = 0, failed = 0;
+  std::vector<int> failed_frames;       ///< trial frame indices
+  double wall_time = 0.0;               ///< [s], all frames
+  int total_iterations = 0;
+  SettleResult first_settle;            ///< the passive settle of the first frame
+};
+
+/// Runs frame after frame: the first from the passive settle at its flexion
+/// (muscle tone options.settle.muscle_tone), each next one warm-started from
+/// the previous converged frame. `on_frame` is called after every frame
+/// (with the model data evaluated at the frame's solution) so a writer can
+/// append it at once.
+ComakRunSummary run_comak(
+    const ComakProblem& problem, const std::vector<ComakFrameInput>& frames,
+    const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
+        on_frame);
+
+const char* to_string(ComakFrameStatus status);
+
+}  // namespace arthrosim::musculoskeletal

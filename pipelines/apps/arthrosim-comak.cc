@@ -1,0 +1,146 @@
+// arthrosim-comak: the musculoskeletal stage. Per frame of a walking trial,
+// one Ipopt NLP (muscle activations + 11 secondary knee coordinates, static
+// equilibrium of all 12 knee coordinates under muscles, ligaments,
+// elastic-foundation contact and the external knee loads; musculoskeletal/
+// comak.h, docs/comak.md), written frame by frame into the kinematics file
+// (docs/kinematics_file.md).
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <exception>
+#include <iostream>
+#include <sstream>
+#include <string>
+
+#include "common/effects.h"
+#include "common/error.h"
+#include "common/log.h"
+#include "common/metadata.h"
+#include "common/progress.h"
+#include "musculoskeletal/comak.h"
+#include "musculoskeletal/gait_trial.h"
+#include "musculoskeletal/kinematics_file.h"
+#include "musculoskeletal/knee_loads.h"
+#include "musculoskeletal/model_io.h"
+
+using namespace arthrosim;
+namespace msk = arthrosim::musculoskeletal;
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "arthrosim-comak: COMAK over a walking trial. Per frame one Ipopt NLP: muscle activations and the\n"
+      "11 secondary knee coordinates minimising sum w V a^2 subject to static equilibrium of the 12 knee\n"
+      "coordinates (flexion prescribed from the trial) under muscles, ligaments, elastic-foundation contact\n"
+      "and the external knee loads. Writes the kinematics file (HDF5, docs/kinematics_file.md), an XDMF\n"
+      "sidecar with per-triangle contact pressure, and .sto exports. Method: docs/comak.md."};
+  std::string model_path, trial_path, out, sto_prefix;
+  int first = 0, last = -1, stride = 1;
+  msk::ComakOptions o;
+  double lowpass_hz = 6.0;
+  bool verbose = false, quiet = false, no_pressure = false;
+  app.add_option("--model", model_path, "model URDF (e.g. data/models/knee_parametric/knee.urdf)")
+      ->required();
+  app.add_option("--trial", trial_path, "trial description or its folder")->required();
+  app.add_option("--out", out, "kinematics file to write (.h5)")->required();
+  app.add_option("--first-frame", first, "first trial frame (0-based)")->capture_default_str();
+  app.add_option("--last-frame", last, "last trial frame (-1 = the last)")->capture_default_str();
+  app.add_option("--stride", stride, "use every stride-th frame")->capture_default_str();
+  app.add_option("--tolerance", o.force_tolerance,
+                 "equilibrium tolerance of the force rows [N]; moment rows x length scale 0.03 m")
+      ->capture_default_str();
+  app.add_option("--ipopt-tolerance", o.ipopt_tolerance, "Ipopt 'tol' (scaled NLP)")->capture_default_str();
+  app.add_option("--max-iterations", o.max_iterations, "Ipopt iteration limit per attempt")
+      ->capture_default_str();
+  app.add_option("--activation-min", o.activation_min, "lower bound of the activations, 0..1")
+      ->capture_default_str();
+  app.add_flag("--reserve-actuators", o.reserve_actuators,
+               "reserve actuators on the 11 secondary coordinates (heavy weight, reported)");
+  app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0, 1 or 2")
+      ->capture_default_str();
+  app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
+      ->capture_default_str();
+  app.add_option("--sto-prefix", sto_prefix,
+                 "prefix of the .sto exports (default: --out without .h5)");
+  app.add_flag("--no-pressure", no_pressure, "do not store per-triangle pressure / XDMF");
+  app.add_option("--ipopt-print-level", o.print_level, "Ipopt output, 0..12")->capture_default_str();
+  app.add_flag("-v,--verbose", verbose, "one line per frame");
+  app.add_flag("-q,--quiet", quiet, "warnings and errors only");
+  app.footer(
+      "Sample runs:\n"
+      "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf \\\n"
+      "      --trial data/trials/synthetic_gait --out comak_coarse.h5 --first-frame 0 --last-frame 2\n"
+      "  arthrosim-comak --model data/models/knee_parametric/knee.urdf \\\n"
+      "      --trial data/trials/synthetic_gait --out kinematics.h5 -v      # whole SYNTHETIC cycle\n");
+  CLI11_PARSE(app, argc, argv);
+  common::set_log_program("arthrosim-comak");
+  common::set_log_level(common::log_level_from_flags(verbose, quiet));
+
+  try {
+    const msk::Model model = msk::load_model(model_path);
+    msk::GaitTrialOptions to;
+    to.lowpass.cutoff_hz = lowpass_hz;
+    const msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+    if (trial.side != msk::Side::kRight)
+      throw common::InputError(trial_path + ": error: the bundled knee models are right knees; "
+                               "this trial is of the left leg");
+    const msk::KneeLoads loads = msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
+    const auto frames = msk::comak_frame_inputs(loads, first, last, stride);
+    msk::ComakProblem problem(model, o);
+
+    std::ostringstream opts;
+    opts << "model: " << model_path << "\ntrial: " << trial_path << "\nfirst_frame: " << first
+         << "\nlast_frame: " << last << "\nstride: " << stride
+         << "\nforce_tolerance_n: " << o.force_tolerance << "\nlength_scale_m: " << o.length_scale
+         << "\nipopt_tolerance: " << o.ipopt_tolerance << "\nmax_iterations: " << o.max_iterations
+         << "\nactivation_min: " << o.activation_min
+         << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
+         << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
+         << "\nhessian: limited-memory\n";
+    common::log_info("options:\n" + opts.str() + (trial.synthetic ? "trial is SYNTHETIC\n" : ""));
+    const auto meta = common::collect_run_metadata("arthrosim-comak", argc, argv, "", opts.str());
+
+    common::EffectLedger ledger("comak");
+    ledger.record("ligaments", model.num_bundles());
+    ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
+    const int tibia = model.tree.body_index("tibia"), patella = model.tree.body_index("patella");
+    for (const auto& c : model.contacts) {
+      if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());
+      if (c.casting().body == patella) ledger.record("patellofemoral_contact", c.casting().mesh.F.rows(), c.name());
+    }
+
+    msk::KinematicsFileInfo info;
+    info.model_path = model_path;
+    info.trial_path = trial_path;
+    info.body_mass_kg = trial.body_mass_kg;
+    info.synthetic = trial.synthetic;
+    info.expected_frames = static_cast<std::int64_t>(frames.size());
+    info.pressure_fields = !no_pressure;
+    msk::KinematicsFileWriter writer(out, problem, info, meta);
+    common::Progress progress("comak", static_cast<std::int64_t>(frames.size()));
+    const auto summary = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
+      writer.append(f, r, d);
+      progress.step();
+    });
+    progress.finish();
+    if (sto_prefix.empty()) {
+      sto_prefix = out;
+      if (sto_prefix.size() > 3 && sto_prefix.substr(sto_prefix.size() - 3) == ".h5")
+        sto_prefix.resize(sto_prefix.size() - 3);
+    }
+    writer.finish(summary, ledger, sto_prefix);
+    std::printf("arthrosim-comak: %d frames, %d converged, %d failed, %d Ipopt iterations, %.2f s "
+                "(%.3f s/frame) -> %s\n",
+                summary.frames, summary.converged, summary.failed, summary.total_iterations,
+                summary.wall_time, summary.wall_time / std::max(1, summary.frames), out.c_str());
+    if (summary.failed) {
+      std::string list;
+      for (int i : summary.failed_frames) list += " " + std::to_string(i);
+      common::log_error("failed frames (marked in /solver/status):" + list);
+      return 2;
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "arthrosim-comak: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,329 @@
+// COMAK per-frame NLP (musculoskeletal/comak.h) and the kinematics file
+// (musculoskeletal/kinematics_file.h), on the bundled coarse knee model.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <numbers>
+
+#include "common/effects.h"
+#include "common/error.h"
+#include "common/hdf5.h"
+#include "common/metadata.h"
+#include "musculoskeletal/comak.h"
+#include "musculoskeletal/gait_trial.h"
+#include "musculoskeletal/kinematics_file.h"
+#include "musculoskeletal/knee_loads.h"
+#include "musculoskeletal/model_io.h"
+
+namespace msk = arthrosim::musculoskeletal;
+namespace common = arthrosim::common;
+
+namespace {
+std::string source(const std::string& rel) { return std::string(ARTHROSIM_SOURCE_DIR) + "/" + rel; }
+
+const msk::Model& coarse_model() {
+  static const msk::Model m = msk::load_model(source("data/models/knee_parametric/knee_coarse.urdf"));
+  return m;
+}
+
+const msk::KneeLoads& trial_loads() {
+  static const msk::KneeLoads l = [] {
+    const auto trial = msk::load_gait_trial(source("data/trials/synthetic_gait"));
+    return msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
+  }();
+  return l;
+}
+
+double deg(double d) { return d * std::numbers::pi / 180.0; }
+
+// A loaded, non-trivial pose: passive settle at `flexion` with muscle tone `tone`.
+Eigen::VectorXd settled_pose(const msk::ComakProblem& p, double flexion, double tone) {
+  const auto& m = p.model();
+  auto d = msk::make_data(m);
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_coordinates());
+  q[p.flexion_coordinate()] = flexion;
+  q[m.tree.coordinate_index("pf_flexion")] = 0.7 * flexion;
+  msk::SettleOptions so;
+  so.fixed = {p.flexion_coordinate()};
+  so.muscle_tone = tone;
+  return msk::settle(m, d, q, so).q;  // a start/test pose: convergence not needed
+}
+}  // namespace
+
+// Every derivative handed to Ipopt: dc/d[a, s] from residual_jacobian
+// (exact activation columns, central-difference dQ/ds from the model plus
+// dQ_ext/ds) against central differences of the residual itself with a
+// different step h.
+//  - Without contact every term is C1 and smooth at the pose (Blankevoort
+//    bundles are C1, straight and wrapped paths smooth away from the wrap
+//    switch): the two difference quotients agree to O(h^2) truncation
+//    (~1e-8 relative at h = 1e-5) plus rounding (1e-16 x 1e3 N / 1e-6 ~ 1e-7
+//    N per unit), except where a bundle sits near e = 0 or e = e_t: the
+//    Blankevoort law is C1 but not C2 there, so both quotients carry an O(h)
+//    error ~ k h / (l0^2 e_t) (measured 5e-5 relative): tolerance 2e-4.
+//  - With the faceted elastic-foundation contact the residual is only
+//    piecewise smooth: a ray's depth changes slope when its hit point crosses
+//    an edge of the target mesh. A step of h = 2e-6 crosses few such kinks
+//    (3 mm triangles); tolerance 2 % of the column's largest entry (measured
+//    disagreement at h = 1e-5 was up to 10 % on patellar columns, which is why
+//    the model's step is 1e-6).
+namespace {
+void check_jacobian(bool contact, double h, double rel_tol) {
+  const auto& m = coarse_model();
+  msk::ComakOptions o;
+  o.forces.contact = contact;
+  msk::ComakProblem p(m, o);
+  msk::ComakFrameInput in;
+  in.knee_flexion = deg(20);
+  in.hip_angles = Eigen::Vector3d(deg(20), deg(3), deg(2));
+  in.ankle_flexion = deg(5);
+  in.F_ext_T = Eigen::Vector3d(-60, 500, -30);
+  in.M_ext_T = Eigen::Vector3d(25, 2, -40);
+  msk::ComakProblem p_settle(m, {});
+  const Eigen::VectorXd q = p.coordinates(in, settled_pose(p_settle, in.knee_flexion, 0.1));
+  const int nm = static_cast<int>(m.muscles.size());
+  Eigen::VectorXd a(nm);
+  for (int i = 0; i < nm; ++i) a[i] = 0.05 + 0.02 * i;
+  auto d = msk::make_data(m);
+  const Eigen::MatrixXd J = p.residual_jacobian(d, in, q, a);
+  const auto& sec = p.secondary_coordinates();
+  ASSERT_EQ(J.cols(), nm + static_cast<int>(sec.size()));
+  double worst = 0.0;
+  for (int c = 0; c < J.cols(); ++c) {
+    Eigen::VectorXd qp = q, qm = q, ap = a, am = a;
+    if (c < nm) {
+      ap[c] += h, am[c] -= h;
+    } else {
+      qp[sec[c - nm]] += h, qm[sec[c - nm]] -= h;
+    }
+    const Eigen::VectorXd fd =
+        (p.residual(d, in, qp, ap, {}) - p.residual(d, in, qm, am, {})) / (2 * h);
+    const double scale = std::max(1.0, fd.cwiseAbs().maxCoeff());
+    const double err = (J.col(c) - fd).cwiseAbs().maxCoeff() / scale;
+    worst = std::max(worst, err);
+    EXPECT_LE(err, rel_tol) << "column " << c << "\nJ  " << J.col(c).transpose() << "\nfd "
+                            << fd.transpose();
+  }
+  std::printf("contact %s, h = %g: largest relative Jacobian error %.3g\n", contact ? "on" : "off", h,
+              worst);
+}
+}  // namespace
+
+TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithoutContact) { check_jacobian(false, 1e-5, 2e-4); }
+
+TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithContact) { check_jacobian(true, 2e-6, 2e-2); }
+
+// Q_ext: a pure force through the tibia origin along the flexion axis makes
+// no flexion moment; a couple about the tibia's Z moves only rotations.
+// Closed form at q = 0 (tibia frame = femur frame): the flexion axis is -Z,
+// so Q_flexion = -M_z, the tx/ty/tz rows equal the force components.
+TEST(Comak, ExternalLoadClosedFormAtReference) {
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  msk::ComakFrameInput in;
+  in.F_ext_T = Eigen::Vector3d(10, 20, 30);
+  in.M_ext_T = Eigen::Vector3d(1, 2, 3);
+  auto d = msk::make_data(m);
+  msk::forward_kinematics(m.tree, Eigen::VectorXd::Zero(m.num_coordinates()), d.kinematics);
+  const Eigen::VectorXd Q = p.external_generalized_force(d, in);
+  const auto idx = [&](const char* n) { return m.tree.coordinate_index(n); };
+  EXPECT_NEAR(Q[idx("knee_flexion")], -3.0, 1e-12);
+  EXPECT_NEAR(Q[idx("knee_adduction")], 1.0, 1e-12);
+  EXPECT_NEAR(Q[idx("knee_rotation")], 2.0, 1e-12);
+  EXPECT_NEAR(Q[idx("knee_tx")], 10.0, 1e-12);
+  EXPECT_NEAR(Q[idx("knee_ty")], 20.0, 1e-12);
+  EXPECT_NEAR(Q[idx("knee_tz")], 30.0, 1e-12);
+  EXPECT_EQ(Q[idx("pf_flexion")], 0.0);
+}
+
+// Synthetic ground truth: uniform activation a* = 0.15 and secondary
+// coordinates s* from a settle with that tone (so the patella and every
+// tibial row but the ones balanced by the load are in equilibrium), then the
+// external load that balances the tibia's 6 rows exactly (linear in F, M).
+// The solver, started elsewhere (the passive settle at a_min tone), must
+// return equilibrium within tolerance and an objective <= f(a*).
+TEST(Comak, SyntheticGroundTruth) {
+  const auto& m = coarse_model();
+  msk::ComakOptions o;
+  msk::ComakProblem p(m, o);
+  const int nm = static_cast<int>(m.muscles.size());
+  const double a_star = 0.15;
+  msk::ComakFrameInput in;
+  in.index = 7;
+  in.knee_flexion = deg(25);
+  in.hip_angles = Eigen::Vector3d(deg(15), 0, 0);
+  in.ankle_flexion = deg(0);
+  // Settle with every free coordinate except flexion and the 5 tibial ones
+  // moving: the patella settles; the tibia is held at a pose of our choosing.
+  Eigen::VectorXd q_star = p.coordinates(in, settled_pose(p, in.knee_flexion, a_star));
+  const auto idx = [&](const char* n) { return m.tree.coordinate_index(n); };
+  q_star[idx("knee_tx")] += 0.5e-3;  // move the tibia 0.5 mm anterior, 1 deg rotation
+  q_star[idx("knee_rotation")] += deg(1);
+  {
+    auto d = msk::make_data(m);
+    msk::SettleOptions so;
+    so.muscle_tone = a_star;
+    so.fixed = {idx("knee_flexion"), idx("knee_adduction"), idx("knee_rotation"), idx("knee_tx"),
+                idx("knee_ty"), idx("knee_tz")};
+    const auto r = msk::settle(m, d, q_star, so);
+    ASSERT_EQ(r.status, msk::SettleStatus::kConverged) << r.message;
+    q_star = r.q;
+  }
+  const Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, a_star);
+  auto d = msk::make_data(m);
+  // Tibial rows of the residual without load, and the unit-load columns.
+  const std::vector<int> tib = {idx("knee_flexion"), idx("knee_adduction"), idx("knee_rotation"),
+                                idx("knee_tx"), idx("knee_ty"), idx("knee_tz")};
+  const auto& fc = p.free_coordinates();
+  auto row = [&](int coord) { return static_cast<int>(std::find(fc.begin(), fc.end(), coord) - fc.begin()); };
+  const Eigen::VectorXd r0 = p.residual(d, in, q_star, a, {});
+  Eigen::Matrix<double, 6, 6> A;
+  for (int j = 0; j < 6; ++j) {
+    msk::ComakFrameInput u = in;
+    u.F_ext_T.setZero();
+    u.M_ext_T.setZero();
+    (j < 3 ? u.F_ext_T[j] : u.M_ext_T[j - 3]) = 1.0;
+    const Eigen::VectorXd Qe = p.external_generalized_force(d, u);
+    for (int i = 0; i < 6; ++i) A(i, j) = Qe[tib[i]];
+  }
+  Eigen::Matrix<double, 6, 1> b;
+  for (int i = 0; i < 6; ++i) b[i] = -r0[row(tib[i])];
+  const Eigen::Matrix<double, 6, 1> load = A.fullPivLu().solve(b);
+  in.F_ext_T = load.head<3>();
+  in.M_ext_T = load.tail<3>();
+  const Eigen::VectorXd r_star = p.residual(d, in, q_star, a, {});
+  // The ground truth is an equilibrium (patella rows from the settle).
+  ASSERT_LE(r_star.cwiseAbs().maxCoeff(), 0.1) << r_star.transpose();
+  const double f_star = p.objective(a, {});
+  std::printf("ground truth: load F_T = (%.1f, %.1f, %.1f) N, M_T = (%.2f, %.2f, %.2f) N m, f* = %.4g m^3\n",
+              in.F_ext_T.x(), in.F_ext_T.y(), in.F_ext_T.z(), in.M_ext_T.x(), in.M_ext_T.y(),
+              in.M_ext_T.z(), f_star);
+
+  const Eigen::VectorXd q0 = settled_pose(p, in.knee_flexion, o.activation_min);
+  const auto res = msk::solve_comak_frame(p, d, in, q0, Eigen::VectorXd::Constant(nm, o.activation_min));
+  std::printf("%s\n", res.message.c_str());
+  EXPECT_EQ(res.status, msk::ComakFrameStatus::kConverged) << res.message;
+  EXPECT_LE(res.max_force_residual, o.force_tolerance);
+  EXPECT_LE(res.max_moment_residual, o.force_tolerance * o.length_scale);
+  EXPECT_LE(res.objective, f_star);
+  // The reported residual is the true one at the reported solution.
+  const Eigen::VectorXd r = p.residual(d, in, res.q, res.activations, {});
+  EXPECT_LE(r.cwiseAbs().maxCoeff(), o.force_tolerance);
+}
+
+// A NaN in the trial's knee loads stops before any solve, naming the frame.
+TEST(Comak, NanInTrialStopsNamingTheFrame) {
+  msk::KneeLoads loads = trial_loads();
+  loads.F_ext_T(3, 1) = std::nan("");
+  try {
+    msk::comak_frame_inputs(loads, 0, 5, 1);
+    FAIL() << "expected NumericalError";
+  } catch (const common::NumericalError& e) {
+    EXPECT_NE(std::string(e.what()).find("COMAK frame 3"), std::string::npos) << e.what();
+  }
+  // The same through the per-frame solver.
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  auto frames = msk::comak_frame_inputs(trial_loads(), 3, 3, 1);
+  frames[0].M_ext_T.z() = std::numeric_limits<double>::infinity();
+  auto d = msk::make_data(m);
+  try {
+    msk::solve_comak_frame(p, d, frames[0], Eigen::VectorXd::Zero(m.num_coordinates()),
+                           Eigen::VectorXd::Constant(m.muscles.size(), 0.01));
+    FAIL() << "expected NumericalError";
+  } catch (const common::NumericalError& e) {
+    EXPECT_NE(std::string(e.what()).find("COMAK frame 3"), std::string::npos) << e.what();
+  }
+}
+
+namespace {
+// Runs frames [first, last] of the bundled trial into `path`.
+msk::ComakRunSummary run_to_file(const std::string& path, int first, int last) {
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  const auto frames = msk::comak_frame_inputs(trial_loads(), first, last, 1);
+  msk::KinematicsFileInfo info;
+  info.body_mass_kg = 61.0;
+  info.synthetic = true;
+  info.expected_frames = static_cast<std::int64_t>(frames.size());
+  common::RunMetadata meta;
+  meta.program = "comak_test";
+  msk::KinematicsFileWriter w(path, p, info, meta);
+  const auto s = msk::run_comak(p, frames, [&](const auto& f, const auto& r, const auto& d) {
+    w.append(f, r, d);
+  });
+  common::EffectLedger ledger("comak");
+  ledger.record("ligaments", m.num_bundles());
+  w.finish(s, ledger, path.substr(0, path.size() - 3));
+  return s;
+}
+
+void for_each_dataset(const common::H5File& f, const std::string& g,
+                      const std::function<void(const std::string&)>& fn) {
+  for (const auto& n : f.list(g)) {
+    const std::string full = (g == "/" ? "" : g) + "/" + n;
+    if (f.is_group(full)) for_each_dataset(f, full, fn);
+    else fn(full);
+  }
+}
+}  // namespace
+
+// Three frames of the bundled trial (0-2, heel strike: light loads, fast): the file has the schema's datasets with
+// the right shapes, every frame converged, and a second run writes identical
+// datasets (wall_time excepted: it is a measurement).
+TEST(Comak, KinematicsFileSchemaAndDeterminism) {
+  const std::string dir = std::string(ARTHROSIM_BINARY_DIR) + "/tests/comak_test_out";
+  std::filesystem::create_directories(dir);
+  const auto s1 = run_to_file(dir + "/run1.h5", 0, 2);
+  const auto s2 = run_to_file(dir + "/run2.h5", 0, 2);
+  EXPECT_EQ(s1.converged, 3);
+  EXPECT_EQ(s2.converged, 3);
+  common::H5File f1(dir + "/run1.h5", common::H5File::Mode::kRead);
+  common::H5File f2(dir + "/run2.h5", common::H5File::Mode::kRead);
+  const std::vector<std::pair<std::string, std::vector<std::int64_t>>> expect = {
+      {"/time", {3}}, {"/coordinates/values", {3, 12}}, {"/bodies/femur/X_W", {3, 4, 4}},
+      {"/bodies/tibia/X_W", {3, 4, 4}}, {"/bodies/patella/X_W", {3, 4, 4}},
+      {"/muscles/activation", {3, 13}}, {"/muscles/force", {3, 13}},
+      {"/ligaments/force", {3, 76}}, {"/ligaments/strain", {3, 76}},
+      {"/contact/tibiofemoral/force", {3, 3}}, {"/contact/tibiofemoral/medial_force", {3, 3}},
+      {"/contact/tibiofemoral/lateral_force", {3, 3}}, {"/contact/tibiofemoral/cop", {3, 3}},
+      {"/contact/tibiofemoral/area", {3}}, {"/contact/tibiofemoral/max_pressure", {3}},
+      {"/contact/patellofemoral/force", {3, 3}}, {"/solver/status", {3}},
+      {"/solver/iterations", {3}}, {"/solver/constraint_violation", {3, 2}},
+      {"/solver/objective", {3}}, {"/solver/wall_time", {3}}, {"/effects/built", {1}}};
+  for (const auto& [name, dims] : expect) {
+    ASSERT_TRUE(f1.exists(name)) << name;
+    EXPECT_EQ(f1.dims(name), dims) << name;
+  }
+  EXPECT_EQ(f1.attribute_double("/", "body_mass_kg"), 61.0);
+  EXPECT_EQ(f1.read_vector_int("/solver/status"), Eigen::VectorXi::Zero(3));
+  EXPECT_EQ(f1.read_strings("/coordinates/names")[0], "knee_flexion");
+  int compared = 0;
+  for_each_dataset(f1, "/", [&](const std::string& n) {
+    if (n == "/solver/wall_time") return;
+    ASSERT_TRUE(f2.exists(n)) << n;
+    const auto t = f1.type(n);
+    const auto dims = f1.dims(n);
+    if (t == common::H5Type::kString) {
+      EXPECT_EQ(f1.read_strings(n), f2.read_strings(n)) << n;
+    } else if (dims.size() == 3) {
+      EXPECT_EQ(f1.read_tensor3(n).data, f2.read_tensor3(n).data) << n;
+    } else if (t == common::H5Type::kInt) {
+      if (dims.size() == 1) EXPECT_EQ(f1.read_vector_int(n), f2.read_vector_int(n)) << n;
+      else EXPECT_EQ(f1.read_matrix_int(n), f2.read_matrix_int(n)) << n;
+    } else if (dims.size() == 1) {
+      EXPECT_EQ(f1.read_vector(n), f2.read_vector(n)) << n;  // bit-identical
+    } else {
+      EXPECT_EQ(f1.read_matrix(n), f2.read_matrix(n)) << n;
+    }
+    ++compared;
+  });
+  EXPECT_GT(compared, 30);
+  EXPECT_TRUE(std::filesystem::exists(dir + "/run1.xdmf"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/run1_activations.sto"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/run1_coordinates.sto"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/run1_contact_forces.sto"));
+}

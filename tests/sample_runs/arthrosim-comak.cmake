@@ -1,0 +1,8 @@
+# Sample run of arthrosim-comak (--help): the coarse bundled knee over the
+# first three frames of the SYNTHETIC trial (a few seconds), written into the
+# build tree. Exit code 2 would mean a frame failed.
+add_test(NAME sample.arthrosim-comak.coarse
+  COMMAND arthrosim-comak --model ${CMAKE_SOURCE_DIR}/data/models/knee_parametric/knee_coarse.urdf
+          --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
+          --out ${CMAKE_BINARY_DIR}/sample_runs/comak_coarse.h5 --first-frame 0 --last-frame 2)
+set_tests_properties(sample.arthrosim-comak.coarse PROPERTIES LABELS sample TIMEOUT 120)
