@@ -66,10 +66,13 @@ Eigen::VectorXd settled_pose(const msk::ComakProblem& p, double flexion, double 
 //    error ~ k h / (l0^2 e_t) (measured 5e-5 relative): tolerance 2e-4.
 //  - With the faceted elastic-foundation contact the residual is only
 //    piecewise smooth: a ray's depth changes slope when its hit point crosses
-//    an edge of the target mesh. A step of h = 2e-6 crosses few such kinks
-//    (3 mm triangles); tolerance 2 % of the column's largest entry (measured
-//    disagreement at h = 1e-5 was up to 10 % on patellar columns, which is why
-//    the model's step is 1e-6).
+//    an edge of the target mesh, and a triangle's force switches on/off at
+//    the edge of the target mesh. The model's dQ/dq is therefore a local
+//    derivative on the scale of its step (1e-6). Measured at this pose on the
+//    bundled coarse model: h = 5e-7 and 3e-7 agree with it to 1.1e-3
+//    relative (rounding 1e-16 x 1e3 N / 5e-7 ~ 2e-7 N per unit is
+//    negligible), while h = 2e-6 already differs by 30 % on patellar columns
+//    (kinks within +-2 um). Tolerance 1e-2 at h = 5e-7.
 namespace {
 void check_jacobian(bool contact, double h, double rel_tol) {
   const auto& m = coarse_model();
@@ -114,7 +117,7 @@ void check_jacobian(bool contact, double h, double rel_tol) {
 
 TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithoutContact) { check_jacobian(false, 1e-5, 2e-4); }
 
-TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithContact) { check_jacobian(true, 2e-6, 2e-2); }
+TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithContact) { check_jacobian(true, 5e-7, 1e-2); }
 
 // Q_ext: a pure force through the tibia origin along the flexion axis makes
 // no flexion moment; a couple about the tibia's Z moves only rotations.
