@@ -130,6 +130,27 @@ const std::vector<OptionSpec>& schema_table() {
        "Coherent Point Drift kernel width beta (normalised units)"},
       {"post", "cpd_lambda", T::kNumber, U::kNone, "3", false, 1e-9, 1e9, "", false,
        "Coherent Point Drift regularisation lambda"},
+      {"post", "cpd_nonrigid", T::kFlag, U::kNone, "true", false, 0, 0, "", false,
+       "register the map non-rigidly after the affine fit (false: affine only)"},
+      {"post", "outline_points", T::kInteger, U::kNone, "200", false, 8, 5000, "", false,
+       "both outlines are resampled to this many points for registration"},
+      {"post", "average_radius_mm", T::kNumber, U::kMillimetre, "0", false, 0, 100, "", false,
+       "radius of the spatial averaging of model directions at each map sample; 0 = the "
+       "registered map's resolution (at least 1.5 model node spacings)"},
+      {"post", "view_surface", T::kText, U::kNone, "femur", false, 0, 0, "", false,
+       "surface of the surface-output files that is projected and compared with the map"},
+      {"post", "view_direction_x", T::kNumber, U::kNone, "0", false, -1e6, 1e6, "", false,
+       "x component of the viewing direction (model frame; default (0, 1, 0): distal view of the femur, looking superiorly)"},
+      {"post", "view_direction_y", T::kNumber, U::kNone, "1", false, -1e6, 1e6, "", false,
+       "y component of the viewing direction (model frame; default (0, 1, 0): distal view of the femur, looking superiorly)"},
+      {"post", "view_direction_z", T::kNumber, U::kNone, "0", false, -1e6, 1e6, "", false,
+       "z component of the viewing direction (model frame; default (0, 1, 0): distal view of the femur, looking superiorly)"},
+      {"post", "view_up_x", T::kNumber, U::kNone, "1", false, -1e6, 1e6, "", false,
+       "x component of the direction shown upwards in the view (default (1, 0, 0): anterior up)"},
+      {"post", "view_up_y", T::kNumber, U::kNone, "0", false, -1e6, 1e6, "", false,
+       "y component of the direction shown upwards in the view (default (1, 0, 0): anterior up)"},
+      {"post", "view_up_z", T::kNumber, U::kNone, "0", false, -1e6, 1e6, "", false,
+       "z component of the direction shown upwards in the view (default (1, 0, 0): anterior up)"},
   };
   return kSchema;
 }

@@ -1,0 +1,56 @@
+#pragma once
+// arthrosim-post driver (docs/post.md): reads the deformable-surface outputs of one or
+// more scenarios, optionally the kinematics file and a split-line map, and writes
+// DIR/report.html (self-contained XHTML with inline SVG figures) and DIR/summary.json
+// (the same numbers). Optional inputs that are absent are listed in both files under
+// "missing"; they never stop the run.
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "pipelines/post_compare.h"
+
+namespace arthrosim::common {
+struct Scene;
+}
+
+namespace arthrosim::pipelines {
+
+struct PostOptions {
+  std::string view_surface = "femur";
+  ViewOptions view{Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(1, 0, 0)};
+  RegistrationOptions registration;
+  ComparisonOptions comparison;
+  std::string splitline_map;  ///< empty = none
+  double map_sample_spacing = 0.0;  ///< SVG sampling (map units), 0 = automatic
+};
+
+/// The scene's post block (docs/scenes.md) as options.
+PostOptions post_options_from_scene(const common::Scene& scene);
+
+struct PostInputs {
+  std::vector<std::pair<std::string, std::string>> surfaces;  ///< (scenario, file)
+  std::string kinematics;  ///< empty = none
+  std::string scene_file;  ///< for the report header
+};
+
+struct ScenarioOutcome {
+  std::string scenario, file;
+  std::vector<RegionStatistics> stats;  ///< empty without a map
+  double outline_mean_distance_m = 0.0;
+  double averaging_radius_m = 0.0;
+  int nodes = 0, frames = 0;
+};
+
+struct PostSummary {
+  std::vector<std::string> missing;
+  std::vector<ScenarioOutcome> scenarios;
+  std::vector<std::string> figures;  ///< ids of the figures in report.html
+  std::string report_path, summary_path;
+};
+
+/// Runs the post stage into `out_dir` (created). Throws InputError for unreadable or
+/// malformed inputs that were given.
+PostSummary run_post(const PostInputs& inputs, const PostOptions& options, const std::string& out_dir);
+
+}  // namespace arthrosim::pipelines
