@@ -42,8 +42,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// Every dataset under `group` of shape (n) or (n, 3) with n = frames becomes a series
-// (|F| for 3 columns), labelled by its path below the group.
+// Every dataset under `group` whose name contains "force" and has shape (n) or (n, 3)
+// with n = frames becomes a series (|F| for 3 columns), labelled by its path below the
+// group (docs/kinematics_file.md: force, medial_force, lateral_force; cop, area and
+// max_pressure are not forces and are skipped).
 std::vector<report::Series> contact_series(const common::H5File& f, const std::string& group, const std::string& prefix) {
   std::vector<report::Series> out;
   if (!f.is_group(group) || !f.exists("/time")) return out;
@@ -55,7 +57,7 @@ std::vector<report::Series> contact_series(const common::H5File& f, const std::s
         walk(p);
         continue;
       }
-      if (f.type(p) != common::H5Type::kDouble) continue;
+      if (f.type(p) != common::H5Type::kDouble || name.find("force") == std::string::npos) continue;
       const auto d = f.dims(p);
       report::Series s;
       s.label = prefix + p.substr(group.size() + 1);

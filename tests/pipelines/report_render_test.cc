@@ -73,8 +73,12 @@ void write_kinematics(const fs::path& path) {
   }
   common::H5File f(path.string(), common::H5File::Mode::kTruncate);
   f.write("/time", t);
-  f.write("/contact/tibiofemoral/medial/force", fm);
-  f.write("/contact/tibiofemoral/lateral/force", fl);
+  // Layout of docs/kinematics_file.md; cop and area must not be plotted as forces.
+  f.write("/contact/tibiofemoral/force", Eigen::MatrixXd(fm + fl));
+  f.write("/contact/tibiofemoral/medial_force", fm);
+  f.write("/contact/tibiofemoral/lateral_force", fl);
+  f.write("/contact/tibiofemoral/cop", Eigen::MatrixXd(Eigen::MatrixXd::Ones(T, 3) * 0.01));
+  f.write("/contact/tibiofemoral/area", Eigen::VectorXd(Eigen::VectorXd::Ones(T) * 1e-4));
   f.set_attribute("/", "stage", "comak");
 }
 
@@ -136,6 +140,9 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   const std::string html = slurp(kDir / "full" / "report.html");
   EXPECT_NE(html.find("SYNTHETIC"), std::string::npos);
   EXPECT_NE(html.find("first peak"), std::string::npos);  // key frames from the force peaks
+  EXPECT_NE(html.find("stage 1 medial_force |F|"), std::string::npos);
+  EXPECT_EQ(html.find("stage 1 cop"), std::string::npos);
+  EXPECT_EQ(html.find("stage 1 area"), std::string::npos);
   EXPECT_NE(html.find("total_s"), std::string::npos);     // solver statistics table
   // The gait field is the osmotic one turned by 0.3 rad = 17.2 deg, so its mean error
   // is larger; the grid's outline is a rectangle, not the map's outline, so only the
