@@ -99,6 +99,13 @@ struct CpdOptions {
   CpdEStep estep = CpdEStep::kAuto;
   /// Truncation radius in units of sigma (>= 1). Skipped kernel values < exp(-k^2/2).
   double truncation_sigmas = 5.0;
+  /// Truncated E-step only: while sigma is large compared with the point spacing, both sets are
+  /// binned into grid cells of size sigma / bins_per_sigma and each cell acts as one weighted
+  /// point at its centroid (first moments exact; kernel values off by ~var_cell / sigma^2 =
+  /// 1 / (12 bins_per_sigma^2) per dimension, 0.5 % for the default 4). Used only in iterations
+  /// where it cuts the pair count 4x or more (so the final, small-sigma iterations are exact);
+  /// 0 disables it. Count reported in CpdResult::binned_estep_iterations.
+  double bins_per_sigma = 4.0;
   /// kAuto E-step uses the full sum up to this many pairs (M * N).
   double full_estep_max_pairs = 4.0e6;
 
@@ -165,6 +172,7 @@ struct CpdResult {
   Eigen::MatrixXd transformed;     ///< T(Y), M x D, equal to transform.apply(Y)
   Eigen::VectorXd match_weight;    ///< P1 of the last E-step (M): soft match count per y_m
   bool truncated_estep = false;    ///< which E-step ran
+  int binned_estep_iterations = 0; ///< E-steps that used the binned approximation
   int kernel_rank = 0;             ///< non-rigid: r (low rank) or M (full)
   double kernel_error_bound = 0.0; ///< non-rigid low rank: max |G - L L^T| entry bound
   int prealign_candidate = -1;     ///< kMoments: index of the kept candidate

@@ -1,5 +1,5 @@
-// Benchmark: non-rigid Coherent Point Drift on 2D sets like a split-line map (points filling a
-// lobed outline, registered to a smoothly warped copy), N = M = 1k, 5k, 20k. Reports wall time,
+// Benchmark: non-rigid Coherent Point Drift on 2D sets like a split-line map (points on an
+// outline and interior split lines, registered to a smoothly warped, differently sampled copy), N = M = 1k, 5k, 20k. Reports wall time,
 // EM iterations, kernel rank, final sigma2 and the peak resident memory of the process
 // (getrusage ru_maxrss, which only grows: sizes run in increasing order, so each row's value is
 // the peak up to and including that size). Target: 20k x 20k in < 10 s, memory linear in size.
@@ -18,17 +18,30 @@ using arthrosim::common::CpdMethod;
 using arthrosim::common::CpdOptions;
 using arthrosim::common::CpdResult;
 
-// n points uniformly inside the lobed outline r(a) = 1 + 0.3 cos 2a + 0.15 sin 3a (rejection
-// sampling with a fixed seed), scaled to a map of ~40 x 25 units.
+// n points on a synthetic split-line map of ~40 x 25 units: the lobed outline
+// r(a) = 1 + 0.3 cos 2a + 0.15 sin 3a (30 % of the points) and 12 wavy interior "split lines"
+// (70 %), each point at a uniformly random curve parameter (fixed seed), so two calls with
+// different seeds sample the same curves at different places (no exact correspondences).
 Eigen::MatrixXd map_points(int n, uint64_t seed) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1.5, 1.5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
   Eigen::MatrixXd P(n, 2);
-  int k = 0;
-  while (k < n) {
-    const double x = u(rng), y = u(rng);
-    const double a = std::atan2(y, x);
-    if (std::hypot(x, y) < 1.0 + 0.3 * std::cos(2 * a) + 0.15 * std::sin(3 * a)) P.row(k++) << 16 * x, 10 * y;
+  for (int k = 0; k < n; ++k) {
+    double x, y;
+    if (k % 10 < 3) {
+      const double a = 2 * std::numbers::pi * u(rng);
+      const double r = 1.0 + 0.3 * std::cos(2 * a) + 0.15 * std::sin(3 * a);
+      x = r * std::cos(a);
+      y = r * std::sin(a);
+    } else {
+      const int line = k % 12;
+      const double s = u(rng);
+      const double y0 = -0.6 + 1.2 * line / 11.0;
+      x = -0.9 + 1.8 * s;
+      y = 0.5 * y0 + 0.08 * std::sin(3 * x + line);
+      x *= 1.0 - 0.3 * y0 * y0;
+    }
+    P.row(k) << 16 * x, 10 * y;
   }
   return P;
 }
@@ -55,6 +68,10 @@ void BM_CpdNonrigid2d(benchmark::State& state) {
   const Eigen::MatrixXd X = warp(map_points(n, 2));  // different samples: no exact correspondences
   CpdOptions o;
   o.method = CpdMethod::kNonrigid;
+  // The reference tolerance 1e-5 stops this problem on the slow phase at s^2 ~ 0.12 (measured:
+  // 17 iterations, the warped set still contracted, RMS error 3.7 > the warp's 1.06); 1e-6
+  // lets the EM leave that plateau.
+  o.tolerance = 1e-6;
   CpdResult r;
   for (auto _ : state) {
     r = arthrosim::common::cpd_register(X, Y, o);
@@ -66,6 +83,11 @@ void BM_CpdNonrigid2d(benchmark::State& state) {
   state.counters["truncated"] = r.truncated_estep ? 1 : 0;
   state.counters["converged"] = r.status == arthrosim::common::CpdStatus::kMaxIterations ? 0 : 1;
   state.counters["peak_rss_MB"] = peak_rss_mb();
+  // Registration quality: RMS distance of T(y) to the true warped position warp(y), map units
+  // (the map is ~40 x 25; the warp moves points by ~1.3 RMS).
+  state.counters["rms_error"] = (r.transformed - warp(Y)).norm() / std::sqrt(static_cast<double>(n));
+  state.counters["rms_warp"] = (warp(Y) - Y).norm() / std::sqrt(static_cast<double>(n));
+  state.counters["binned_iters"] = r.binned_estep_iterations;
 }
 
 BENCHMARK(BM_CpdNonrigid2d)->Arg(1000)->Arg(5000)->Arg(20000)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
