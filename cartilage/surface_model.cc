@@ -1,6 +1,8 @@
 #include "cartilage/surface_model.h"
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 
 #include "common/effects.h"
 #include "common/error.h"
@@ -14,15 +16,28 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
   // before anything is built or recorded.
   for (const std::string& e : effects) {
     const bool supported = e == "foundation_springs" || e == "foundation_damping" || e == "osmotic_pressure" ||
-                           e == "periphery_fixed" || e == "inertia";
+                           e == "periphery_fixed" || e == "inertia" || e == "fixed_nodes" || e == "point_loads" ||
+                           e == "pressure" || e == "prescribed_displacement";
     if (!supported) {
       if (!common::find_effect(e)) throw common::InputError("surface " + surface.name + ": unknown effect '" + e + "'");
       throw common::InputError("surface " + surface.name + ": effect '" + e +
                                "' is requested but the surface stage of this build cannot simulate it (it "
                                "simulates foundation_springs, foundation_damping, osmotic_pressure, "
-                               "periphery_fixed, inertia); remove it from the scenario");
+                               "periphery_fixed, inertia, and for generic meshes fixed_nodes, point_loads, pressure, "
+                               "prescribed_displacement); remove it from the scenario");
     }
   }
+  const GenericLoads& g = surface.generic;
+  for (const std::string& e : effects) {
+    const std::vector<int>* set = e == "fixed_nodes"               ? &g.fixed_nodes
+                                  : e == "point_loads"             ? &g.load_nodes
+                                  : e == "prescribed_displacement" ? &g.displaced_nodes
+                                                                   : nullptr;
+    if (set && set->empty())
+      throw common::InputError("surface " + surface.name + ": effect '" + e +
+                               "' is requested but its node set (box) holds no node of the mesh");
+  }
+  if (!(g.ramp_time_s > 0)) throw common::InputError("surface " + surface.name + ": load ramp time must be > 0");
   if (!(parameters.shell_thickness_m > 0))
     throw common::InputError("surface " + surface.name + ": shell thickness must be > 0");
   if (surface.normals.rows() != surface.mesh.num_nodes())
@@ -34,6 +49,8 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
       mesh, surface.normals, Eigen::VectorXd::Constant(mesh.num_nodes(), parameters.shell_thickness_m),
       parameters.material);
   model->attach_ledger(ledger);
+  const double T = g.ramp_time_s;
+  const std::function<double(double)> ramp = [T](double t) { return std::clamp(t / T, 0.0, 1.0); };
   model->add_internal_forces();
   // Order of construction follows the scenario's list; the terms are
   // independent (their sum is the residual).
@@ -49,6 +66,28 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
       model->add_periphery_fixed(bone);
     } else if (e == "inertia") {
       model->add_inertia();
+    } else if (e == "fixed_nodes") {
+      std::array<bool, 6> all;
+      all.fill(true);
+      model->fix_nodes("fixed_nodes", g.fixed_nodes, all);
+    } else if (e == "point_loads") {
+      std::vector<std::pair<int, Eigen::Vector3d>> loads;
+      for (int n : g.load_nodes) loads.emplace_back(n, g.total_force_N / static_cast<double>(g.load_nodes.size()));
+      model->add_point_loads("point_loads", std::move(loads), ramp);
+    } else if (e == "pressure") {
+      const double p = g.pressure_Pa;
+      model->add_pressure("pressure", 0.0, [p, ramp](double t) { return p * ramp(t); });
+    } else if (e == "prescribed_displacement") {
+      NodeConstraint c;
+      c.name = "prescribed_displacement";
+      c.nodes = g.displaced_nodes;
+      c.mask = {true, true, true, false, false, false};
+      const Eigen::VectorXd q0 = model->reference_state();
+      const Eigen::Vector3d u = g.displacement_m;
+      c.value = [q0, u, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+        q6.head<3>() = q0.segment<3>(6 * node) + ramp(t) * u;
+      };
+      model->add_constraint(std::move(c));
     }
   }
   return model;

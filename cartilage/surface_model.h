@@ -27,12 +27,27 @@ class EffectLedger;
 
 namespace arthrosim::cartilage {
 
+/// Node sets and loads of the generic case (any quad mesh, scene keys
+/// fixed_box_mm, load_box_mm, point_load_n, pressure_mpa, displaced_box_mm,
+/// displacement_mm). Loads and prescribed displacements grow linearly from 0
+/// at t = 0 to their value at t = ramp_time_s, then stay constant.
+struct GenericLoads {
+  std::vector<int> fixed_nodes;      ///< clamped: positions and directors (effect fixed_nodes)
+  std::vector<int> load_nodes;       ///< share total_force_N equally (effect point_loads)
+  Eigen::Vector3d total_force_N = Eigen::Vector3d::Zero();
+  double pressure_Pa = 0;            ///< on the mid-surface, along the directors (effect pressure)
+  std::vector<int> displaced_nodes;  ///< positions prescribed (effect prescribed_displacement)
+  Eigen::Vector3d displacement_m = Eigen::Vector3d::Zero();
+  double ramp_time_s = 1;            ///< > 0
+};
+
 /// One surface to simulate.
 struct SurfaceInput {
   std::string name;            ///< e.g. "femur"; part name in the ledger
   common::QuadMesh mesh;       ///< nodes [m], quads counter-clockwise seen from the joint space
   common::Points3 normals;     ///< unit node normals (N x 3), away from the bone
   std::vector<int> periphery;  ///< outline nodes (sorted); may be empty for generic meshes
+  GenericLoads generic;        ///< used only by the generic effects
 };
 
 /// Material and effect parameters (SI). Defaults: seed 002 values (the
@@ -47,8 +62,10 @@ struct SurfaceParameters {
 
 /// Builds the shell model of one surface with its internal forces and the
 /// listed effects (foundation_springs, foundation_damping, osmotic_pressure,
-/// periphery_fixed, inertia). Each term is recorded in `ledger` (part =
-/// surface name) by the model when it is constructed. Any other effect name
+/// periphery_fixed, inertia; for generic meshes also fixed_nodes,
+/// point_loads, pressure, prescribed_displacement with the node sets of
+/// surface.generic, an empty set being an error). Each term is recorded in
+/// `ledger` (part = surface name) by the model when it is constructed. Any other effect name
 /// (imposed_kinematics, mesh_contact: not simulated by this build) throws
 /// InputError naming it before anything is built: an effect is never silently
 /// ignored. `bone` moves the foundation anchors and the fixed periphery.

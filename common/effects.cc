@@ -34,6 +34,13 @@ const std::vector<EffectInfo>& known_effects() {
       {"inertia", EffectStage::kSurface, "mass terms (without it the run is quasi-static)"},
       {"mesh_contact", EffectStage::kSurface,
        "penalty contact between deformable cartilage surfaces"},
+      {"fixed_nodes", EffectStage::kSurface,
+       "generic mesh: the nodes in fixed_box_mm clamped (positions and directors)"},
+      {"point_loads", EffectStage::kSurface,
+       "generic mesh: point_load_n shared by the nodes in load_box_mm"},
+      {"pressure", EffectStage::kSurface, "generic mesh: pressure_mpa on the mid-surface (follower load)"},
+      {"prescribed_displacement", EffectStage::kSurface,
+       "generic mesh: the nodes in displaced_box_mm moved by displacement_mm"},
   };
   return kEffects;
 }

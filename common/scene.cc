@@ -117,6 +117,26 @@ const std::vector<OptionSpec>& schema_table() {
       // --- one scenario --------------------------------------------------------
       {"scenario", "description", T::kText, U::kNone, "", false, 0, 0, "", false,
        "free text for reports"},
+      // Generic case (docs/surface_output.md): any quad mesh with node sets
+      // chosen by boxes, so standard shell problems can be checked.
+      {"scenario", "mesh", T::kPath, U::kNone, "", false, 0, 0, "", false,
+       "quad mesh (OBJ with 'v' and 4-node 'f' lines, coordinates in mm) simulated instead of the "
+       "prepared model's surfaces; shell directors on the side of the quad normals"},
+      {"scenario", "fixed_box_mm", T::kNumberList, U::kMillimetre, "", false, 6, 6, "", false,
+       "[xmin, ymin, zmin, xmax, ymax, zmax]: nodes of `mesh` in this box are clamped (all six "
+       "coordinates; effect fixed_nodes)"},
+      {"scenario", "load_box_mm", T::kNumberList, U::kMillimetre, "", false, 6, 6, "", false,
+       "box of the nodes of `mesh` that share point_load_n equally (effect point_loads)"},
+      {"scenario", "point_load_n", T::kNumberList, U::kNone, "", false, 3, 3, "", false,
+       "[fx, fy, fz] total force [N] on the nodes in load_box_mm, ramped linearly from 0 at t = 0 "
+       "to its value at end_time_s (effect point_loads)"},
+      {"scenario", "pressure_mpa", T::kNumber, U::kMegapascal, "", false, -1e3, 1e3, "", false,
+       "pressure on the mid-surface of `mesh`, positive along the directors, ramped like "
+       "point_load_n (effect pressure)"},
+      {"scenario", "displaced_box_mm", T::kNumberList, U::kMillimetre, "", false, 6, 6, "", false,
+       "box of the nodes of `mesh` whose positions are prescribed (effect prescribed_displacement)"},
+      {"scenario", "displacement_mm", T::kNumberList, U::kMillimetre, "", false, 3, 3, "", false,
+       "[ux, uy, uz] displacement of the nodes in displaced_box_mm, ramped like point_load_n"},
       {"scenario", "effects", T::kEffectList, U::kNone, "", true, 0, 0, "", false,
        "surface effects to simulate in this scenario"},
       // --- post ----------------------------------------------------------------
@@ -248,6 +268,8 @@ std::string_view type_word(OptionType t) {
     case T::kTextList:
     case T::kOutputList:
       return "a list like [a, b]";
+    case T::kNumberList:
+      return "a list of numbers like [1, 2.5]";
     case T::kEffectList:
       return "a list of effects like [a, b]";
     case T::kBlock:
@@ -500,6 +522,29 @@ class Parser {
         v.list = word_list(value, spec);
         v.canonical = "[" + join(v.list) + "]";
         break;
+      case T::kNumberList: {
+        if (!value.IsSequence()) {
+          fail(at(value), "'" + key + "': expected a list of numbers like [1, 2.5], found " + describe(value));
+        }
+        std::vector<std::string> words;
+        for (const YAML::Node& item : value) {
+          if (!item.IsScalar()) {
+            fail(at(item), "'" + key + "': expected a number in the list, found " + describe(item));
+          }
+          const double x = parse_number(item.Scalar(), item, spec);
+          v.numbers_as_written.push_back(x);
+          v.numbers_si.push_back(x * unit_to_si(spec.unit));
+          words.push_back(shortest(x));
+        }
+        const auto n = static_cast<double>(v.numbers_si.size());
+        if (n < spec.min || n > spec.max) {
+          fail(at(value), "'" + key + "': expected " +
+                              (spec.min == spec.max ? shortest(spec.min) : shortest(spec.min) + " to " + shortest(spec.max)) +
+                              " numbers, found " + shortest(n));
+        }
+        v.canonical = "[" + join(words) + "]";
+        break;
+      }
       case T::kOutputList: {
         v.list = word_list(value, spec);
         std::size_t i = 0;
@@ -745,6 +790,9 @@ const std::string& OptionBlock::text(std::string_view key) const {
 const std::filesystem::path& OptionBlock::path(std::string_view key) const {
   return checked(key, T::kPath).path;
 }
+const std::vector<double>& OptionBlock::numbers_si(std::string_view key) const {
+  return checked(key, T::kNumberList).numbers_si;
+}
 const std::vector<std::string>& OptionBlock::list(std::string_view key) const {
   const OptionValue& v = value(key);
   if (v.spec->type != T::kTextList && v.spec->type != T::kEffectList &&
@@ -957,6 +1005,8 @@ std::string schema_markdown() {
     std::string range;
     if (o.type == T::kNumber || o.type == T::kInteger) {
       range = "[" + shortest(o.min) + ", " + shortest(o.max) + "]";
+    } else if (o.type == T::kNumberList) {
+      range = o.min == o.max ? shortest(o.min) + " numbers" : shortest(o.min) + " to " + shortest(o.max) + " numbers";
     } else if (!o.choices.empty()) {
       range = std::string(o.choices);
     }

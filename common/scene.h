@@ -35,6 +35,7 @@ enum class OptionType {
   kText,        ///< one word; `choices` may restrict it
   kPath,        ///< file or folder, relative to the scene file (see docs)
   kTextList,    ///< [a, b, c]
+  kNumberList,  ///< [1, -2.5, 3]: numbers (each converted to SI by the unit), length = min..max
   kEffectList,  ///< [effect, ...] from known_effects(), of the block's stage
   kOutputList,  ///< [output, ...]: prepared_model, kinematics, surface, report
   kBlock,       ///< a nested block of options (prepare:, comak:, ...)
@@ -74,7 +75,8 @@ struct OptionSpec {
   /// key is then either required or simply absent).
   std::string_view default_value;
   bool required;
-  /// Allowed closed range of a number or integer, in the unit as written.
+  /// Allowed closed range of a number or integer, in the unit as written;
+  /// for kNumberList the allowed list length.
   double min;
   double max;
   /// For kText: allowed words separated by '|', empty = any word.
@@ -108,6 +110,8 @@ struct OptionValue {
   std::string text;                 ///< kText; kPath as written
   std::filesystem::path path;       ///< kPath resolved (absolute, normalised)
   std::vector<std::string> list;    ///< kTextList, kEffectList, kOutputList
+  std::vector<double> numbers_as_written;  ///< kNumberList
+  std::vector<double> numbers_si;          ///< kNumberList
   /// Canonical text of the value: numbers in shortest round-trip form in the
   /// unit as written ("3", "0.0001"), lists as "[a, b]", paths as written.
   /// Two scenes that mean the same get the same canonical text.
@@ -133,6 +137,8 @@ class OptionBlock {
   const std::string& text(std::string_view key) const;
   const std::filesystem::path& path(std::string_view key) const;
   const std::vector<std::string>& list(std::string_view key) const;
+  /// kNumberList values in SI units.
+  const std::vector<double>& numbers_si(std::string_view key) const;
   /// True when the key has a value (given in the scene or by default).
   bool has(std::string_view key) const;
   /// True when the key was written in the scene.

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <sstream>
 
@@ -53,6 +54,81 @@ cartilage::SurfaceInput read_prepared_surface(const H5File& f, const std::string
   if (!s.mesh.V.allFinite() || !s.normals.allFinite())
     throw common::InputError(f.path() + ": error: dataset " + g + "nodes or " + g + "normals holds NaN/Inf");
   return s;
+}
+
+/// Quad OBJ reader for the generic case: 'v x y z' (millimetres) and 4-node
+/// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); comments,
+/// vn/vt/vp/g/o/s/usemtl/mtllib/l lines are skipped. Anything else, or a face
+/// that is not a quad, is an InputError with file:line.
+common::QuadMesh read_quad_obj(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
+  std::vector<Eigen::Vector3d> V;
+  std::vector<Eigen::Vector4i> Q;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream ls(line);
+    std::string kw;
+    if (!(ls >> kw)) continue;
+    if (kw == "v") {
+      Eigen::Vector3d p;
+      if (!(ls >> p.x() >> p.y() >> p.z()) || !p.allFinite())
+        throw common::InputError(path, line_no, "expected 'v x y z' with three finite numbers");
+      V.push_back(p * 1e-3);
+    } else if (kw == "f") {
+      std::vector<int> idx;
+      std::string tok;
+      while (ls >> tok) {
+        const std::string head = tok.substr(0, tok.find('/'));
+        std::size_t used = 0;
+        int k = 0;
+        try {
+          k = std::stoi(head, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used != head.size() || head.empty() || k == 0)
+          throw common::InputError(path, line_no, "expected a vertex index, found '" + tok + "'");
+        const int i = k > 0 ? k - 1 : static_cast<int>(V.size()) + k;
+        if (i < 0 || i >= static_cast<int>(V.size()))
+          throw common::InputError(path, line_no,
+                                   "vertex index " + head + " out of range (" + std::to_string(V.size()) +
+                                       " vertices so far)");
+        idx.push_back(i);
+      }
+      if (idx.size() != 4)
+        throw common::InputError(path, line_no,
+                                 "expected a quad (4 vertices), found a face with " + std::to_string(idx.size()));
+      Q.emplace_back(idx[0], idx[1], idx[2], idx[3]);
+    } else if (kw == "vn" || kw == "vt" || kw == "vp" || kw == "g" || kw == "o" || kw == "s" || kw == "usemtl" ||
+               kw == "mtllib" || kw == "l") {
+      continue;
+    } else {
+      throw common::InputError(path, line_no, "unknown OBJ keyword '" + kw + "'");
+    }
+  }
+  if (Q.empty()) throw common::InputError(path + ": error: no quad faces");
+  common::QuadMesh m;
+  m.V.resize(static_cast<Eigen::Index>(V.size()), 3);
+  for (size_t i = 0; i < V.size(); ++i) m.V.row(static_cast<Eigen::Index>(i)) = V[i].transpose();
+  m.Q.resize(static_cast<Eigen::Index>(Q.size()), 4);
+  for (size_t i = 0; i < Q.size(); ++i) m.Q.row(static_cast<Eigen::Index>(i)) = Q[i].transpose();
+  return m;
+}
+
+/// Nodes inside the box [xmin, ymin, zmin, xmax, ymax, zmax] (SI), sorted.
+std::vector<int> nodes_in_box(const common::QuadMesh& m, const std::vector<double>& box) {
+  std::vector<int> out;
+  for (int i = 0; i < m.num_nodes(); ++i) {
+    bool in = true;
+    for (int k = 0; k < 3; ++k) in = in && m.V(i, k) >= box[k] && m.V(i, k) <= box[k + 3];
+    if (in) out.push_back(i);
+  }
+  return out;
 }
 
 struct SurfaceRun {
@@ -114,11 +190,63 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
                                       : cartilage::LinearSolverChoice::kAuto;
 
   // ---- models -------------------------------------------------------------
-  const H5File prepared(options.prepared, H5File::Mode::kRead);
-  const std::vector<std::string> names = prepared.read_strings("/surfaces/names");
   common::EffectLedger ledger("surface:" + sc->name);
   std::vector<SurfaceRun> runs;
-  for (const std::string& name : o.list("surfaces")) {
+  const bool generic = o.has("mesh");
+  for (const char* e : {"fixed_nodes", "point_loads", "pressure", "prescribed_displacement"}) {
+    if (sc->wants(e) && !generic)
+      throw common::InputError(scene.file.string(), sc->line,
+                               "scenario '" + sc->name + "': effect '" + e + "' needs a generic `mesh`");
+  }
+  auto require = [&](const char* key, const char* effect) {
+    if (sc->wants(effect) && !o.has(key))
+      throw common::InputError(scene.file.string(), sc->line,
+                               "scenario '" + sc->name + "': effect '" + effect + "' needs `" + key + "`");
+  };
+  require("fixed_box_mm", "fixed_nodes");
+  require("load_box_mm", "point_loads");
+  require("point_load_n", "point_loads");
+  require("pressure_mpa", "pressure");
+  require("displaced_box_mm", "prescribed_displacement");
+  require("displacement_mm", "prescribed_displacement");
+  if (generic) {
+    SurfaceRun r;
+    r.input.mesh = read_quad_obj(o.path("mesh").string());
+    r.input.name = o.path("mesh").stem().string();
+    r.input.mesh.name = r.input.name;
+    r.input.normals = cartilage::quad_mesh_vertex_normals(r.input.mesh);
+    cartilage::GenericLoads& g = r.input.generic;
+    g.ramp_time_s = end_time > 0 ? end_time : 1.0;
+    if (o.has("fixed_box_mm")) g.fixed_nodes = nodes_in_box(r.input.mesh, o.numbers_si("fixed_box_mm"));
+    if (o.has("load_box_mm")) g.load_nodes = nodes_in_box(r.input.mesh, o.numbers_si("load_box_mm"));
+    if (o.has("point_load_n")) {
+      const auto& f = o.numbers_si("point_load_n");
+      g.total_force_N = Eigen::Vector3d(f[0], f[1], f[2]);
+    }
+    if (o.has("pressure_mpa")) g.pressure_Pa = o.si("pressure_mpa");
+    if (o.has("displaced_box_mm")) g.displaced_nodes = nodes_in_box(r.input.mesh, o.numbers_si("displaced_box_mm"));
+    if (o.has("displacement_mm")) {
+      const auto& u = o.numbers_si("displacement_mm");
+      g.displacement_m = Eigen::Vector3d(u[0], u[1], u[2]);
+    }
+    r.model = cartilage::build_surface_model(r.input, par, sc->effects, cartilage::BoneMotion::fixed(), &ledger);
+    r.basis = cartilage::node_strain_basis(*r.model);
+    r.summary.name = r.input.name;
+    r.summary.nodes = r.model->num_nodes();
+    r.summary.elements = r.model->num_elements();
+    runs.push_back(std::move(r));
+  }
+  if (!generic && options.prepared.empty())
+    throw common::InputError(options.scene + ": error: scenario '" + sc->name +
+                             "' simulates the prepared model's surfaces: give --prepared");
+  std::unique_ptr<H5File> prepared_file;
+  std::vector<std::string> names;
+  if (!generic) {
+    prepared_file = std::make_unique<H5File>(options.prepared, H5File::Mode::kRead);
+    names = prepared_file->read_strings("/surfaces/names");
+  }
+  for (const std::string& name : generic ? std::vector<std::string>{} : o.list("surfaces")) {
+    const H5File& prepared = *prepared_file;
     if (std::find(names.begin(), names.end(), name) == names.end()) {
       std::string have;
       for (const auto& n : names) have += (have.empty() ? "" : ", ") + n;
@@ -148,7 +276,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   }
   out.set_attribute("/", "schema", "arthrosim surface output 1");
   out.set_attribute("/", "scenario", sc->name);
-  out.set_attribute("/", "prepared_model", options.prepared);
+  out.set_attribute("/", "prepared_model", generic ? std::string() : options.prepared);
+  out.set_attribute("/", "mesh", generic ? o.path("mesh").string() : std::string());
   out.set_attribute("/", "mode", steady ? "steady_state" : (quasi_static ? "quasi_static" : "hht"));
   out.set_attribute("/", "status", "running");
   common::write_effect_ledger(out, ledger);

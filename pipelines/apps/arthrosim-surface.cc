@@ -23,7 +23,8 @@ int main(int argc, char** argv) {
       "Material/effect options and their seed defaults: docs/scenes.md; output: docs/surface_output.md."};
   pipelines::SurfaceStageOptions o;
   bool verbose = false, quiet = false;
-  app.add_option("--prepared", o.prepared, "prepared-model HDF5 (arthrosim-prepare)")->required();
+  app.add_option("--prepared", o.prepared,
+                 "prepared-model HDF5 (arthrosim-prepare); not needed by a scenario with a generic `mesh`");
   app.add_option("--kinematics", o.kinematics, "kinematics HDF5 (arthrosim-comak), for imposed_kinematics");
   app.add_option("--scene", o.scene, "scene YAML")->required();
   app.add_option("--scenario", o.scenario, "scenario of the scene (may be left out if it has only one)");
@@ -35,7 +36,9 @@ int main(int argc, char** argv) {
       "  arthrosim-prepare --model data/models/knee_parametric/coarse --out prepared_coarse.h5\n"
       "  arthrosim-surface --prepared prepared_coarse.h5 --scene data/scenes/osmotic.yaml --scenario osmotic \\\n"
       "      --out surface_osmotic.h5      # steady osmotic swelling of the femoral cartilage\n"
-      "  paraview surface_osmotic.xdmf    # deflection, e1, e1_dir per frame\n");
+      "  paraview surface_osmotic.xdmf    # deflection, e1, e1_dir per frame\n"
+      "  arthrosim-surface --scene data/scenes/cantilever_plate.yaml --out cantilever.h5\n"
+      "      # generic quad mesh (scene key mesh): cantilever plate vs beam theory\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-surface");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));

@@ -25,7 +25,9 @@ TEST(EffectVocabulary, IsTheScenesVocabulary) {
                                        "patellofemoral_contact"}));
   EXPECT_EQ(surface, (std::set<std::string>{"foundation_springs", "foundation_damping",
                                             "osmotic_pressure", "periphery_fixed",
-                                            "imposed_kinematics", "inertia", "mesh_contact"}));
+                                            "imposed_kinematics", "inertia", "mesh_contact",
+                                            "fixed_nodes", "point_loads", "pressure",
+                                            "prescribed_displacement"}));
   EXPECT_EQ(find_effect("foundation_spring"), nullptr);
   EXPECT_EQ(effect_names(EffectStage::kMusculoskeletal),
             "ligaments, muscles, tibiofemoral_contact, patellofemoral_contact");

@@ -352,7 +352,7 @@ TEST(SceneSchema, UnitSuffixesMatchUnitsAndDefaultsAreValid) {
     const std::string key(o.key);
     const std::string suffix(unit_suffix(o.unit));
     if (o.unit != Unit::kNone) {
-      EXPECT_EQ(o.type, OptionType::kNumber) << key;
+      EXPECT_TRUE(o.type == OptionType::kNumber || o.type == OptionType::kNumberList) << key;
       ASSERT_GE(key.size(), suffix.size());
       EXPECT_EQ(key.substr(key.size() - suffix.size()), suffix) << key;
     } else if (o.type == OptionType::kNumber) {

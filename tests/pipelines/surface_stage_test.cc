@@ -3,6 +3,8 @@
 // from the stage's own ledger, and clear errors for effects it cannot build.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
@@ -24,11 +26,13 @@ std::string work_dir() {
   return d.string();
 }
 
-/// Prepared coarse bundled knee (made once per process; prepare takes well
-/// under a second on the coarse model).
+/// Prepared coarse bundled knee (made once per process, under a file named
+/// after the test so that CTest's parallel processes never share it; prepare
+/// takes well under a second on the coarse model).
 const std::string& coarse_prepared() {
   static const std::string path = [] {
-    const std::string p = work_dir() + "/prepared_coarse.h5";
+    const std::string p = work_dir() + "/prepared_coarse_" +
+                          ::testing::UnitTest::GetInstance()->current_test_info()->name() + ".h5";
     PrepareOptions o;
     const PreparedModel m =
         prepare_model(find_model_files(std::string(ARTHROSIM_SOURCE_DIR) + "/data/models/knee_parametric/coarse"), o);
@@ -193,6 +197,92 @@ TEST(SurfaceStage, UnknownSurfaceNamesWhatThePreparedModelHas) {
     const std::string m = e.what();
     EXPECT_NE(m.find("femoral"), std::string::npos) << m;
     EXPECT_NE(m.find("tibia_medial"), std::string::npos) << m;
+  }
+}
+
+/// Runs build/bin/arthrosim-surface (the executable, as a user would) and
+/// returns its exit code.
+int run_executable(const std::string& args) {
+  const std::string exe = std::string(ARTHROSIM_BINARY_DIR) + "/bin/arthrosim-surface";
+  EXPECT_TRUE(fs::exists(exe)) << exe << " not built";
+  return std::system((exe + " --quiet " + args + " > /dev/null 2>&1").c_str());
+}
+
+/// OBJ of an L x W plate (mm), nx x 1 quads in z = 0.
+std::string write_plate_obj(const std::string& name, int nx, double L_mm, double W_mm) {
+  const std::string p = work_dir() + "/" + name + ".obj";
+  std::ofstream f(p);
+  for (int j = 0; j < 2; ++j)
+    for (int i = 0; i <= nx; ++i) f << "v " << i * L_mm / nx << " " << j * W_mm << " 0\n";
+  for (int i = 0; i < nx; ++i) f << "f " << i + 1 << " " << i + 2 << " " << nx + i + 3 << " " << nx + i + 2 << "\n";
+  return p;
+}
+
+// Generic case through the executable: the bundled cantilever plate scene
+// (data/scenes/cantilever_plate.yaml), and the same plate refined, against
+// Euler-Bernoulli beam theory w = P L^3 / (3 E I) (nu = 0: the one-element
+// wide strip is a beam; shear adds (E / kG)(t/L)^2 ~ 2e-4 relative,
+// geometric nonlinearity ~ (w/L)^2 = 1e-6).
+TEST(SurfaceStageGeneric, CantileverPlateTipDeflectionMatchesBeamTheory) {
+  const double L = 0.1, W = 0.01, t = 1e-3, E = 400e6, P = 1e-4;
+  const double w_beam = P * L * L * L / (3 * E * W * t * t * t / 12);
+  {
+    const std::string out = work_dir() + "/cantilever_bundled.h5";
+    ASSERT_EQ(run_executable("--scene " + std::string(ARTHROSIM_SOURCE_DIR) +
+                             "/data/scenes/cantilever_plate.yaml --out " + out),
+              0);
+    const common::H5File f(out, common::H5File::Mode::kRead);
+    const Eigen::MatrixXd w = f.read_matrix("/surfaces/cantilever_plate/deflection");
+    const double w_tip = w(1, 16);  // node (16, 0): the tip
+    std::printf("bundled cantilever (16 quads): tip %.6g m, beam %.6g m, error %.3g%%\n", w_tip, w_beam,
+                100 * (w_tip / w_beam - 1));
+    EXPECT_NEAR(w_tip / w_beam, 1.0, 5e-3);
+    const common::EffectLedger ledger = common::read_effect_ledger(f);
+    EXPECT_EQ(ledger.count("fixed_nodes"), 2);
+    EXPECT_EQ(ledger.count("point_loads"), 2);
+    EXPECT_FALSE(ledger.built("foundation_springs"));
+    EXPECT_FALSE(ledger.built("periphery_fixed"));
+  }
+  std::vector<double> errors;
+  for (int nx : {2, 4, 8}) {
+    const std::string name = "cantilever_" + std::to_string(nx);
+    write_plate_obj(name, nx, 100, 10);
+    const std::string scene = write_scene(name, "surface:\n  scenarios:\n    c:\n      mesh: " + name +
+                                                    ".obj\n      poisson_ratio: 0\n      end_time_s: 1\n"
+                                                    "      steady_state: true\n"
+                                                    "      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]\n"
+                                                    "      load_box_mm: [99.999, -1, -1, 100.001, 11, 1]\n"
+                                                    "      point_load_n: [0, 0, 1e-4]\n"
+                                                    "      effects: [fixed_nodes, point_loads]\n");
+    const std::string out = work_dir() + "/" + name + ".h5";
+    ASSERT_EQ(run_executable("--scene " + scene + " --out " + out), 0);
+    const common::H5File f(out, common::H5File::Mode::kRead);
+    const Eigen::MatrixXd w = f.read_matrix("/surfaces/" + name + "/deflection");
+    errors.push_back(std::abs(w(1, nx) / w_beam - 1));
+    std::printf("cantilever %d quads: tip %.6g m, relative error %.3g\n", nx, w(1, nx), errors.back());
+  }
+  for (size_t i = 1; i < errors.size(); ++i) {
+    const double rate = std::log2(errors[i - 1] / errors[i]);
+    std::printf("  observed rate %.2f\n", rate);
+    EXPECT_GT(rate, 1.5);  // second order expected for the bilinear element's bending
+  }
+}
+
+TEST(SurfaceStageGeneric, GenericEffectWithoutMeshIsAnError) {
+  const std::string scene = write_scene("generic_without_mesh", R"(surface:
+  scenarios:
+    g:
+      surfaces: [femur]
+      end_time_s: 1
+      load_box_mm: [0, 0, 0, 1, 1, 1]
+      point_load_n: [0, 0, 1]
+      effects: [point_loads]
+)");
+  try {
+    run_surface_stage(stage_options(scene, "g", "generic_without_mesh.h5"));
+    FAIL();
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("needs a generic `mesh`"), std::string::npos) << e.what();
   }
 }
 

@@ -11,3 +11,8 @@ add_test(NAME sample.arthrosim-surface.osmotic
           --out ${CMAKE_BINARY_DIR}/surface_sample_osmotic.h5)
 set_tests_properties(sample.arthrosim-surface.osmotic PROPERTIES LABELS sample TIMEOUT 300
   FIXTURES_REQUIRED surface_prepared_coarse)
+# Generic case: the bundled cantilever plate scene (well under a second).
+add_test(NAME sample.arthrosim-surface.cantilever
+  COMMAND arthrosim-surface --scene ${CMAKE_SOURCE_DIR}/data/scenes/cantilever_plate.yaml
+          --out ${CMAKE_BINARY_DIR}/surface_sample_cantilever.h5)
+set_tests_properties(sample.arthrosim-surface.cantilever PROPERTIES LABELS sample TIMEOUT 60)
