@@ -330,3 +330,28 @@ TEST(Comak, KinematicsFileSchemaAndDeterminism) {
   EXPECT_TRUE(std::filesystem::exists(dir + "/run1_coordinates.sto"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/run1_contact_forces.sto"));
 }
+
+// Reserve actuators (off by default): with them on, a loaded stance frame
+// still converges, the reserves are reported per free coordinate (zero on
+// the flexion row, which the muscles balance), and their heavy weight keeps
+// them small against the loads they could replace (hundreds of N): the
+// solver uses muscles and passive structures instead.
+TEST(Comak, ReserveActuatorsReported) {
+  const auto& m = coarse_model();
+  msk::ComakOptions o;
+  o.reserve_actuators = true;
+  msk::ComakProblem p(m, o);
+  const auto frames = msk::comak_frame_inputs(trial_loads(), 40, 41, 1);
+  std::vector<msk::ComakFrameResult> res;
+  msk::run_comak(p, frames, [&](const auto&, const auto& r, const auto&) { res.push_back(r); });
+  ASSERT_EQ(res.size(), 2u);
+  for (const auto& r : res) {
+    std::printf("%s; reserves [N, N m]: ", r.message.c_str());
+    for (int k = 0; k < r.reserves.size(); ++k) std::printf("%.3g ", r.reserves[k]);
+    std::printf("\n");
+    EXPECT_EQ(r.status, msk::ComakFrameStatus::kConverged) << r.message;
+    ASSERT_EQ(r.reserves.size(), 12);
+    EXPECT_EQ(r.reserves[0], 0.0);  // flexion row (free coordinate 0)
+    EXPECT_LT(r.reserves.cwiseAbs().maxCoeff(), 1.0);
+  }
+}
