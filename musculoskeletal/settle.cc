@@ -72,9 +72,29 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
     return fmax <= opt.force_tolerance && mmax <= opt.moment_tolerance;
   };
 
+  if (!(opt.initial_pseudo_time > 0.0))
+    throw common::InputError("settle: initial_pseudo_time must be > 0, found " +
+                             std::to_string(opt.initial_pseudo_time));
+  // Scales the step dx so that no coordinate moves by more than its limit.
+  auto step_factor = [&](const Eigen::VectorXd& dx) {
+    double f = 1.0;
+    for (int k = 0; k < m; ++k) {
+      const double dq = std::abs(dx[k] / scale_x[k]);
+      const double lim = rev[k] ? opt.max_step_rad : opt.max_step_m;
+      if (dq > lim) f = std::min(f, lim / dq);
+    }
+    return f;
+  };
+  auto apply = [&](const Eigen::VectorXd& dx, double f) {
+    Eigen::VectorXd q_try = res.q;
+    for (int k = 0; k < m; ++k) q_try[free[k]] += f * dx[k] / scale_x[k];
+    return q_try;
+  };
+
   Eigen::MatrixXd J;
   Eigen::VectorXd r = residual(res.q, true, &J);
   double lambda = opt.initial_damping;
+  double tau = opt.initial_pseudo_time;
   for (res.iterations = 0; res.iterations < opt.max_iterations; ++res.iterations) {
     res.history.push_back(r.norm());
     if (converged(res.q)) {
@@ -82,27 +102,45 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
       break;
     }
     bool accepted = false;
-    for (int attempt = 0; attempt < 12 && !accepted; ++attempt) {
-      const Eigen::MatrixXd JtJ = J.transpose() * J;
-      Eigen::MatrixXd A = JtJ;
-      A.diagonal() += lambda * JtJ.diagonal().cwiseMax(1e-12 * JtJ.diagonal().maxCoeff());
-      Eigen::VectorXd dx = A.ldlt().solve(-J.transpose() * r);
-      // Step limit in physical units.
-      double f = 1.0;
-      for (int k = 0; k < m; ++k) {
-        const double dq = std::abs(dx[k] / scale_x[k]);
-        const double lim = rev[k] ? opt.max_step_rad : opt.max_step_m;
-        if (dq > lim) f = std::min(f, lim / dq);
+    if (opt.method == SettleMethod::kPseudoTransient) {
+      // D = diag(|J_kk|), floored so that a coordinate without own stiffness
+      // still gets some damping.
+      const Eigen::VectorXd D =
+          J.diagonal().cwiseAbs().cwiseMax(1e-6 * J.diagonal().cwiseAbs().maxCoeff() + 1e-300);
+      for (int attempt = 0; attempt < 12 && !accepted; ++attempt) {
+        Eigen::MatrixXd A = -J;
+        A.diagonal() += D / tau;
+        const Eigen::VectorXd dx = A.partialPivLu().solve(r);
+        if (!dx.allFinite()) {
+          tau /= 4.0;
+          continue;
+        }
+        const Eigen::VectorXd q_try = apply(dx, step_factor(dx));
+        const Eigen::VectorXd r_try = residual(q_try, false, nullptr);
+        if (r_try.norm() <= 2.0 * r.norm()) {
+          const double ratio = r.norm() / std::max(r_try.norm(), 1e-300);
+          tau = std::min(tau * std::clamp(ratio, 0.25, 10.0), 1e12);
+          res.q = q_try;
+          accepted = true;
+        } else {
+          tau /= 4.0;
+        }
       }
-      Eigen::VectorXd q_try = res.q;
-      for (int k = 0; k < m; ++k) q_try[free[k]] += f * dx[k] / scale_x[k];
-      const Eigen::VectorXd r_try = residual(q_try, false, nullptr);
-      if (r_try.norm() < r.norm()) {
-        res.q = q_try;
-        lambda = std::max(lambda / 3.0, 1e-9);
-        accepted = true;
-      } else {
-        lambda *= 10.0;
+    } else {
+      for (int attempt = 0; attempt < 12 && !accepted; ++attempt) {
+        const Eigen::MatrixXd JtJ = J.transpose() * J;
+        Eigen::MatrixXd A = JtJ;
+        A.diagonal() += lambda * JtJ.diagonal().cwiseMax(1e-12 * JtJ.diagonal().maxCoeff());
+        const Eigen::VectorXd dx = A.ldlt().solve(-J.transpose() * r);
+        const Eigen::VectorXd q_try = apply(dx, step_factor(dx));
+        const Eigen::VectorXd r_try = residual(q_try, false, nullptr);
+        if (r_try.norm() < r.norm()) {
+          res.q = q_try;
+          lambda = std::max(lambda / 3.0, 1e-9);
+          accepted = true;
+        } else {
+          lambda *= 10.0;
+        }
       }
     }
     if (!accepted) {
@@ -118,7 +156,7 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
   s << "settle: "
     << (res.status == SettleStatus::kConverged
             ? "converged"
-            : res.status == SettleStatus::kStalled ? "stalled (no step reduces the residual)"
+            : res.status == SettleStatus::kStalled ? "stalled (no acceptable step)"
                                                    : "reached the iteration limit")
     << " after " << res.iterations << " iterations; max |Q| = " << res.max_force_residual
     << " N (tolerance " << opt.force_tolerance << "), " << res.max_moment_residual

@@ -7,10 +7,31 @@
 // tone (activation a_tone on every muscle, as COMAK's settle step uses
 // 0.02 F_max). Gravity and inertia are not included (a static, unloaded joint).
 //
-// Method: damped Newton (Levenberg-Marquardt) on the scaled residual
+// Default method (SettleMethod::kPseudoTransient): pseudo-transient
+// continuation (Kelley & Keyes 1998, "Convergence analysis of pseudo-transient
+// continuation"), described below after the scaling; the Levenberg-Marquardt
+// method of the first version is kept as SettleMethod::kLevenbergMarquardt.
+//
+// Scaling (both methods): the scaled residual
 //   r = S_r Q_s,  S_r = 1 for prismatic (N), 1/L for revolute (N m / L) rows,
-// with variables scaled x = S_x q_s (rad, m / L), L = length_scale. Each
-// iteration solves (J^T J + lambda diag(J^T J)) dx = -J^T r with J = dr/dx from
+// with variables scaled x = S_x q_s (rad, m / L), L = length_scale.
+//
+// Pseudo-transient continuation: instead of minimising |r|^2, follow the
+// over-damped pseudo-dynamics D dx/dt = r (the joint slides downhill in
+// potential energy towards a stable equilibrium) with linearised backward Euler
+// steps
+//   (D / tau - J) dx = r,    D = diag(|J_kk|)  (a stiffness-like "damping"),
+// where the dimensionless pseudo time step tau grows by switched evolution
+// relaxation, tau_k+1 = tau_k |r_k-1| / |r_k| (clamped to [tau/4, 10 tau]), so
+// the iteration turns into Newton's method (tau -> inf) near the solution. A
+// step that more than doubles |r| is retried with tau / 4 (the pseudo time
+// step is too long for the nonlinearity). Steps are limited as for LM.
+// Why: on the bundled knee at full extension, LM on |r|^2 stalled with 6-9 N
+// on knee_tz while Q was smooth along the stalled direction (see
+// docs/model_format.md, "Passive settle"); the damped pseudo-dynamics does not
+// need |r| to decrease monotonically.
+//
+// Levenberg-Marquardt: each iteration solves (J^T J + lambda diag(J^T J)) dx = -J^T r with J = dr/dx from
 // the model's central-difference dQ/dq, limits the step (max_step_rad,
 // max_step_m), accepts it if |r| decreases (else lambda x 10), and stops when
 // max |Q_s| is below the force and moment tolerances.
@@ -22,7 +43,14 @@
 
 namespace arthrosim::musculoskeletal {
 
+enum class SettleMethod { kPseudoTransient, kLevenbergMarquardt };
+
 struct SettleOptions {
+  SettleMethod method = SettleMethod::kPseudoTransient;
+  /// Initial pseudo time step tau [-] of the pseudo-transient method (> 0):
+  /// tau = 1 moves each coordinate about half-way to where its own stiffness
+  /// alone would put it.
+  double initial_pseudo_time = 1.0;
   /// Coordinates held at their initial values (indices into q) in addition to
   /// the model's prescribed ones; everything else is solved for.
   std::vector<int> fixed;
