@@ -75,6 +75,9 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
   if (!(opt.initial_pseudo_time > 0.0))
     throw common::InputError("settle: initial_pseudo_time must be > 0, found " +
                              std::to_string(opt.initial_pseudo_time));
+  if (!(opt.max_residual_growth >= 1.0))
+    throw common::InputError("settle: max_residual_growth must be >= 1, found " +
+                             std::to_string(opt.max_residual_growth));
   // Scales the step dx so that no coordinate moves by more than its limit.
   auto step_factor = [&](const Eigen::VectorXd& dx) {
     double f = 1.0;
@@ -117,7 +120,7 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
         }
         const Eigen::VectorXd q_try = apply(dx, step_factor(dx));
         const Eigen::VectorXd r_try = residual(q_try, false, nullptr);
-        if (r_try.norm() <= 2.0 * r.norm()) {
+        if (r_try.norm() <= opt.max_residual_growth * r.norm()) {
           const double ratio = r.norm() / std::max(r_try.norm(), 1e-300);
           tau = std::min(tau * std::clamp(ratio, 0.25, 10.0), 1e12);
           res.q = q_try;

@@ -164,3 +164,23 @@ TEST(KneeSettle, CoarseKneeSweepIsContinuous) {
   for (size_t i = 1; i + 1 < p.size() && p[i].flexion_deg >= 20.0; ++i)
     EXPECT_GT(p[i - 1].tx_mm, p[i].tx_mm) << p[i].flexion_deg;
 }
+
+// Robustness: cold starts every 5 deg from 0 to 90 deg all converge (the
+// mediolateral double well near extension is where the first settle failed;
+// with max_residual_growth = 2 the 10 deg start did not converge either).
+TEST(KneeSettle, CoarseKneeColdStartsEveryFiveDegrees) {
+  const auto m = msk::load_model(model_path("knee_coarse.urdf"));
+  msk::SettleOptions opt;
+  opt.fixed = {m.tree.coordinate_index("knee_flexion")};
+  int iterations = 0;
+  for (double deg = 0; deg <= 90; deg += 5) {
+    auto d = msk::make_data(m);
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_coordinates());
+    q[m.tree.coordinate_index("knee_flexion")] = deg * kDeg;
+    q[m.tree.coordinate_index("pf_flexion")] = 0.7 * deg * kDeg;
+    const auto res = msk::settle(m, d, q, opt);
+    EXPECT_EQ(res.status, msk::SettleStatus::kConverged) << deg << " deg: " << res.message;
+    iterations += res.iterations;
+  }
+  std::printf("19 cold starts: %d iterations in total\n", iterations);
+}
