@@ -246,11 +246,12 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     }
     json.begin_object().value("scenario", scenario).value("file", file).value("nodes", oc.nodes).value("frames", oc.frames);
     json.begin_array("key_frames");
-    for (const auto& [name, k] : frames) {
+    for (size_t kf = 0; kf < frames.size(); ++kf) {
+      const auto& [name, k] = frames[kf];
       const std::string t = report::number(field.time(k));
       if (field.deflection.size() > 0) {
         const Eigen::VectorXd v = field.deflection.row(k).transpose() * 1e3;
-        add_figure(sid + "-deflection-" + std::to_string(k), scenario + ": deflection at " + name + " (t = " + t + " s)",
+        add_figure(sid + "-deflection-" + std::to_string(kf), scenario + ": deflection at " + name + " (t = " + t + " s)",
                    report::field_map(scenario + " deflection, " + name, view.nodes, quads, v, "mm"));
         json.begin_object().value("name", name).value("time_s", field.time(k)).value("deflection_max_mm", v.maxCoeff())
             .value("deflection_min_mm", v.minCoeff()).value("e1_max", field.e1.row(k).maxCoeff())
@@ -260,7 +261,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
             .value("e1_min", field.e1.row(k).minCoeff()).end_object();
       }
       const Eigen::VectorXd e1 = field.e1.row(k).transpose();
-      add_figure(sid + "-e1-" + std::to_string(k), scenario + ": first principal strain e1 at " + name + " (t = " + t + " s)",
+      add_figure(sid + "-e1-" + std::to_string(kf), scenario + ": first principal strain e1 at " + name + " (t = " + t + " s)",
                  report::field_map(scenario + " e1, " + name, view.nodes, quads, e1, "strain"));
     }
     json.end_array();

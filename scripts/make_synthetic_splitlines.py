@@ -156,7 +156,7 @@ def main():
         f.write('  <path id="outline" fill="none" stroke="black" d="' + " ".join(d_attr) + '"/>\n')
         # Dashes: inside a translate+scale group as polylines (even index), as relative
         # paths at the top level (odd index).
-        f.write('  <g id="dashes" transform="translate(10,5) scale(2)" stroke="blue" fill="none">\n')
+        f.write('  <g class="dashes" transform="translate(10,5) scale(2)" stroke="blue" fill="none">\n')
         for k, md in enumerate(map_dashes):
             if k % 2 == 0:
                 q = [(svg_pt(m) - np.array([10.0, 5.0])) / 2.0 for m in md]

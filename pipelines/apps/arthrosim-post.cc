@@ -28,8 +28,7 @@ int main(int argc, char** argv) {
   std::string kinematics, map, scene_file, out, out_dir;
   double spacing = 0.0;
   app.add_option("--surface", surfaces,
-                 "surface output of one scenario, NAME=FILE or FILE (name from the file's 'scenario' attribute); repeat")
-      ->take_all();
+                 "surface output of one scenario, NAME=FILE or FILE (name from the file's 'scenario' attribute); repeat");
   app.add_option("--kinematics", kinematics, "kinematics file of the musculoskeletal stage (contact force, key frames)");
   app.add_option("--map", map, "split-line map (.svg or .csv); overrides the scene's post.splitline_map");
   app.add_option("--map-sample-spacing", spacing, "SVG maps: sample spacing along split lines [map units], 0 = auto")

@@ -82,7 +82,7 @@ void write_kinematics(const fs::path& path) {
   f.set_attribute("/", "stage", "comak");
 }
 
-// Python check: XML well-formed, every #link has an element with that id containing an
+// Python check: XML well-formed, ids unique, every #link has an element with that id containing an
 // <svg> with at least one drawing element, summary.json parses and lists the same ids.
 int check(const fs::path& dir, int min_figures) {
   const fs::path script = kDir / "check.py";
@@ -91,6 +91,8 @@ import json, sys, xml.etree.ElementTree as ET
 d, need = sys.argv[1], int(sys.argv[2])
 root = ET.parse(d + '/report.html').getroot()
 ns = {'h': 'http://www.w3.org/1999/xhtml', 's': 'http://www.w3.org/2000/svg'}
+all_ids = [e.get('id') for e in root.iter() if e.get('id')]
+assert len(all_ids) == len(set(all_ids)), ('duplicate ids', all_ids)
 ids = {e.get('id'): e for e in root.iter() if e.get('id')}
 links = [a.get('href')[1:] for a in root.iter('{http://www.w3.org/1999/xhtml}a') if (a.get('href') or '').startswith('#')]
 assert len(links) >= need, ('too few figures', len(links), need)
