@@ -99,16 +99,14 @@ std::vector<Pose6> sweep(const msk::Model& m, const msk::SettleOptions& opt, dou
   }
   return out;
 }
-}  // namespace
-
 // Cold starts (secondary coordinates at 0, patella at 0.7 x flexion) at the four
 // angles of the issue. The first (Levenberg-Marquardt) settle stalled here at
-// 0 deg with 8.7 N on knee_tz; pseudo-transient continuation converges.
-TEST(KneeSettle, CoarseKneeColdStartsAtFourAngles) {
-  const auto m = msk::load_model(model_path("knee_coarse.urdf"));
+// 0 deg with 8.7 N on knee_tz (coarse) and 6.7 N (medium); pseudo-transient
+// continuation converges.
+void cold_starts_at_four_angles(const char* file) {
+  const auto m = msk::load_model(model_path(file));
   msk::SettleOptions opt;
   opt.fixed = {m.tree.coordinate_index("knee_flexion")};
-  std::vector<Eigen::VectorXd> sol;
   for (double deg : {0.0, 30.0, 60.0, 90.0}) {
     auto d = msk::make_data(m);
     Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_coordinates());
@@ -119,13 +117,24 @@ TEST(KneeSettle, CoarseKneeColdStartsAtFourAngles) {
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     print(pose_of(m, res.q), res, d, m);
-    std::printf("        (%.0f ms)\n", ms);
+    std::printf("        (%s, %.0f ms)\n", file, ms);
     ASSERT_EQ(res.status, msk::SettleStatus::kConverged) << deg << " deg: " << res.message;
     EXPECT_LE(res.max_force_residual, opt.force_tolerance);
     EXPECT_LE(res.max_moment_residual, opt.moment_tolerance);
     expect_equilibrium(m, res.q, opt, deg);
   }
 }
+}  // namespace
+
+TEST(KneeSettle, CoarseKneeColdStartsAtFourAngles) { cold_starts_at_four_angles("knee_coarse.urdf"); }
+
+// The medium model (knee.urdf) at the same angles (about 1 s). Not covered:
+// on this model a continuation in 10 deg steps does not converge at 80 deg
+// (4.6 N left): there the patellofemoral contact force jumps by 4.3 N between
+// two points 20 urad apart (one patellar triangle's overlap 0 -> 0.36 mm, the
+// ray entering the femoral cartilage through its boundary), so no point with
+// |Q| < 0.1 N exists nearby; see docs/model_format.md, "Passive settle".
+TEST(KneeSettle, MediumKneeColdStartsAtFourAngles) { cold_starts_at_four_angles("knee.urdf"); }
 
 // Continuation from 90 down to 0 deg in 10 deg steps: equilibrium at every
 // angle, and smooth variation. Smoothness check: between successive 10 deg
