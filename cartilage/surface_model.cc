@@ -1,8 +1,10 @@
 #include "cartilage/surface_model.h"
 
 #include <algorithm>
+#include <Eigen/Geometry>
 #include <cmath>
 #include <functional>
+#include <memory>
 
 #include "common/effects.h"
 #include "common/error.h"
@@ -16,14 +18,14 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
   // before anything is built or recorded.
   for (const std::string& e : effects) {
     const bool supported = e == "foundation_springs" || e == "foundation_damping" || e == "osmotic_pressure" ||
-                           e == "periphery_fixed" || e == "inertia" || e == "fixed_nodes" || e == "point_loads" ||
+                           e == "periphery_fixed" || e == "inertia" || e == "imposed_kinematics" || e == "fixed_nodes" || e == "point_loads" ||
                            e == "pressure" || e == "prescribed_displacement";
     if (!supported) {
       if (!common::find_effect(e)) throw common::InputError("surface " + surface.name + ": unknown effect '" + e + "'");
       throw common::InputError("surface " + surface.name + ": effect '" + e +
                                "' is requested but the surface stage of this build cannot simulate it (it "
                                "simulates foundation_springs, foundation_damping, osmotic_pressure, "
-                               "periphery_fixed, inertia, and for generic meshes fixed_nodes, point_loads, pressure, "
+                               "periphery_fixed, imposed_kinematics, inertia, and for generic meshes fixed_nodes, point_loads, pressure, "
                                "prescribed_displacement); remove it from the scenario");
     }
   }
@@ -37,6 +39,10 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
       throw common::InputError("surface " + surface.name + ": effect '" + e +
                                "' is requested but its node set (box) holds no node of the mesh");
   }
+  const bool moving = std::find(effects.begin(), effects.end(), "imposed_kinematics") != effects.end();
+  if (moving && bone.at_rest)
+    throw common::InputError("surface " + surface.name +
+                             ": imposed_kinematics is requested but the bone is at rest (no kinematics given)");
   if (!(g.ramp_time_s > 0)) throw common::InputError("surface " + surface.name + ": load ramp time must be > 0");
   if (!(parameters.shell_thickness_m > 0))
     throw common::InputError("surface " + surface.name + ": shell thickness must be > 0");
@@ -52,6 +58,7 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
   const double T = g.ramp_time_s;
   const std::function<double(double)> ramp = [T](double t) { return std::clamp(t / T, 0.0, 1.0); };
   model->add_internal_forces();
+  if (moving && ledger) ledger->record("imposed_kinematics", 1, surface.name);
   // Order of construction follows the scenario's list; the terms are
   // independent (their sum is the residual).
   for (const std::string& e : effects) {
@@ -91,6 +98,61 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
     }
   }
   return model;
+}
+
+BoneMotion interpolated_bone_motion(std::vector<double> times, std::vector<Eigen::Isometry3d> poses,
+                                    const std::string& source) {
+  if (times.empty() || times.size() != poses.size())
+    throw common::InputError(source + ": error: " + std::to_string(times.size()) + " times for " +
+                             std::to_string(poses.size()) + " poses (expected the same number, at least 1)");
+  for (size_t i = 1; i < times.size(); ++i)
+    if (!(times[i] > times[i - 1]))
+      throw common::InputError(source + ": error: times must increase strictly, found " +
+                               std::to_string(times[i - 1]) + " then " + std::to_string(times[i]) + " at frame " +
+                               std::to_string(i));
+  struct Track {
+    std::vector<double> t;
+    std::vector<Eigen::Isometry3d> X;
+    // Interval [i, i+1] holding absolute time s and the fraction within it;
+    // i = -1 before the first sample, i = n-1 after the last (held poses).
+    int interval(double s, double& f) const {
+      const int n = static_cast<int>(t.size());
+      if (n == 1 || s <= t.front()) { f = 0; return s <= t.front() ? -1 : n - 1; }
+      if (s >= t.back()) { f = 0; return n - 1; }
+      const int i = static_cast<int>(std::upper_bound(t.begin(), t.end(), s) - t.begin()) - 1;
+      f = (s - t[i]) / (t[i + 1] - t[i]);
+      return i;
+    }
+  };
+  auto track = std::make_shared<Track>(Track{std::move(times), std::move(poses)});
+  const double t0 = track->t.front();
+  BoneMotion m;
+  m.at_rest = false;
+  m.pose = [track, t0](double t) {
+    double f = 0;
+    const int i = track->interval(t0 + t, f);
+    if (i < 0) return track->X.front();
+    if (i >= static_cast<int>(track->t.size()) - 1) return track->X.back();
+    const Eigen::Isometry3d& A = track->X[i];
+    const Eigen::Isometry3d& B = track->X[i + 1];
+    const Eigen::AngleAxisd rel(B.linear() * A.linear().transpose());
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = Eigen::AngleAxisd(f * rel.angle(), rel.axis()).toRotationMatrix() * A.linear();
+    X.translation() = (1 - f) * A.translation() + f * B.translation();
+    return X;
+  };
+  m.spatial_velocity = [track, t0](double t) {
+    Eigen::Matrix<double, 6, 1> V = Eigen::Matrix<double, 6, 1>::Zero();
+    double f = 0;
+    const int i = track->interval(t0 + t, f);
+    if (i < 0 || i >= static_cast<int>(track->t.size()) - 1) return V;
+    const double dt = track->t[i + 1] - track->t[i];
+    const Eigen::AngleAxisd rel(track->X[i + 1].linear() * track->X[i].linear().transpose());
+    V.head<3>() = rel.angle() / dt * rel.axis();
+    V.tail<3>() = (track->X[i + 1].translation() - track->X[i].translation()) / dt;
+    return V;
+  };
+  return m;
 }
 
 NodeBasis node_strain_basis(const ShellModel& model) {

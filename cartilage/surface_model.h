@@ -66,12 +66,24 @@ struct SurfaceParameters {
 /// point_loads, pressure, prescribed_displacement with the node sets of
 /// surface.generic, an empty set being an error). Each term is recorded in
 /// `ledger` (part = surface name) by the model when it is constructed. Any other effect name
-/// (imposed_kinematics, mesh_contact: not simulated by this build) throws
-/// InputError naming it before anything is built: an effect is never silently
-/// ignored. `bone` moves the foundation anchors and the fixed periphery.
+/// (mesh_contact: not simulated by this build) throws InputError naming it
+/// before anything is built: an effect is never silently ignored. `bone`
+/// moves the foundation anchors and the fixed periphery; imposed_kinematics
+/// means `bone` comes from a kinematics file (it must not be at rest) and is
+/// recorded with count 1 per surface.
 std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, const SurfaceParameters& parameters,
                                                 const std::vector<std::string>& effects, const BoneMotion& bone,
                                                 common::EffectLedger* ledger);
+
+/// Rigid bone motion interpolated from sampled poses (a kinematics file's
+/// /bodies/<bone>/X_W): simulation time t corresponds to times[0] + t.
+/// Between samples the translation is linear and the rotation a slerp, so the
+/// spatial velocity is constant per interval: w_W = axis-angle(R_1 R_0^T) / dt,
+/// v_WBo_W = (p_1 - p_0) / dt. Before the first / after the last sample the
+/// pose is held (zero velocity). times strictly increasing, >= 1 sample;
+/// otherwise InputError naming `source`.
+BoneMotion interpolated_bone_motion(std::vector<double> times, std::vector<Eigen::Isometry3d> poses,
+                                    const std::string& source);
 
 /// Per-node tangent basis of the strain output: a1 = the world axis x
 /// projected onto the plane normal to the reference director n and

@@ -167,10 +167,49 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   par.foundation_stiffness_N_m3 = o.si("foundation_stiffness_n_per_mm3");
   par.foundation_damping_N_s_m3 = o.si("foundation_damping_n_s_per_mm3");
   par.osmotic_pressure_Pa = o.si("osmotic_pressure_mpa");
-  if (!o.has("end_time_s"))
+  // ---- kinematics (imposed_kinematics) -------------------------------------
+  const bool moving = sc->wants("imposed_kinematics");
+  std::unique_ptr<H5File> kin;
+  std::vector<double> kin_times;
+  if (moving) {
+    if (options.kinematics.empty())
+      throw common::InputError(scene.file.string(), sc->line,
+                               "scenario '" + sc->name + "' lists imposed_kinematics: give --kinematics");
+    kin = std::make_unique<H5File>(options.kinematics, H5File::Mode::kRead);
+    const Eigen::VectorXd t = kin->read_vector("/time");
+    kin_times.assign(t.data(), t.data() + t.size());
+    if (kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
+  } else if (!options.kinematics.empty()) {
+    common::log_warn("--kinematics " + options.kinematics + " is not used: scenario '" + sc->name +
+                     "' does not list imposed_kinematics");
+  }
+  auto bone_motion = [&](const std::string& bone) {
+    const std::string ds = "/bodies/" + bone + "/X_W";
+    const common::Tensor3d X = kin->read_tensor3(ds);
+    if (X.dims[0] != static_cast<std::int64_t>(kin_times.size()) || X.dims[1] != 4 || X.dims[2] != 4)
+      throw common::InputError(options.kinematics + ": error: dataset " + ds + ": expected dims (" +
+                               std::to_string(kin_times.size()) + ", 4, 4), found (" + std::to_string(X.dims[0]) +
+                               ", " + std::to_string(X.dims[1]) + ", " + std::to_string(X.dims[2]) + ")");
+    std::vector<Eigen::Isometry3d> poses(kin_times.size());
+    for (std::int64_t k = 0; k < X.dims[0]; ++k) {
+      Eigen::Matrix4d M;
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) M(i, j) = X(k, i, j);
+      common::check_finite(M, options.kinematics + ": dataset " + ds + ", frame " + std::to_string(k));
+      if ((M.topLeftCorner<3, 3>().transpose() * M.topLeftCorner<3, 3>() - Eigen::Matrix3d::Identity()).norm() > 1e-6)
+        throw common::InputError(options.kinematics + ": error: dataset " + ds + ", frame " + std::to_string(k) +
+                                 ": expected a rotation in the top-left 3 x 3 block");
+      poses[k].matrix() = M;
+    }
+    return cartilage::interpolated_bone_motion(kin_times, std::move(poses), options.kinematics + ": " + ds);
+  };
+
+  if (!o.has("end_time_s") && !moving)
     throw common::InputError(scene.file.string(), sc->line,
                              "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
-  const double end_time = o.si("end_time_s");
+  const double end_time = o.has("end_time_s") ? o.si("end_time_s") : kin_times.back() - kin_times.front();
+  if (!(end_time > 0))
+    throw common::InputError(scene.file.string(), sc->line, "scenario '" + sc->name + "': nothing to simulate (end time 0)");
   const double dt = o.si("time_step_s");
   const bool steady = o.flag("steady_state");
   const bool quasi_static = steady || !sc->wants("inertia");
@@ -256,7 +295,17 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     }
     SurfaceRun r;
     r.input = read_prepared_surface(prepared, name);
-    r.model = cartilage::build_surface_model(r.input, par, sc->effects, cartilage::BoneMotion::fixed(), &ledger);
+    cartilage::BoneMotion bone = cartilage::BoneMotion::fixed();
+    if (moving) {
+      // Prepared coordinates are bone-frame coordinates (the model frame at
+      // q = 0, docs/kinematics_file.md); the shell's reference is the surface
+      // placed by the bone's pose at the first kinematics frame.
+      bone = bone_motion(prepared.attribute_string("/surfaces/" + name, "bone"));
+      const Eigen::Isometry3d X0 = bone.pose(0.0);
+      r.input.mesh.V = ((r.input.mesh.V * X0.linear().transpose()).rowwise() + X0.translation().transpose()).eval();
+      r.input.normals = (r.input.normals * X0.linear().transpose()).eval();
+    }
+    r.model = cartilage::build_surface_model(r.input, par, sc->effects, bone, &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
     r.summary.name = name;
     r.summary.nodes = r.model->num_nodes();

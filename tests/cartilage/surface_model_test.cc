@@ -107,6 +107,7 @@ TEST(SurfaceModel, EffectsItCannotBuildAreErrorsNotOmissions) {
   const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.0);
   common::EffectLedger ledger("test");
   for (const char* e : {"mesh_contact", "imposed_kinematics", "no_such_effect"}) {
+    // imposed_kinematics: rejected here because the bone is at rest.
     try {
       build_surface_model(s, SurfaceParameters{}, {"foundation_springs", e}, BoneMotion::fixed(), &ledger);
       FAIL() << e;
@@ -115,6 +116,39 @@ TEST(SurfaceModel, EffectsItCannotBuildAreErrorsNotOmissions) {
     }
   }
   EXPECT_TRUE(ledger.records().empty());  // nothing was built before the error
+}
+
+// Interpolated bone motion: samples are reproduced, and the spatial velocity
+// is the derivative of the interpolated pose (central differences inside an
+// interval; both are exact for the piecewise slerp/linear path, so the
+// tolerance only covers the O(h^2) difference error at h = 1e-6 s and
+// round-off: 1e-6 relative).
+TEST(SurfaceKinematics, InterpolatedMotionReproducesSamplesAndItsVelocityIsItsDerivative) {
+  std::vector<double> t = {0.5, 0.6, 0.75};
+  std::vector<Eigen::Isometry3d> X(3, Eigen::Isometry3d::Identity());
+  X[1].linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(0, 0, 1)).toRotationMatrix();
+  X[1].translation() << 0.01, -0.02, 0.005;
+  X[2].linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+  X[2].translation() << 0.0, 0.01, 0.0;
+  const BoneMotion m = interpolated_bone_motion(t, X, "test");
+  EXPECT_FALSE(m.at_rest);
+  for (int k = 0; k < 3; ++k)
+    EXPECT_LT((m.pose(t[k] - t[0]).matrix() - X[k].matrix()).norm(), 1e-14) << k;
+  for (double s : {0.03, 0.08, 0.12, 0.2}) {
+    const double h = 1e-6;
+    const Eigen::Isometry3d A = m.pose(s - h), B = m.pose(s + h);
+    const Eigen::AngleAxisd rel(B.linear() * A.linear().transpose());
+    const Eigen::Vector3d w_fd = rel.angle() / (2 * h) * rel.axis();
+    const Eigen::Vector3d v_fd = (B.translation() - A.translation()) / (2 * h);
+    const Eigen::Matrix<double, 6, 1> V = m.spatial_velocity(s);
+    EXPECT_LT((V.head<3>() - w_fd).norm(), 1e-6 * V.head<3>().norm()) << s;
+    EXPECT_LT((V.tail<3>() - v_fd).norm(), 1e-6 * V.tail<3>().norm()) << s;
+  }
+  // Held before the first and after the last sample, with zero velocity.
+  EXPECT_LT((m.pose(1.0).matrix() - X[2].matrix()).norm(), 1e-14);
+  EXPECT_EQ(m.spatial_velocity(1.0).norm(), 0.0);
+  EXPECT_THROW(interpolated_bone_motion({0, 0}, {X[0], X[1]}, "test"), common::InputError);
+  EXPECT_THROW(interpolated_bone_motion({0}, {}, "test"), common::InputError);
 }
 
 }  // namespace

@@ -200,6 +200,89 @@ TEST(SurfaceStage, UnknownSurfaceNamesWhatThePreparedModelHas) {
   }
 }
 
+// imposed_kinematics: a kinematics file (docs/kinematics_file.md layout)
+// moving the tibia rigidly (10 degrees about an oblique axis and 2 mm) over
+// 1 ms. With the periphery fixed to the bone and the foundation moving with
+// it, the quasi-static solution is the rigid motion itself: displacement
+// X(t) X(0)^-1 r0 - r0 at every node and zero strain (SVK is frame
+// invariant). Tolerance 1e-9 m: Newton's increment tolerance is 1e-8 relative
+// on mm-sized motions.
+TEST(SurfaceStage, ImposedKinematicsMoveTheSurfaceRigidly) {
+  const std::string kin_path = work_dir() + "/kinematics_rigid.h5";
+  Eigen::Isometry3d X1 = Eigen::Isometry3d::Identity();
+  X1.linear() = Eigen::AngleAxisd(10 * M_PI / 180, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();
+  X1.translation() << 0.002, -0.001, 0.0005;
+  {
+    common::H5File k(kin_path, common::H5File::Mode::kTruncate);
+    k.write("/time", std::vector<double>{0.2, 0.2005, 0.201});
+    std::vector<double> tib, fem;
+    for (int f = 0; f < 3; ++f) {
+      // Frame 1 halfway (slerp/linear); frame 0 the identity.
+      Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+      if (f == 1) {
+        const Eigen::AngleAxisd aa(X1.linear());
+        X.linear() = Eigen::AngleAxisd(0.5 * aa.angle(), aa.axis()).toRotationMatrix();
+        X.translation() = 0.5 * X1.translation();
+      }
+      if (f == 2) X = X1;
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+          tib.push_back(X.matrix()(i, j));
+          fem.push_back(i == j ? 1.0 : 0.0);
+        }
+    }
+    k.write_tensor3("/bodies/tibia/X_W", {3, 4, 4}, tib);
+    k.write_tensor3("/bodies/femur/X_W", {3, 4, 4}, fem);
+  }
+  // The scene parser requires a comak block and a trial for imposed_kinematics
+  // (the runner would run COMAK); the stage itself reads only the file given.
+  const std::string scene = write_scene("moving", "trial: " + std::string(ARTHROSIM_SOURCE_DIR) +
+                                                      "/data/trials/synthetic_gait\ncomak: {effects: [ligaments]}\n" +
+                                                      R"(surface:
+  scenarios:
+    moving:
+      surfaces: [tibia_medial]
+      time_step_s: 2.5e-4
+      output_interval_ms: 0.5
+      effects: [foundation_springs, periphery_fixed, imposed_kinematics]
+)");
+  SurfaceStageOptions o = stage_options(scene, "moving", "moving.h5");
+  o.kinematics = kin_path;
+  const SurfaceStageResult r = run_surface_stage(o);
+  ASSERT_EQ(r.status, SurfaceStageStatus::kCompleted);
+  const common::H5File f(o.out, common::H5File::Mode::kRead);
+  const Eigen::VectorXd t = f.read_vector("/time");
+  ASSERT_EQ(t.size(), 3);  // the kinematics file's duration, 1 ms
+  EXPECT_NEAR(t(2), 1e-3, 1e-15);
+  const Eigen::MatrixXd X0 = f.read_matrix("/surfaces/tibia_medial/nodes");
+  const common::Tensor3d u = f.read_tensor3("/surfaces/tibia_medial/displacement");
+  const Eigen::MatrixXd e1 = f.read_matrix("/surfaces/tibia_medial/strain/e1");
+  const Eigen::MatrixXd e2 = f.read_matrix("/surfaces/tibia_medial/strain/e2");
+  double err = 0, moved = 0;
+  for (int i = 0; i < X0.rows(); ++i) {
+    const Eigen::Vector3d r0 = X0.row(i).transpose();
+    const Eigen::Vector3d expected = X1 * r0 - r0;
+    const Eigen::Vector3d got(u(2, i, 0), u(2, i, 1), u(2, i, 2));
+    err = std::max(err, (got - expected).norm());
+    moved = std::max(moved, expected.norm());
+  }
+  std::printf("rigid tibia motion: %ld steps, %ld Newton iterations, %ld rejected, wall %.2f s; max |u - u_rigid| "
+              "%.3g m (max motion %.3g m), max |e| %.3g\n",
+              r.steps, r.newton_iterations, r.rejected_steps, r.wall_s, err, moved,
+              std::max(e1.row(2).cwiseAbs().maxCoeff(), e2.row(2).cwiseAbs().maxCoeff()));
+  EXPECT_GT(moved, 1e-3);
+  EXPECT_LT(err, 1e-9);
+  EXPECT_LT(e1.row(2).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT(e2.row(2).cwiseAbs().maxCoeff(), 1e-9);
+  const common::EffectLedger ledger = common::read_effect_ledger(f);
+  EXPECT_EQ(ledger.count("imposed_kinematics"), 1);
+  EXPECT_FALSE(ledger.built("mesh_contact"));
+  EXPECT_FALSE(ledger.built("osmotic_pressure"));
+  // Without --kinematics the scenario cannot run.
+  o.kinematics.clear();
+  EXPECT_THROW(run_surface_stage(o), common::InputError);
+}
+
 /// Runs build/bin/arthrosim-surface (the executable, as a user would) and
 /// returns its exit code.
 int run_executable(const std::string& args) {
