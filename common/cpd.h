@@ -107,7 +107,7 @@ struct CpdOptions {
   /// 0 disables it. Count reported in CpdResult::binned_estep_iterations.
   double bins_per_sigma = 4.0;
   /// kAuto E-step uses the full sum up to this many pairs (M * N).
-  double full_estep_max_pairs = 4.0e6;
+  double full_estep_max_pairs = 2.5e5;
 
   CpdKernel kernel = CpdKernel::kAuto;
   /// kAuto kernel uses the dense G up to this many moving points.
