@@ -19,6 +19,7 @@
 #include <numbers>
 #include <vector>
 
+#include "common/error.h"
 #include "musculoskeletal/model_io.h"
 #include "musculoskeletal/settle.h"
 
@@ -192,4 +193,50 @@ TEST(KneeSettle, CoarseKneeColdStartsEveryFiveDegrees) {
     iterations += res.iterations;
   }
   std::printf("19 cold starts: %d iterations in total\n", iterations);
+}
+
+// The Levenberg-Marquardt option (the first settle) started near the
+// pseudo-transient solution (tibia moved 1 mm anterior and 1 deg, patella 1 mm
+// lateral) returns to the same equilibrium (coarse, 60 deg). (From a cold start
+// at 60 deg LM stalls with 190 N left, measured; the default converges.)
+// Tolerance: 0.1 N over the softest measured stiffness (~2.8e4 N/m) is 4 um;
+// 20 um / 0.05 deg leaves room for both residuals.
+TEST(KneeSettle, LevenbergMarquardtReturnsToTheSameEquilibrium) {
+  const auto m = msk::load_model(model_path("knee_coarse.urdf"));
+  msk::SettleOptions opt;
+  opt.fixed = {m.tree.coordinate_index("knee_flexion")};
+  auto d = msk::make_data(m);
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_coordinates());
+  q[m.tree.coordinate_index("knee_flexion")] = 60 * kDeg;
+  q[m.tree.coordinate_index("pf_flexion")] = 0.7 * 60 * kDeg;
+  const auto ptc = msk::settle(m, d, q, opt);
+  ASSERT_EQ(ptc.status, msk::SettleStatus::kConverged) << ptc.message;
+  q = ptc.q;
+  q[m.tree.coordinate_index("knee_tx")] += 1e-3;
+  q[m.tree.coordinate_index("knee_rotation")] += 1 * kDeg;
+  q[m.tree.coordinate_index("pf_tz")] += 1e-3;
+  opt.method = msk::SettleMethod::kLevenbergMarquardt;
+  const auto lm = msk::settle(m, d, q, opt);
+  std::printf("%s\n%s\n", ptc.message.c_str(), lm.message.c_str());
+  ASSERT_EQ(lm.status, msk::SettleStatus::kConverged) << lm.message;
+  const Pose6 a = pose_of(m, ptc.q), b = pose_of(m, lm.q);
+  for (auto [x, y] : {std::pair{a.tx_mm, b.tx_mm}, {a.ty_mm, b.ty_mm}, {a.tz_mm, b.tz_mm},
+                      {a.pf_tx_mm, b.pf_tx_mm}, {a.pf_ty_mm, b.pf_ty_mm}, {a.pf_tz_mm, b.pf_tz_mm}})
+    EXPECT_NEAR(x, y, 0.02);
+  for (auto [x, y] : {std::pair{a.rotation_deg, b.rotation_deg}, {a.adduction_deg, b.adduction_deg},
+                      {a.pf_flexion_deg, b.pf_flexion_deg}, {a.pf_rotation_deg, b.pf_rotation_deg},
+                      {a.pf_tilt_deg, b.pf_tilt_deg}})
+    EXPECT_NEAR(x, y, 0.05);
+}
+
+TEST(KneeSettle, RejectsBadOptions) {
+  const auto m = msk::load_model(model_path("knee_coarse.urdf"));
+  auto d = msk::make_data(m);
+  const Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_coordinates());
+  msk::SettleOptions opt;
+  opt.initial_pseudo_time = 0.0;
+  EXPECT_THROW(msk::settle(m, d, q, opt), arthrosim::common::InputError);
+  opt = {};
+  opt.max_residual_growth = 0.5;
+  EXPECT_THROW(msk::settle(m, d, q, opt), arthrosim::common::InputError);
 }
