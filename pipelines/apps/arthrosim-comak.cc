@@ -6,8 +6,11 @@
 // (docs/kinematics_file.md).
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <exception>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -17,6 +20,7 @@
 #include "common/log.h"
 #include "common/metadata.h"
 #include "common/progress.h"
+#include "common/scene.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/kinematics_file.h"
@@ -25,6 +29,36 @@
 
 using namespace arthrosim;
 namespace msk = arthrosim::musculoskeletal;
+namespace fs = std::filesystem;
+
+namespace {
+// --model may name a URDF or a model folder (as scenes do). A folder is
+// resolved to the one URDF inside it, or else to the one URDF next to it
+// that references meshes in it ("<folder>/" in the file, as the bundled
+// knee.urdf references medium/...). Anything else is an error naming what
+// was found.
+std::string resolve_model(const std::string& given) {
+  const fs::path p(given);
+  if (!fs::is_directory(p)) return given;
+  std::vector<fs::path> inside, beside;
+  for (const auto& e : fs::directory_iterator(p))
+    if (e.path().extension() == ".urdf") inside.push_back(e.path());
+  if (inside.size() == 1) return inside[0].string();
+  const fs::path dir = fs::weakly_canonical(p);
+  const std::string needle = "\"" + dir.filename().string() + "/";
+  for (const auto& e : fs::directory_iterator(dir.parent_path())) {
+    if (e.path().extension() != ".urdf") continue;
+    std::ifstream in(e.path());
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (text.find(needle) != std::string::npos) beside.push_back(e.path());
+  }
+  std::sort(beside.begin(), beside.end());
+  if (inside.empty() && beside.size() == 1) return beside[0].string();
+  throw common::InputError(given + ": error: model folder: expected one URDF in it or one URDF next to "
+                           "it referencing its meshes, found " + std::to_string(inside.size()) +
+                           " and " + std::to_string(beside.size()));
+}
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -33,13 +67,19 @@ int main(int argc, char** argv) {
       "coordinates (flexion prescribed from the trial) under muscles, ligaments, elastic-foundation contact\n"
       "and the external knee loads. Writes the kinematics file (HDF5, docs/kinematics_file.md), an XDMF\n"
       "sidecar with per-triangle contact pressure, and .sto exports. Method: docs/comak.md."};
-  std::string model_path, trial_path, out, sto_prefix;
+  std::string model_path, trial_path, out, sto_prefix, scene_path, prepared_path;
   int first = 0, last = -1, stride = 1;
   msk::ComakOptions o;
   double lowpass_hz = 6.0;
   bool verbose = false, quiet = false, no_pressure = false;
-  app.add_option("--model", model_path, "model URDF (e.g. data/models/knee_parametric/knee.urdf)")
+  app.add_option("--model", model_path,
+                 "model URDF (e.g. data/models/knee_parametric/knee.urdf) or a model folder")
       ->required();
+  app.add_option("--scene", scene_path,
+                 "scene YAML: its comak block gives effects and options (explicit flags win)");
+  app.add_option("--prepared", prepared_path,
+                 "prepared-model HDF5 (accepted from the runner; not used: contact uses the "
+                 "model's own cartilage meshes)");
   app.add_option("--trial", trial_path, "trial description or its folder")->required();
   app.add_option("--out", out, "kinematics file to write (.h5)")->required();
   app.add_option("--first-frame", first, "first trial frame (0-based)")->capture_default_str();
@@ -70,12 +110,44 @@ int main(int argc, char** argv) {
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf \\\n"
       "      --trial data/trials/synthetic_gait --out comak_coarse.h5 --first-frame 0 --last-frame 2\n"
       "  arthrosim-comak --model data/models/knee_parametric/knee.urdf \\\n"
-      "      --trial data/trials/synthetic_gait --out kinematics.h5 -v      # whole SYNTHETIC cycle\n");
+      "      --trial data/trials/synthetic_gait --out kinematics.h5 -v      # whole SYNTHETIC cycle\n"
+      "  arthrosim-comak --model data/models/knee_parametric/coarse --scene data/scenes/demo.yaml \\\n"
+      "      --trial data/trials/synthetic_gait --out comak_scene.h5 --first-frame 0 --last-frame 2\n"
+      "      # model folder + the scene's comak block (as `arthrosim run` calls it)\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-comak");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
 
   try {
+    std::vector<std::string> effects = {"ligaments", "muscles", "tibiofemoral_contact",
+                                        "patellofemoral_contact"};
+    if (!scene_path.empty()) {
+      const common::Scene scene = common::load_scene(scene_path);
+      if (scene.comak) {
+        const common::OptionBlock& c = *scene.comak;
+        effects = c.list("effects");
+        if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.si("ipopt_tolerance");
+        if (!app.count("--max-iterations"))
+          o.max_iterations = static_cast<int>(c.integer("ipopt_max_iterations"));
+        if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
+        if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
+        if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
+      }
+    }
+    auto wants = [&](const char* e) { return std::find(effects.begin(), effects.end(), e) != effects.end(); };
+    if (!wants("muscles"))
+      throw common::InputError(scene_path + ": error: comak effects must include muscles (they balance the "
+                               "flexion equation)");
+    if (wants("tibiofemoral_contact") != wants("patellofemoral_contact"))
+      throw common::InputError(scene_path + ": error: comak effects: tibiofemoral_contact and "
+                               "patellofemoral_contact can only be simulated together (the model "
+                               "evaluates all contact pairs as one term)");
+    o.forces.ligaments = wants("ligaments");
+    o.forces.contact = wants("tibiofemoral_contact");
+    if (!prepared_path.empty())
+      common::log_info("--prepared " + prepared_path +
+                       ": not used by this stage (contact uses the model's own meshes)");
+    model_path = resolve_model(model_path);
     const msk::Model model = msk::load_model(model_path);
     msk::GaitTrialOptions to;
     to.lowpass.cutoff_hz = lowpass_hz;
@@ -96,14 +168,18 @@ int main(int argc, char** argv) {
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
          << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
+    std::string effect_text;
+    for (const auto& e : effects) effect_text += (effect_text.empty() ? "" : ", ") + e;
+    opts << "effects: [" << effect_text << "]\n";
     common::log_info("options:\n" + opts.str() + (trial.synthetic ? "trial is SYNTHETIC\n" : ""));
-    const auto meta = common::collect_run_metadata("arthrosim-comak", argc, argv, "", opts.str());
+    const auto meta = common::collect_run_metadata("arthrosim-comak", argc, argv, scene_path, opts.str());
 
     common::EffectLedger ledger("comak");
-    ledger.record("ligaments", model.num_bundles());
+    if (o.forces.ligaments) ledger.record("ligaments", model.num_bundles());
     ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
     const int tibia = model.tree.body_index("tibia"), patella = model.tree.body_index("patella");
     for (const auto& c : model.contacts) {
+      if (!o.forces.contact) break;
       if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());
       if (c.casting().body == patella) ledger.record("patellofemoral_contact", c.casting().mesh.F.rows(), c.name());
     }

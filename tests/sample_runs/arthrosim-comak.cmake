@@ -6,3 +6,11 @@ add_test(NAME sample.arthrosim-comak.coarse
           --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
           --out ${CMAKE_BINARY_DIR}/sample_runs/comak_coarse.h5 --first-frame 0 --last-frame 2)
 set_tests_properties(sample.arthrosim-comak.coarse PROPERTIES LABELS sample TIMEOUT 120)
+# The same through a model folder and the demo scene's comak block (effects,
+# Ipopt tolerance and limits), as the runner calls the stage.
+add_test(NAME sample.arthrosim-comak.scene
+  COMMAND arthrosim-comak --model ${CMAKE_SOURCE_DIR}/data/models/knee_parametric/coarse
+          --scene ${CMAKE_SOURCE_DIR}/data/scenes/demo.yaml
+          --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
+          --out ${CMAKE_BINARY_DIR}/sample_runs/comak_scene.h5 --first-frame 0 --last-frame 2)
+set_tests_properties(sample.arthrosim-comak.scene PROPERTIES LABELS sample TIMEOUT 120)
