@@ -24,15 +24,17 @@
 // where the dimensionless pseudo time step tau grows by switched evolution
 // relaxation, tau_k+1 = tau_k |r_k-1| / |r_k| (clamped to [tau/4, 10 tau]), so
 // the iteration turns into Newton's method (tau -> inf) near the solution. A
-// step that grows |r| by more than max_residual_growth is retried with tau / 4 (the pseudo time
-// step is too long for the nonlinearity). Steps are limited as for LM.
+// step that grows |r| by more than max_residual_growth is retried with
+// tau / 4 (the pseudo time step is too long for the nonlinearity). Steps are
+// limited as for LM.
 // Why: on the bundled knee at full extension, LM on |r|^2 stalled with 6-9 N
 // on knee_tz while Q was smooth along the stalled direction (see
 // docs/model_format.md, "Passive settle"); the damped pseudo-dynamics does not
 // need |r| to decrease monotonically.
 //
-// Levenberg-Marquardt: each iteration solves (J^T J + lambda diag(J^T J)) dx = -J^T r with J = dr/dx from
-// the model's central-difference dQ/dq, limits the step (max_step_rad,
+// Levenberg-Marquardt: each iteration solves
+//   (J^T J + lambda diag(J^T J)) dx = -J^T r
+// with J = dr/dx from the model's central-difference dQ/dq, limits the step (max_step_rad,
 // max_step_m), accepts it if |r| decreases (else lambda x 10), and stops when
 // max |Q_s| is below the force and moment tolerances.
 #include <Eigen/Core>
