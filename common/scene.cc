@@ -120,7 +120,8 @@ const std::vector<OptionSpec>& schema_table() {
       // Generic case (docs/surface_output.md): any quad mesh with node sets
       // chosen by boxes, so standard shell problems can be checked.
       {"scenario", "mesh", T::kPath, U::kNone, "", false, 0, 0, "", false,
-       "quad mesh (OBJ with 'v' and 4-node 'f' lines, coordinates in mm) simulated instead of the "
+       "quad mesh (OBJ with 'v' and 4-node 'f' lines, or legacy ASCII VTK polydata with quad "
+       "POLYGONS; coordinates in mm) simulated instead of the "
        "prepared model's surfaces; shell directors on the side of the quad normals"},
       {"scenario", "fixed_box_mm", T::kNumberList, U::kMillimetre, "", false, 6, 6, "", false,
        "[xmin, ymin, zmin, xmax, ymax, zmax]: nodes of `mesh` in this box are clamped (all six "

@@ -1,6 +1,7 @@
 #include "pipelines/surface_stage.h"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -117,6 +118,79 @@ common::QuadMesh read_quad_obj(const std::string& path) {
   for (size_t i = 0; i < V.size(); ++i) m.V.row(static_cast<Eigen::Index>(i)) = V[i].transpose();
   m.Q.resize(static_cast<Eigen::Index>(Q.size()), 4);
   for (size_t i = 0; i < Q.size(); ++i) m.Q.row(static_cast<Eigen::Index>(i)) = Q[i].transpose();
+  return m;
+}
+
+/// Legacy VTK ASCII polydata quad reader for the generic case: POINTS
+/// (coordinates in mm) and POLYGONS whose cells all have 4 nodes; header
+/// lines, other sections (VERTICES, LINES, POINT_DATA, CELL_DATA, ...) end
+/// the geometry part and are ignored. Errors name file:line.
+common::QuadMesh read_quad_vtk(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
+  // Tokens with their line numbers.
+  std::vector<std::pair<std::string, int>> tok;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line_no <= 2) continue;  // "# vtk DataFile Version x" and the title
+    std::istringstream ls(line);
+    std::string w;
+    while (ls >> w) tok.emplace_back(w, line_no);
+  }
+  size_t k = 0;
+  auto next = [&](const char* what) -> const std::pair<std::string, int>& {
+    if (k >= tok.size()) throw common::InputError(path, line_no, std::string("unexpected end of file, expected ") + what);
+    return tok[k++];
+  };
+  auto number = [&](const char* what) {
+    const auto& t = next(what);
+    try {
+      size_t used = 0;
+      const double x = std::stod(t.first, &used);
+      if (used == t.first.size() && std::isfinite(x)) return x;
+    } catch (const std::exception&) {
+    }
+    throw common::InputError(path, t.second, std::string("expected ") + what + ", found '" + t.first + "'");
+  };
+  common::QuadMesh m;
+  bool have_points = false, have_polys = false;
+  while (k < tok.size()) {
+    const auto& t = next("a keyword");
+    if (t.first == "ASCII" || t.first == "DATASET" || t.first == "POLYDATA") continue;
+    if (t.first == "BINARY") throw common::InputError(path, t.second, "expected ASCII, found BINARY");
+    if (t.first == "POINTS") {
+      const int n = static_cast<int>(number("the number of points"));
+      next("the point type");
+      m.V.resize(n, 3);
+      for (int i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) m.V(i, c) = number("a coordinate") * 1e-3;
+      have_points = true;
+    } else if (t.first == "POLYGONS") {
+      const int n = static_cast<int>(number("the number of polygons"));
+      number("the list size");
+      m.Q.resize(n, 4);
+      for (int i = 0; i < n; ++i) {
+        const int line_of_cell = k < tok.size() ? tok[k].second : line_no;
+        const int nv = static_cast<int>(number("a polygon size"));
+        if (nv != 4)
+          throw common::InputError(path, line_of_cell, "expected a quad (4 nodes), found a polygon with " + std::to_string(nv));
+        for (int c = 0; c < 4; ++c) {
+          const double x = number("a node index");
+          if (x < 0 || x >= static_cast<double>(m.V.rows()) || x != std::floor(x))
+            throw common::InputError(path, line_of_cell, "node index " + std::to_string(x) + " out of range [0, " +
+                                                             std::to_string(m.V.rows()) + ")");
+          m.Q(i, c) = static_cast<int>(x);
+        }
+      }
+      have_polys = true;
+    } else {
+      break;  // VERTICES, LINES, POINT_DATA, ...: not geometry of the shell
+    }
+  }
+  if (!have_points || !have_polys || m.Q.rows() == 0)
+    throw common::InputError(path + ": error: expected POINTS and a non-empty POLYGONS section of quads");
   return m;
 }
 
@@ -250,7 +324,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   require("displacement_mm", "prescribed_displacement");
   if (generic) {
     SurfaceRun r;
-    r.input.mesh = read_quad_obj(o.path("mesh").string());
+    const std::string mesh_file = o.path("mesh").string();
+    std::string ext = o.path("mesh").extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (ext != ".obj" && ext != ".vtk")
+      throw common::InputError(scene.file.string(), o.value("mesh").line,
+                               "mesh '" + mesh_file + "': expected an .obj or .vtk quad mesh");
+    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file);
     r.input.name = o.path("mesh").stem().string();
     r.input.mesh.name = r.input.name;
     r.input.normals = cartilage::quad_mesh_vertex_normals(r.input.mesh);
