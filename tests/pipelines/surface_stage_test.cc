@@ -449,6 +449,44 @@ TEST(SurfaceStageGeneric, VtkQuadMeshGivesTheSameResultAsObj) {
   }
 }
 
+// prescribed_displacement: a 100 x 10 mm strip (nu = 0) clamped at x = 0 and
+// pulled by 2 mm at x = L is in uniaxial stretch lambda = 1.02 (no lateral
+// contraction with nu = 0, directors unchanged), so E_xx = (lambda^2 - 1)/2 =
+// 0.0202 at every node (a1 = x) and E_yy = E_xy = 0; e1 along x. Tolerance
+// 1e-9: Newton's converged residual on an exactly representable state.
+TEST(SurfaceStageGeneric, PrescribedDisplacementGivesUniformStretch) {
+  write_plate_obj("pulled", 8, 100, 10);
+  const std::string scene = write_scene("pulled", R"(surface:
+  scenarios:
+    pull:
+      mesh: pulled.obj
+      poisson_ratio: 0
+      end_time_s: 1
+      steady_state: true
+      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]
+      displaced_box_mm: [99.999, -1, -1, 100.001, 11, 1]
+      displacement_mm: [2, 0, 0]
+      effects: [fixed_nodes, prescribed_displacement]
+)");
+  const SurfaceStageOptions o = stage_options(scene, "pull", "pulled.h5");
+  run_surface_stage(o);
+  const common::H5File f(o.out, common::H5File::Mode::kRead);
+  const common::Tensor3d E = f.read_tensor3("/surfaces/pulled/strain/E");
+  const common::Tensor3d dir = f.read_tensor3("/surfaces/pulled/strain/e1_dir");
+  const common::Tensor3d u = f.read_tensor3("/surfaces/pulled/displacement");
+  const double expected = 0.5 * (1.02 * 1.02 - 1);
+  for (int i = 0; i < 18; ++i) {
+    EXPECT_NEAR(E(1, i, 0), expected, 1e-9) << i;
+    EXPECT_NEAR(E(1, i, 1), 0.0, 1e-9) << i;
+    EXPECT_NEAR(E(1, i, 2), 0.0, 1e-9) << i;
+    EXPECT_NEAR(std::abs(dir(1, i, 0)), 1.0, 1e-9) << i;
+    EXPECT_NEAR(u(1, i, 0), 0.02 * (i % 9) * 0.0125, 1e-12) << i;  // linear along x
+  }
+  const common::EffectLedger ledger = common::read_effect_ledger(f);
+  EXPECT_EQ(ledger.count("prescribed_displacement"), 2);
+  EXPECT_EQ(ledger.count("fixed_nodes"), 2);
+}
+
 TEST(SurfaceStageGeneric, GenericEffectWithoutMeshIsAnError) {
   const std::string scene = write_scene("generic_without_mesh", R"(surface:
   scenarios:
