@@ -240,10 +240,16 @@ class FrameNlp : public Ipopt::TNLP {
   }
 
   bool get_starting_point(Ipopt::Index n, bool init_x, Ipopt::Number* x, bool init_z,
-                          Ipopt::Number*, Ipopt::Number*, Ipopt::Index, bool init_lambda,
-                          Ipopt::Number*) override {
-    if (!init_x || init_z || init_lambda) return false;
+                          Ipopt::Number* zl, Ipopt::Number* zu, Ipopt::Index m, bool init_lambda,
+                          Ipopt::Number* lambda) override {
+    if (!init_x) return false;
     for (int i = 0; i < n; ++i) x[i] = x0_[i];
+    if (init_z || init_lambda) {
+      // Only asked for with warm_start_init_point (set when warm_ is given).
+      if (!warm_ || warm_->lambda.size() != m || warm_->z_lower.size() != n) return false;
+      for (int i = 0; i < n; ++i) zl[i] = warm_->z_lower[i], zu[i] = warm_->z_upper[i];
+      for (int k = 0; k < m; ++k) lambda[k] = warm_->lambda[k];
+    }
     return true;
   }
 
@@ -328,10 +334,13 @@ class FrameNlp : public Ipopt::TNLP {
   }
 
   void finalize_solution(Ipopt::SolverReturn, Ipopt::Index n, const Ipopt::Number* x,
-                         const Ipopt::Number*, const Ipopt::Number*, Ipopt::Index,
-                         const Ipopt::Number*, const Ipopt::Number*, Ipopt::Number,
+                         const Ipopt::Number* zl, const Ipopt::Number* zu, Ipopt::Index m,
+                         const Ipopt::Number*, const Ipopt::Number* lambda, Ipopt::Number,
                          const Ipopt::IpoptData*, Ipopt::IpoptCalculatedQuantities*) override {
     x_best_ = Eigen::Map<const Eigen::VectorXd>(x, n);
+    final_.z_lower = Eigen::Map<const Eigen::VectorXd>(zl, n);
+    final_.z_upper = Eigen::Map<const Eigen::VectorXd>(zu, n);
+    final_.lambda = Eigen::Map<const Eigen::VectorXd>(lambda, m);
   }
 
   Eigen::VectorXd q_of(const Ipopt::Number* x) const {
@@ -355,6 +364,8 @@ class FrameNlp : public Ipopt::TNLP {
   static constexpr double kForceUnit = 100.0;  ///< [N] per scaled constraint unit
 
   const Eigen::VectorXd& solution() const { return x_best_; }
+  const ComakMultipliers& multipliers() const { return final_; }
+  void set_warm(const ComakMultipliers* w) { warm_ = w; }
   int iterations() const { return iterations_; }
   std::exception_ptr error() const { return error_; }
   int nm() const { return nm_; }
@@ -366,6 +377,8 @@ class FrameNlp : public Ipopt::TNLP {
   ModelData& data_;
   const ComakFrameInput& in_;
   Eigen::VectorXd x0_, x_best_, q_base_;
+  const ComakMultipliers* warm_ = nullptr;
+  ComakMultipliers final_;
   int nm_ = 0, ns_ = 0, nf_ = 0, ne_ = 0;
   int iterations_ = 0;
   std::exception_ptr error_;
@@ -375,11 +388,15 @@ struct Attempt {
   int status = 0;
   int iterations = 0;
   Eigen::VectorXd x;
+  ComakMultipliers multipliers;
 };
 
 Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput& in,
-                  const Eigen::VectorXd& x0, bool robust) {
+                  const Eigen::VectorXd& x0, bool robust, const ComakMultipliers* warm) {
   Ipopt::SmartPtr<FrameNlp> nlp = new FrameNlp(p, data, in, x0);
+  const bool use_warm = warm && warm->lambda.size() == static_cast<int>(p.free_coordinates().size()) &&
+                        warm->z_lower.size() == x0.size();
+  nlp->set_warm(use_warm ? warm : nullptr);
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
   const ComakOptions& o = p.options();
   auto& opt = *app->Options();
@@ -397,6 +414,14 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
   opt.SetNumericValue("mu_init", 1e-3);
   opt.SetIntegerValue("acceptable_iter", o.acceptable_iterations);
   if (robust) opt.SetStringValue("mu_strategy", "adaptive");
+  if (use_warm) {
+    // Primal-dual warm start from the previous frame (multipliers of the
+    // equilibrium rows and of the bounds), barrier started near its final value.
+    opt.SetStringValue("warm_start_init_point", "yes");
+    opt.SetNumericValue("warm_start_bound_push", 1e-9);
+    opt.SetNumericValue("warm_start_mult_bound_push", 1e-9);
+    opt.SetNumericValue("mu_init", 1e-7);
+  }
   if (app->Initialize() != Ipopt::Solve_Succeeded)
     throw std::logic_error("COMAK: Ipopt failed to initialise");
   Attempt a;
@@ -410,6 +435,7 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
   }
   a.iterations = nlp->iterations();
   a.x = nlp->solution();
+  a.multipliers = nlp->multipliers();
   if (!a.x.allFinite())
     throw common::NumericalError(frame_name(in) + ": Ipopt returned a non-finite point");
   return a;
@@ -419,7 +445,7 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
 
 ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
                                    const ComakFrameInput& in, const Eigen::VectorXd& q_start,
-                                   const Eigen::VectorXd& a_start) {
+                                   const Eigen::VectorXd& a_start, const ComakMultipliers* warm) {
   const auto t0 = std::chrono::steady_clock::now();
   const Model& model = p.model();
   const ComakOptions& o = p.options();
@@ -468,6 +494,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
       m = std::max(m, std::abs(r[k]));
     }
     res.ipopt_status = at.status;
+    res.multipliers = at.multipliers;
     res.ipopt_status_name = ipopt_status_name(at.status);
     const bool ipopt_ok = at.status == Ipopt::Solve_Succeeded ||
                           at.status == Ipopt::Solved_To_Acceptable_Level;
@@ -478,7 +505,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
 
   // Attempt 1: warm start.
   const Eigen::VectorXd q0 = p.coordinates(in, q_start);
-  Attempt at = run_ipopt(p, data, in, make_x0(q0, a_start), false);
+  Attempt at = run_ipopt(p, data, in, make_x0(q0, a_start), false, warm);
   res.iterations += at.iterations;
   res.attempts = 1;
   evaluate(at);
@@ -489,14 +516,14 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     so.forces = o.forces;
     const SettleResult sr = settle(model, data, q0, so);
     at = run_ipopt(p, data, in,
-                   make_x0(sr.q, Eigen::VectorXd::Constant(nm, o.activation_min)), false);
+                   make_x0(sr.q, Eigen::VectorXd::Constant(nm, o.activation_min)), false, nullptr);
     res.iterations += at.iterations;
     res.attempts = 2;
     evaluate(at);
   }
   // Attempt 3: warm start, adaptive barrier, doubled iteration limit.
   if (res.status != ComakFrameStatus::kConverged && o.retries >= 2) {
-    at = run_ipopt(p, data, in, make_x0(q0, a_start), true);
+    at = run_ipopt(p, data, in, make_x0(q0, a_start), true, nullptr);
     res.iterations += at.iterations;
     res.attempts = 3;
     evaluate(at);
@@ -565,9 +592,12 @@ ComakRunSummary run_comak(
   common::log_info("COMAK: first frame from the passive settle: " + sum.first_settle.message);
   q = sum.first_settle.q;
   Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, o.activation_min);
+  ComakMultipliers warm;
+  bool have_warm = false;
   const auto t0 = std::chrono::steady_clock::now();
   for (const ComakFrameInput& f : frames) {
-    const ComakFrameResult r = solve_comak_frame(p, data, f, q, a);
+    const ComakFrameResult r =
+        solve_comak_frame(p, data, f, q, a, have_warm && o.warm_start_multipliers ? &warm : nullptr);
     // Evaluate the model at the reported solution for the writer.
     p.residual(data, f, r.q, r.activations, r.reserves);
     ++sum.frames;
@@ -576,6 +606,8 @@ ComakRunSummary run_comak(
       ++sum.converged;
       q = r.q;
       a = r.activations;
+      warm = r.multipliers;
+      have_warm = true;
       common::log_debug(r.message);
     } else {
       ++sum.failed;

@@ -106,6 +106,9 @@ struct ComakOptions {
   int max_iterations = 300;
   /// Ipopt print level (0 = silent, 5 = Ipopt's default).
   int print_level = 0;
+  /// Warm-start attempt 1 of each frame with the previous converged frame's
+  /// multipliers too (Ipopt warm_start_init_point), not only its point.
+  bool warm_start_multipliers = true;
   /// Retry attempts after a failed first attempt: 0, 1 (from the settle
   /// pose) or 2 (also: adaptive barrier, doubled iteration limit).
   int retries = 2;
@@ -127,6 +130,12 @@ struct ComakFrameInput {
   Eigen::Vector3d M_ext_T = Eigen::Vector3d::Zero();  ///< about the tibia origin [N m]
 };
 
+/// Ipopt's multipliers at a solution (for a primal-dual warm start).
+struct ComakMultipliers {
+  Eigen::VectorXd lambda;            ///< equilibrium rows (scaled NLP units)
+  Eigen::VectorXd z_lower, z_upper;  ///< bound multipliers per variable
+};
+
 enum class ComakFrameStatus { kConverged = 0, kFailed = 1 };
 
 struct ComakFrameResult {
@@ -143,6 +152,7 @@ struct ComakFrameResult {
   Eigen::VectorXd activations;   ///< one per muscle
   Eigen::VectorXd reserves;      ///< one per free coordinate (0 when off) [N or N m]
   std::string message;           ///< one line with the above
+  ComakMultipliers multipliers;  ///< of the last attempt
 };
 
 /// The NLP of one frame (exposed for tests: residual and Jacobian checks).
@@ -194,9 +204,12 @@ class ComakProblem {
 /// secondary entries are used; a_start: activations). settle_q: a passive
 /// settle pose used by retry 1 (may be empty: then the retry settles from
 /// q_start). Throws common::NumericalError naming the frame on NaN/Inf.
+/// `warm`: multipliers of the previous frame for Ipopt's warm start of
+/// attempt 1 (nullptr: primal start only).
 ComakFrameResult solve_comak_frame(const ComakProblem& problem, ModelData& data,
                                    const ComakFrameInput& input, const Eigen::VectorXd& q_start,
-                                   const Eigen::VectorXd& a_start);
+                                   const Eigen::VectorXd& a_start,
+                                   const ComakMultipliers* warm = nullptr);
 
 /// Frame inputs of a knee-load series (frames first..last, every stride-th).
 /// Throws InputError for a left leg trial on this right-knee model or an
