@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -93,6 +94,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--activation-min", o.activation_min, "lower bound of the activations, 0..1")
       ->capture_default_str();
+  std::vector<std::string> weight_args;
+  app.add_option("--muscle-weight", weight_args,
+                 "objective weight w_i of a muscle, name=value (> 0; default 1), repeatable");
   app.add_flag("--reserve-actuators", o.reserve_actuators,
                "reserve actuators on the 11 secondary coordinates (heavy weight, reported)");
   app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0, 1 or 2")
@@ -134,6 +138,14 @@ int main(int argc, char** argv) {
         if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
       }
     }
+    for (const std::string& wa : weight_args) {
+      const size_t eq = wa.find('=');
+      char* end = nullptr;
+      const double w = eq == std::string::npos ? 0.0 : std::strtod(wa.c_str() + eq + 1, &end);
+      if (eq == std::string::npos || !end || *end != 0)
+        throw common::InputError("--muscle-weight: expected name=value, found '" + wa + "'");
+      o.muscle_weights[wa.substr(0, eq)] = w;  // name and range checked by ComakProblem
+    }
     auto wants = [&](const char* e) { return std::find(effects.begin(), effects.end(), e) != effects.end(); };
     if (!wants("muscles"))
       throw common::InputError(scene_path + ": error: comak effects must include muscles (they balance the "
@@ -168,6 +180,7 @@ int main(int argc, char** argv) {
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
          << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
+    for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
     std::string effect_text;
     for (const auto& e : effects) effect_text += (effect_text.empty() ? "" : ", ") + e;
     opts << "effects: [" << effect_text << "]\n";
