@@ -355,3 +355,45 @@ TEST(Comak, ReserveActuatorsReported) {
     EXPECT_LT(r.reserves.cwiseAbs().maxCoeff(), 1.0);
   }
 }
+
+// Never silently: with an iteration limit too small to converge and no
+// retries, every frame is reported failed (Ipopt's status, residuals above
+// tolerance or a non-success status), written with /solver/status = 1 and
+// listed in the summary -- not replaced by a previous frame.
+TEST(Comak, FailedFramesAreMarked) {
+  const auto& m = coarse_model();
+  msk::ComakOptions o;
+  o.max_iterations = 1;
+  o.retries = 0;
+  msk::ComakProblem p(m, o);
+  const auto frames = msk::comak_frame_inputs(trial_loads(), 20, 21, 1);
+  const std::string dir = std::string(ARTHROSIM_BINARY_DIR) + "/tests/comak_test_out";
+  std::filesystem::create_directories(dir);
+  const std::string path = dir + "/failed.h5";
+  msk::KinematicsFileInfo info;
+  info.expected_frames = 2;
+  info.pressure_fields = false;
+  std::vector<msk::ComakFrameResult> res;
+  msk::ComakRunSummary s;
+  {
+    msk::KinematicsFileWriter w(path, p, info, common::RunMetadata{});
+    s = msk::run_comak(p, frames, [&](const auto& f, const auto& r, const auto& d) {
+      res.push_back(r);
+      w.append(f, r, d);
+    });
+    w.finish(s, common::EffectLedger("comak"), "");
+  }
+  EXPECT_EQ(s.failed, 2);
+  EXPECT_EQ(s.failed_frames, (std::vector<int>{20, 21}));
+  for (const auto& r : res) {
+    EXPECT_EQ(r.status, msk::ComakFrameStatus::kFailed);
+    EXPECT_EQ(r.ipopt_status_name, "Maximum_Iterations_Exceeded");
+    EXPECT_EQ(r.attempts, 1);
+  }
+  // The two frames' reported points differ (each frame's own last iterate).
+  EXPECT_NE(res[0].q, res[1].q);
+  common::H5File f(path, common::H5File::Mode::kRead);
+  EXPECT_EQ(f.read_vector_int("/solver/status"), Eigen::VectorXi::Ones(2));
+  EXPECT_EQ(f.read_vector_int("/solver/failed_frames"), (Eigen::VectorXi(2) << 20, 21).finished());
+  EXPECT_EQ(f.attribute_int("/", "frames_failed"), 2);
+}
