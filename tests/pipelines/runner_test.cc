@@ -531,8 +531,12 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
   const fs::path out = "/nonexistent/out";
   using V = std::vector<std::string>;
   const Scene demo = common::load_scene(dir / "demo.yaml");
-  EXPECT_EQ(RunnerTest::names(plan_stages(demo, out)), V{"prepare"});
-  EXPECT_EQ(demo.scenarios.size(), 3u);  // described, not yet run
+  // The demo runs every stage this build has; the walking scenarios wait for
+  // mesh_contact (issue 6), so the demo lists only the osmotic one.
+  EXPECT_EQ(RunnerTest::names(plan_stages(demo, out)),
+            (V{"prepare", "comak", "surface.osmotic", "post"}));
+  EXPECT_EQ(demo.scenarios.size(), 1u);
+  EXPECT_FALSE(demo.require_scenario("osmotic").wants("mesh_contact"));
 
   const Scene osmotic = common::load_scene(dir / "osmotic.yaml");
   EXPECT_EQ(RunnerTest::names(plan_stages(osmotic, out)), (V{"prepare", "surface.osmotic"}));
