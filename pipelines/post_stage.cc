@@ -10,6 +10,7 @@
 #include <numbers>
 
 #include "common/error.h"
+#include "common/effects.h"
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/scene.h"
@@ -111,7 +112,6 @@ std::vector<AttrRow> attributes(const common::H5File& f, const std::string& labe
   return rows;
 }
 
-std::vector<double> to_vec(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
 
 }  // namespace
 
@@ -236,7 +236,18 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
       (field.time.array() - t).abs().minCoeff(&best);
       return static_cast<int>(best);
     };
-    if (!key_times.empty() && field.time.size() > 1) {
+    // The gait key times apply only to a scenario that moves with the cycle:
+    // one whose effect ledger lists imposed_kinematics, or, for a file without
+    // a ledger, one with more than the two frames (start, end) of a steady
+    // state. A steady-state scenario (osmotic) falls back to its largest
+    // deflection.
+    bool follows_cycle = !key_times.empty() && field.time.size() > 2;
+    if (follows_cycle) {
+      const common::H5File h5(file, common::H5File::Mode::kRead);
+      if (h5.exists("/effects/built"))
+        follows_cycle = common::read_effect_ledger(h5).built("imposed_kinematics");
+    }
+    if (follows_cycle) {
       for (const auto& [name, t] : key_times) frames.emplace_back(name, nearest(t));
     } else if (field.e1.rows() > 0) {
       Eigen::Index fmax = field.e1.rows() - 1;
