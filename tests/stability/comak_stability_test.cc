@@ -15,43 +15,20 @@
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
+#include "tests/musculoskeletal/comak_fixtures.h"
 
 namespace msk = arthrosim::musculoskeletal;
 
 namespace {
-std::string source(const std::string& rel) { return std::string(ARTHROSIM_SOURCE_DIR) + "/" + rel; }
-
-const msk::Model& coarse_model() {
-  static const msk::Model m = msk::load_model(source("data/models/knee_parametric/knee_coarse.urdf"));
-  return m;
-}
-
-const msk::KneeLoads& trial_loads() {
-  static const msk::KneeLoads l = [] {
-    const auto trial = msk::load_gait_trial(source("data/trials/synthetic_gait"));
-    return msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
-  }();
-  return l;
-}
-
-double deg(double d) { return d * std::numbers::pi / 180.0; }
+using msk::test::coarse_model;
+using msk::test::deg;
+using msk::test::settled_pose;
+using msk::test::trial_loads;
 
 constexpr double kBodyMass = 61.0;  // [kg], the subject of the issue
 constexpr double kGravity = 9.81;   // [m/s^2]
 constexpr double kBodyWeight = kBodyMass * kGravity;  // [N]
 
-// Passive settle at `flexion` with muscle tone `tone` (start pose).
-Eigen::VectorXd settled_pose(const msk::ComakProblem& p, double flexion, double tone) {
-  const auto& m = p.model();
-  auto d = msk::make_data(m);
-  Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_coordinates());
-  q[p.flexion_coordinate()] = flexion;
-  q[m.tree.coordinate_index("pf_flexion")] = 0.7 * flexion;
-  msk::SettleOptions so;
-  so.fixed = {p.flexion_coordinate()};
-  so.muscle_tone = tone;
-  return msk::settle(m, d, q, so).q;
-}
 
 // A frame with the trial's hip/ankle angles and load of `trial_frame`
 // (stance), the knee flexion replaced by `flexion`.
