@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <sstream>
 
 #include "common/error.h"
@@ -61,6 +62,18 @@ std::string frame_name(const ComakFrameInput& in) {
   std::ostringstream s;
   s << "COMAK frame " << in.index << " (t = " << in.time << " s)";
   return s.str();
+}
+
+// Throws NumericalError naming the frame (and where its input came from)
+// if any input of the frame is not finite.
+void check_frame_input(const ComakFrameInput& in) {
+  if (!in.invalid_input.empty())
+    throw common::NumericalError(frame_name(in) + ": trial input not finite: " + in.invalid_input);
+  Eigen::VectorXd v(12);
+  v << in.time, in.knee_flexion, in.hip_angles, in.ankle_flexion, in.F_ext_T, in.M_ext_T;
+  common::check_finite(v, frame_name(in) +
+                              ": input (time, knee flexion, hip flexion/adduction/rotation, ankle "
+                              "flexion, F_ext_T xyz, M_ext_T xyz)");
 }
 
 }  // namespace
@@ -453,11 +466,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   const int ns = static_cast<int>(p.secondary_coordinates().size());
   const int nf = static_cast<int>(p.free_coordinates().size());
   const int ne = o.reserve_actuators ? ns : 0;
-  {
-    Eigen::VectorXd in_values(12);
-    in_values << in.time, in.knee_flexion, in.hip_angles, in.ankle_flexion, in.F_ext_T, in.M_ext_T;
-    common::check_finite(in_values, frame_name(in) + ": input (time, angles, knee loads)");
-  }
+  check_frame_input(in);
   if (a_start.size() != nm)
     throw common::InputError("COMAK: expected " + std::to_string(nm) + " start activations");
 
@@ -542,25 +551,39 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
 std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
                                                 int stride) {
   const int n = loads.num_samples();
+  // A truncated trial: the selection refers to the whole trial's frames.
+  const int n_trial = loads.truncated ? loads.truncated->full_samples : n;
   if (n == 0) throw common::InputError("COMAK: the trial has no samples");
-  if (last < 0) last = n - 1;
-  if (first < 0 || first >= n || last >= n || last < first || stride < 1)
+  if (last < 0) last = n_trial - 1;
+  if (first < 0 || first >= n_trial || last >= n_trial || last < first || stride < 1)
     throw common::InputError("COMAK: frame selection first " + std::to_string(first) + ", last " +
                              std::to_string(last) + ", stride " + std::to_string(stride) +
-                             " outside the trial's frames 0.." + std::to_string(n - 1));
+                             " outside the trial's frames 0.." + std::to_string(n_trial - 1));
   std::vector<ComakFrameInput> out;
   for (int i = first; i <= last; i += stride) {
     ComakFrameInput f;
     f.index = i;
+    if (i >= n) {
+      // The first selected frame after the cut: no loads exist for it; the
+      // run stops here naming it and the bad value.
+      const TrialTruncation& cut = *loads.truncated;
+      const double h = n > 1 ? loads.time[1] - loads.time[0] : 0.0;
+      const double nan = std::numeric_limits<double>::quiet_NaN();
+      f.time = cut.time + (i - cut.frame) * h;
+      f.knee_flexion = f.ankle_flexion = nan;
+      f.hip_angles.setConstant(nan);
+      f.F_ext_T.setConstant(nan);
+      f.M_ext_T.setConstant(nan);
+      f.invalid_input = cut.reason + " (the trial was read up to the row before it)";
+      out.push_back(f);
+      break;
+    }
     f.time = loads.time[i];
     f.knee_flexion = loads.knee_flexion[i];
     f.hip_angles = loads.hip_angles.row(i).transpose();
     f.ankle_flexion = loads.ankle_flexion[i];
     f.F_ext_T = loads.F_ext_T.row(i).transpose();
     f.M_ext_T = loads.M_ext_T.row(i).transpose();
-    Eigen::VectorXd v(12);
-    v << f.time, f.knee_flexion, f.hip_angles, f.ankle_flexion, f.F_ext_T, f.M_ext_T;
-    common::check_finite(v, frame_name(f) + ": trial input (time, angles, knee loads)");
     out.push_back(f);
   }
   return out;
@@ -577,6 +600,21 @@ ComakRunSummary run_comak(
   const ComakOptions& o = p.options();
   ModelData data = make_data(model);
   const int nm = static_cast<int>(model.muscles.size());
+  auto t0 = std::chrono::steady_clock::now();  // restarted after the first settle
+  // A non-finite input or evaluation stops the run at its frame; the
+  // summary of the frames before goes with the exception.
+  auto stop = [&](const ComakFrameInput& f, const common::NumericalError& e) {
+    sum.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    sum.stopped = e.what();
+    common::log_error(std::string(e.what()) + " -- run stopped after " +
+                      std::to_string(sum.frames) + " frames");
+    return ComakRunStopped(e.what(), f.index, sum);
+  };
+  try {
+    check_frame_input(frames.front());
+  } catch (const common::NumericalError& e) {
+    throw stop(frames.front(), e);
+  }
   // The first frame starts from the passive settle at its flexion.
   SettleOptions so = o.settle;
   so.fixed = {p.flexion_coordinate()};
@@ -594,12 +632,17 @@ ComakRunSummary run_comak(
   Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, o.activation_min);
   ComakMultipliers warm;
   bool have_warm = false;
-  const auto t0 = std::chrono::steady_clock::now();
+  t0 = std::chrono::steady_clock::now();
   for (const ComakFrameInput& f : frames) {
-    const ComakFrameResult r =
-        solve_comak_frame(p, data, f, q, a, have_warm && o.warm_start_multipliers ? &warm : nullptr);
-    // Evaluate the model at the reported solution for the writer.
-    p.residual(data, f, r.q, r.activations, r.reserves);
+    ComakFrameResult r;
+    try {
+      r = solve_comak_frame(p, data, f, q, a,
+                            have_warm && o.warm_start_multipliers ? &warm : nullptr);
+      // Evaluate the model at the reported solution for the writer.
+      p.residual(data, f, r.q, r.activations, r.reserves);
+    } catch (const common::NumericalError& e) {
+      throw stop(f, e);
+    }
     ++sum.frames;
     sum.total_iterations += r.iterations;
     if (r.status == ComakFrameStatus::kConverged) {

@@ -65,8 +65,10 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "common/error.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model.h"
 #include "musculoskeletal/settle.h"
@@ -128,6 +130,11 @@ struct ComakFrameInput {
   double ankle_flexion = 0.0;    ///< [rad]
   Eigen::Vector3d F_ext_T = Eigen::Vector3d::Zero();  ///< on the tibia, tibia frame [N]
   Eigen::Vector3d M_ext_T = Eigen::Vector3d::Zero();  ///< about the tibia origin [N m]
+  /// Why this frame has no finite input, naming the trial file, line and
+  /// column (set by comak_frame_inputs for the first frame after a trial
+  /// that ended early at a non-finite value; its values are then NaN).
+  /// Empty otherwise. Solving such a frame throws NumericalError with it.
+  std::string invalid_input;
 };
 
 /// Ipopt's multipliers at a solution (for a primal-dual warm start).
@@ -211,9 +218,14 @@ ComakFrameResult solve_comak_frame(const ComakProblem& problem, ModelData& data,
                                    const Eigen::VectorXd& a_start,
                                    const ComakMultipliers* warm = nullptr);
 
-/// Frame inputs of a knee-load series (frames first..last, every stride-th).
-/// Throws InputError for a left leg trial on this right-knee model or an
-/// empty/out-of-range selection, NumericalError naming the frame on NaN.
+/// Frame inputs of a knee-load series (frames first..last, every stride-th;
+/// last = -1: the last frame of the trial). Throws InputError for an
+/// empty/out-of-range selection. Non-finite values are passed on (the run
+/// stops at that frame, naming it). For loads of a truncated trial
+/// (KneeLoads::truncated) the selection is checked against the whole trial;
+/// the frames before the cut are returned, followed by the first selected
+/// frame after it with NaN values and invalid_input set, so run_comak solves
+/// the frames it can and then stops naming the frame, file, line and column.
 std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
                                                 int stride);
 
@@ -223,13 +235,31 @@ struct ComakRunSummary {
   double wall_time = 0.0;               ///< [s], all frames
   int total_iterations = 0;
   SettleResult first_settle;            ///< the passive settle of the first frame
+  /// Empty unless the run stopped early (ComakRunStopped): the reason,
+  /// naming the frame. Frames counts the frames handed to on_frame before.
+  std::string stopped;
+};
+
+/// Thrown by run_comak when a frame's input or evaluation is not finite:
+/// the run stops at that frame. what() names the frame ("COMAK frame 12 (t =
+/// 0.12 s): ...") and, for a truncated trial, the file, line and column;
+/// `summary` covers the frames before it (each was handed to on_frame), so a
+/// writer can still finish its file.
+class ComakRunStopped : public common::NumericalError {
+ public:
+  ComakRunStopped(const std::string& what, int frame, ComakRunSummary summary)
+      : common::NumericalError(what), frame(frame), summary(std::move(summary)) {}
+  int frame;                ///< trial frame index of the frame that stopped the run
+  ComakRunSummary summary;  ///< of the frames before it; summary.stopped = what()
 };
 
 /// Runs frame after frame: the first from the passive settle at its flexion
 /// (muscle tone options.settle.muscle_tone), each next one warm-started from
 /// the previous converged frame. `on_frame` is called after every frame
 /// (with the model data evaluated at the frame's solution) so a writer can
-/// append it at once.
+/// append it at once. A non-finite input or evaluation throws
+/// ComakRunStopped; a frame that does not converge is marked failed and the
+/// run goes on.
 ComakRunSummary run_comak(
     const ComakProblem& problem, const std::vector<ComakFrameInput>& frames,
     const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&

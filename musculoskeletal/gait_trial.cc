@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -253,8 +254,23 @@ struct LoadedTable {
   Eigen::MatrixXd values;  // columns in the order of `quantities`, signs applied
 };
 
+// A non-finite value met while reading (truncate_at_non_finite).
+struct BadValue {
+  double time = 0.0;         // [s] of the bad row
+  double last_good = 0.0;    // [s] of the row before it
+  double file_end = 0.0;     // [s] of the file's last row (rows after the bad one unchecked)
+  std::string file;
+  int line = 0;
+  std::string message;       // "non-finite value in column ..."
+  std::string reason() const { return file + ":" + std::to_string(line) + ": " + message; }
+};
+
+// Reads the mapped columns of `file`. A non-finite value throws InputError
+// unless `bad` is given: then the table ends before that row and *bad says
+// where (a bad value in the first row still throws: nothing to keep).
 LoadedTable load_columns(const TrialDescription& d, const std::string& file,
-                         const std::vector<std::string>& quantities, bool angles_possible) {
+                         const std::vector<std::string>& quantities, bool angles_possible,
+                         std::optional<BadValue>* bad = nullptr) {
   // Angle columns are exactly the mapped angle quantities; the rest keep the
   // storage reader's default rule (translations, forces, ... are not angles).
   std::set<std::string> angle_labels;
@@ -308,7 +324,13 @@ LoadedTable load_columns(const TrialDescription& d, const std::string& file,
         std::ostringstream s;
         s << "non-finite value in column '" << d.columns.at(quantities[k]).label << "' (time "
           << out.time(r) << " s)";
-        throw InputError(file, line_of(r), s.str());
+        if (!bad || r == 0) throw InputError(file, line_of(r), s.str());
+        *bad = BadValue{out.time(r), out.time(r - 1), out.time(out.time.size() - 1), file, line_of(r),
+                        s.str()};
+        // Rows r.. are dropped (their times were checked up to here only).
+        out.time.conservativeResize(r);
+        out.values.conservativeResize(r, Eigen::NoChange);
+        return out;
       }
     }
   }
@@ -333,17 +355,49 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
   t.leg_overrides = d.leg_overrides;
   t.has_pelvis = d.columns.count("pelvis_tilt") > 0;
 
-  const LoadedTable kin = load_columns(d, d.kinematics_file, trial_coordinate_names(), true);
+  // With truncate_at_non_finite each file reports its first bad value; the
+  // trial then ends at the earliest one (`bad`), in every file.
+  std::optional<BadValue> bad_kin, bad_grf, bad_loads;
+  const bool truncate = options.truncate_at_non_finite;
+  const LoadedTable kin = load_columns(d, d.kinematics_file, trial_coordinate_names(), true,
+                                       truncate ? &bad_kin : nullptr);
   std::optional<LoadedTable> grf, loads;
-  if (!d.grf_file.empty()) grf = load_columns(d, d.grf_file, kGrfQuantities, false);
-  if (!d.knee_loads_file.empty()) loads = load_columns(d, d.knee_loads_file, kKneeLoadQuantities, false);
+  if (!d.grf_file.empty())
+    grf = load_columns(d, d.grf_file, kGrfQuantities, false, truncate ? &bad_grf : nullptr);
+  if (!d.knee_loads_file.empty())
+    loads = load_columns(d, d.knee_loads_file, kKneeLoadQuantities, false,
+                         truncate ? &bad_loads : nullptr);
+  std::optional<BadValue> bad;
+  for (const auto* b : {&bad_kin, &bad_grf, &bad_loads})
+    if (*b && (!bad || (*b)->last_good < bad->last_good)) bad = **b;
 
-  // Common time range.
+  // Common time range (and, for a truncated trial, the range without the cut).
   double t0 = kin.time(0), t1 = kin.time(kin.time.size() - 1);
   for (const auto* tab : {grf ? &*grf : nullptr, loads ? &*loads : nullptr}) {
     if (!tab) continue;
     t0 = std::max(t0, tab->time(0));
     t1 = std::min(t1, tab->time(tab->time.size() - 1));
+  }
+  if (bad) {
+    // The grid of the whole trial had the value been finite (for the frame
+    // selection; its rows after the bad value are not checked).
+    double t1_full = bad_kin ? bad_kin->file_end : kin.time(kin.time.size() - 1);
+    if (grf) t1_full = std::min(t1_full, bad_grf ? bad_grf->file_end : grf->time(grf->time.size() - 1));
+    if (loads)
+      t1_full = std::min(t1_full, bad_loads ? bad_loads->file_end
+                                            : loads->time(loads->time.size() - 1));
+    const Eigen::Index kept = t1 >= t0 ? uniform_grid(t0, t1, options.rate_hz).size() : 0;
+    const Eigen::Index full = t1_full >= t0 ? uniform_grid(t0, t1_full, options.rate_hz).size() : 0;
+    if (kept < full) {  // else the bad value lies outside the common time range
+      if (kept < 4)
+        throw InputError(bad->file, bad->line, bad->message + "; fewer than 4 samples before it");
+      TrialTruncation cut;
+      cut.frame = static_cast<int>(kept);
+      cut.time = t0 + static_cast<double>(kept) / options.rate_hz;
+      cut.full_samples = static_cast<int>(full);
+      cut.reason = bad->reason();
+      t.truncated = cut;
+    }
   }
   if (!(t1 > t0)) {
     std::ostringstream s;
@@ -358,7 +412,10 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
   }
   const double h = 1.0 / options.rate_hz;
   const Eigen::Index last = kin.time.size() - 1;
-  if (d.periodic) {
+  // A truncated trial is no longer one cycle: filter and differentiate it
+  // as an open record.
+  t.periodic = d.periodic && !t.truncated;
+  if (t.periodic) {
     // One whole cycle: the grid must end on the kinematics' last row, and the
     // first and last rows must describe the same posture (pelvis_tx/tz may
     // drift; 2 deg and 2 cm tolerances catch a trial that is not one cycle).
@@ -388,12 +445,12 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
   Eigen::MatrixXd q = resample_linear(kin.time, kin.values, t.time, d.kinematics_file);
   if (options.filter_kinematics) {
     LowPassOptions lp = options.lowpass;
-    lp.periodic = d.periodic;
+    lp.periodic = t.periodic;
     q = filtfilt_lowpass(q, options.rate_hz, lp, d.kinematics_file);
   }
   t.q = q;
-  t.qd = first_derivative(q, h, d.periodic);
-  t.qdd = second_derivative(q, h, d.periodic);
+  t.qd = first_derivative(q, h, t.periodic);
+  t.qdd = second_derivative(q, h, t.periodic);
 
   if (grf) {
     Eigen::MatrixXd g = resample_linear(grf->time, grf->values, t.time, d.grf_file);

@@ -106,6 +106,24 @@ struct GaitTrialOptions {
   bool filter_grf = false;
   /// Below this vertical ground reaction [N] force, torque and COP are set to 0.
   double min_vertical_grf_n = 10.0;
+  /// A non-finite value in a mapped column: false (default) throws
+  /// InputError "file:line: error: non-finite value in column 'c' (time t s)";
+  /// true keeps the trial up to the last row before it (in every file) and
+  /// records where it ends in GaitTrial::truncated, so a consumer can run the
+  /// frames before it and stop at the first frame it cannot compute, naming
+  /// that frame and the file, line and column (arthrosim-comak does). The
+  /// shortened trial is filtered non-periodically (it is no longer one cycle).
+  /// A non-finite time stays an InputError; so does a bad value leaving fewer
+  /// than 4 samples.
+  bool truncate_at_non_finite = false;
+};
+
+/// Where a trial read with truncate_at_non_finite ends early.
+struct TrialTruncation {
+  int frame = 0;           ///< first sample of the full grid that is not in the trial
+  double time = 0.0;       ///< its time [s]
+  int full_samples = 0;    ///< samples the grid would have without the bad value
+  std::string reason;      ///< "ik.mot:48: non-finite value in column 'knee_angle_r' (time 0.35 s)"
 };
 
 /// A trial on a uniform time grid, SI units, lab frame.
@@ -130,6 +148,10 @@ struct GaitTrial {
   Eigen::MatrixXd knee_force_T;  ///< n x 3 [N], given by the trial
   Eigen::MatrixXd knee_moment_T; ///< n x 3 [N m], given by the trial
   std::map<std::string, double> leg_overrides;  ///< from the description
+  /// Set when a non-finite value ended the trial early (see
+  /// GaitTrialOptions::truncate_at_non_finite); the samples above are those
+  /// before it.
+  std::optional<TrialTruncation> truncated;
   int num_samples() const { return static_cast<int>(time.size()); }
 };
 

@@ -209,6 +209,7 @@ void KinematicsFileWriter::finish(const ComakRunSummary& s, const common::Effect
   f.set_attribute("/", "frames", s.frames);
   f.set_attribute("/", "frames_converged", s.converged);
   f.set_attribute("/", "frames_failed", s.failed);
+  if (!s.stopped.empty()) f.set_attribute("/", "stopped", s.stopped);
   f.write("/solver/failed_frames", s.failed_frames);
   f.set_attribute("/solver", "first_settle", s.first_settle.message);
   common::write_effect_ledger(f, ledger);

@@ -87,6 +87,7 @@ KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
   const int n = trial.num_samples();
   KneeLoads out;
   out.time = trial.time;
+  out.truncated = trial.truncated;
   out.q = trial.q;
   out.qd = trial.qd;
   out.qdd = trial.qdd;

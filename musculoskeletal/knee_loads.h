@@ -41,6 +41,7 @@
 // negated), solved as a right leg and mirrored back. The left tibia frame is
 // then X anterior, Y proximal, Z to the right (= medial for the left leg).
 #include <Eigen/Geometry>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,10 @@ struct KneeLoads {
   Eigen::MatrixXd M_ext_T;              ///< n x 3 [N m], about the knee centre, tibia frame
   /// Tibia poses in the lab (inverse dynamics only; empty otherwise).
   std::vector<Eigen::Isometry3d> X_WT;
+  /// Copied from the trial: set when a non-finite trial value ended it
+  /// early (GaitTrialOptions::truncate_at_non_finite); frames from
+  /// truncated->frame on have no loads.
+  std::optional<TrialTruncation> truncated;
   int num_samples() const { return static_cast<int>(time.size()); }
 };
 

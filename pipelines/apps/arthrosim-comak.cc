@@ -163,6 +163,9 @@ int main(int argc, char** argv) {
     const msk::Model model = msk::load_model(model_path);
     msk::GaitTrialOptions to;
     to.lowpass.cutoff_hz = lowpass_hz;
+    // A non-finite trial value: run the frames before it, then stop naming
+    // the frame, file, line and column (exit 1; the file keeps those frames).
+    to.truncate_at_non_finite = true;
     const msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
     if (trial.side != msk::Side::kRight)
       throw common::InputError(trial_path + ": error: the bundled knee models are right knees; "
@@ -205,17 +208,31 @@ int main(int argc, char** argv) {
     info.expected_frames = static_cast<std::int64_t>(frames.size());
     info.pressure_fields = !no_pressure;
     msk::KinematicsFileWriter writer(out, problem, info, meta);
-    common::Progress progress("comak", static_cast<std::int64_t>(frames.size()));
-    const auto summary = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
-      writer.append(f, r, d);
-      progress.step();
-    });
-    progress.finish();
+    if (trial.truncated)
+      common::log_warn(trial_path + ": the trial ends early at frame " +
+                       std::to_string(trial.truncated->frame) + ": " + trial.truncated->reason);
     if (sto_prefix.empty()) {
       sto_prefix = out;
       if (sto_prefix.size() > 3 && sto_prefix.substr(sto_prefix.size() - 3) == ".h5")
         sto_prefix.resize(sto_prefix.size() - 3);
     }
+    common::Progress progress("comak", static_cast<std::int64_t>(frames.size()));
+    msk::ComakRunSummary summary;
+    try {
+      summary = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
+        writer.append(f, r, d);
+        progress.step();
+      });
+    } catch (const msk::ComakRunStopped& e) {
+      // Finish the file with the frames before the stop (attribute `stopped`).
+      progress.finish();
+      writer.finish(e.summary, ledger, sto_prefix);
+      // (run_comak has logged the reason, naming the frame.)
+      std::cerr << "arthrosim-comak: stopped at frame " << e.frame << "; the " << e.summary.frames
+                << " frames before it are in " << out << "\n";
+      return 1;
+    }
+    progress.finish();
     writer.finish(summary, ledger, sto_prefix);
     std::printf("arthrosim-comak: %d frames, %d converged, %d failed, %d Ipopt iterations, %.2f s "
                 "(%.3f s/frame) -> %s\n",

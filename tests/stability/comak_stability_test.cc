@@ -2,14 +2,23 @@
 // (musculoskeletal/comak.h) on the bundled coarse knee model. Each case
 // asserts finite values, an explicit converged status, equilibrium residuals
 // within the solver's tolerances (checked again independently of the solver's
-// own report) and bounded forces. The NaN-in-trial case lives in
-// tests/musculoskeletal/comak_test.cc.
+// own report) and bounded forces. A trial with spikes and a NaN is run
+// through the library and through the arthrosim-comak executable.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "common/error.h"
+#include "common/hdf5.h"
 
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
@@ -163,4 +172,232 @@ TEST(ComakStability, BadInitialGuess) {
   // to a different local optimum (objective 6.2e-4 m^3) than the start from
   // the settle pose (1.05e-4 m^3); the NLP is non-convex through contact.
   solve_and_check("bad initial guess", in, q0);
+}
+
+// ------------------------------------------------ a trial with spikes and a NaN
+
+namespace {
+namespace fs = std::filesystem;
+
+// A copy of the bundled SYNTHETIC trial in the build tree, to be edited.
+fs::path scratch_trial(const std::string& name) {
+  const fs::path dir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / "comak_stability" / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  for (const char* f : {"trial.yaml", "ik.mot", "grf.mot"})
+    fs::copy_file(msk::test::source(std::string("data/trials/synthetic_gait/") + f), dir / f);
+  return dir;
+}
+
+// Sets the value of `column` in the data row whose time is `time` (s) of a
+// .mot file: value = f(old value). Returns the old value. Fails the test if
+// the row or column is missing.
+template <typename F>
+double edit_mot(const fs::path& file, double time, const std::string& column, F f) {
+  std::ifstream in(file);
+  std::vector<std::string> lines;
+  for (std::string l; std::getline(in, l);) lines.push_back(l);
+  size_t label = 0;
+  while (label < lines.size() && lines[label] != "endheader") ++label;
+  ++label;
+  auto split = [](const std::string& l) {
+    std::vector<std::string> v;
+    std::stringstream ss(l);
+    for (std::string x; std::getline(ss, x, '\t');) v.push_back(x);
+    return v;
+  };
+  const auto labels = split(lines.at(label));
+  const size_t c = std::find(labels.begin(), labels.end(), column) - labels.begin();
+  EXPECT_LT(c, labels.size()) << column;
+  double old = std::nan("");
+  bool found = false;
+  for (size_t r = label + 1; r < lines.size(); ++r) {
+    auto v = split(lines[r]);
+    if (std::abs(std::stod(v.at(0)) - time) > 1e-9) continue;
+    old = std::stod(v.at(c));
+    std::ostringstream x;
+    x.precision(10);
+    x << f(old);
+    v.at(c) = x.str();
+    std::string joined;
+    for (size_t k = 0; k < v.size(); ++k) joined += (k ? "\t" : "") + v[k];
+    lines[r] = joined;
+    found = true;
+  }
+  EXPECT_TRUE(found) << file << ": no row at t = " << time;
+  std::ofstream out(file);
+  for (const auto& l : lines) out << l << "\n";
+  return old;
+}
+
+// The spikes of both tests: one sample of the vertical ground reaction at 4x
+// (a force-plate glitch; with the unfiltered GRF (gait_trial.h) it reaches
+// the knee load unchanged) and one sample of the knee angle 40 deg too high
+// (low-pass filtered with the kinematics).
+constexpr double kGrfSpikeTime = 0.12, kAngleSpikeTime = 0.14;  // [s]
+void add_spikes(const fs::path& dir) {
+  edit_mot(dir / "grf.mot", kGrfSpikeTime, "ground_force_vy", [](double v) { return 4.0 * v; });
+  edit_mot(dir / "ik.mot", kAngleSpikeTime, "knee_angle_r", [](double v) { return v + 40.0; });
+}
+
+// Checks one frame of a run: finite values and an explicit status; a frame
+// reported converged satisfies equilibrium when re-evaluated here.
+void check_frame(const msk::ComakProblem& p, const msk::ComakFrameInput& in,
+                 const msk::ComakFrameResult& r) {
+  const auto& o = p.options();
+  SCOPED_TRACE(r.message);
+  EXPECT_TRUE(r.q.allFinite());
+  EXPECT_TRUE(r.activations.allFinite());
+  EXPECT_TRUE(std::isfinite(r.objective));
+  EXPECT_TRUE(std::isfinite(r.max_force_residual) && std::isfinite(r.max_moment_residual));
+  EXPECT_TRUE(r.status == msk::ComakFrameStatus::kConverged ||
+              r.status == msk::ComakFrameStatus::kFailed);
+  EXPECT_NE(r.message.find(msk::to_string(r.status)), std::string::npos);
+  EXPECT_GE(r.activations.minCoeff(), o.activation_min - 1e-6);
+  EXPECT_LE(r.activations.maxCoeff(), 1.0 + 1e-6);
+  if (r.status != msk::ComakFrameStatus::kConverged) return;
+  auto d = msk::make_data(p.model());
+  const Eigen::VectorXd res = p.residual(d, in, r.q, r.activations, r.reserves);
+  for (int k = 0; k < res.size(); ++k)
+    EXPECT_LE(std::abs(res[k]), p.revolute(k) ? o.force_tolerance * o.length_scale : o.force_tolerance)
+        << "row " << k;
+}
+}  // namespace
+
+// Spikes in a load and an angle channel: every frame ends finite with an
+// explicit status, and the run recovers after the spikes.
+TEST(ComakStability, SpikyTrialRunsWithExplicitFrameStatus) {
+  const fs::path dir = scratch_trial("spikes");
+  add_spikes(dir);
+  const auto trial = msk::load_gait_trial((dir / "trial.yaml").string());
+  const auto loads = msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
+  const auto& clean = trial_loads();
+  // The spikes reach the knee loads (else this test could not fail).
+  const int g = static_cast<int>(std::lround(kGrfSpikeTime * 100)), k = static_cast<int>(std::lround(kAngleSpikeTime * 100));
+  const double dF = (loads.F_ext_T.row(g) - clean.F_ext_T.row(g)).norm();
+  const double dq = std::abs(loads.knee_flexion[k] - clean.knee_flexion[k]);
+  std::printf("[spikes] knee load change at frame %d: %.0f N (%.2f BW); knee flexion change at frame %d: %.2f deg\n",
+              g, dF, dF / kBodyWeight, k, dq * 180 / std::numbers::pi);
+  EXPECT_GT(dF, 1.5 * kBodyWeight);
+  EXPECT_GT(dq, deg(2));
+
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  const auto frames = msk::comak_frame_inputs(loads, 10, 17, 1);
+  std::vector<msk::ComakFrameResult> results;
+  const auto s = msk::run_comak(p, frames, [&](const auto& f, const auto& r, const auto&) {
+    check_frame(p, f, r);
+    results.push_back(r);
+  });
+  for (const auto& r : results) std::printf("[spikes] %s\n", r.message.c_str());
+  ASSERT_EQ(results.size(), frames.size());
+  EXPECT_EQ(s.frames, static_cast<int>(frames.size()));
+  EXPECT_EQ(s.converged + s.failed, s.frames);
+  EXPECT_TRUE(s.stopped.empty());
+  // Recovery: the last two frames (after both spikes) converge.
+  EXPECT_EQ(results.end()[-1].status, msk::ComakFrameStatus::kConverged);
+  EXPECT_EQ(results.end()[-2].status, msk::ComakFrameStatus::kConverged);
+}
+
+// A NaN in the trial (library): the run solves the frames before it and
+// stops at the first frame it cannot compute, naming it and the file, line
+// and column of the value.
+TEST(ComakStability, NanInTrialStopsAtItsFrame) {
+  const fs::path dir = scratch_trial("nan_library");
+  add_spikes(dir);
+  edit_mot(dir / "ik.mot", 0.15, "knee_angle_r", [](double) { return std::nan(""); });
+  // Without truncate_at_non_finite the trial is rejected naming file and line
+  // (ik.mot: 9 header/label lines, t = 0.15 s is data row 15 -> line 25).
+  try {
+    msk::load_gait_trial((dir / "trial.yaml").string());
+    ADD_FAILURE() << "expected InputError";
+  } catch (const arthrosim::common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("ik.mot:25: error: non-finite value in column 'knee_angle_r'"),
+              std::string::npos) << e.what();
+  }
+  msk::GaitTrialOptions to;
+  to.truncate_at_non_finite = true;
+  const auto trial = msk::load_gait_trial((dir / "trial.yaml").string(), to);
+  ASSERT_TRUE(trial.truncated.has_value());
+  EXPECT_EQ(trial.truncated->frame, 15);
+  EXPECT_EQ(trial.num_samples(), 15);
+  EXPECT_EQ(trial.truncated->full_samples, 115);
+  EXPECT_TRUE(trial.q.allFinite() && trial.qd.allFinite() && trial.qdd.allFinite());
+  const auto loads = msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
+  const auto frames = msk::comak_frame_inputs(loads, 12, 20, 1);
+  ASSERT_EQ(frames.size(), 4u);  // 12, 13, 14 and the stop frame 15
+  EXPECT_FALSE(frames.back().invalid_input.empty());
+
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  std::vector<int> solved;
+  try {
+    msk::run_comak(p, frames, [&](const auto& f, const auto& r, const auto&) {
+      check_frame(p, f, r);
+      solved.push_back(f.index);
+    });
+    ADD_FAILURE() << "expected ComakRunStopped";
+  } catch (const msk::ComakRunStopped& e) {
+    const std::string w = e.what();
+    std::printf("[nan] %s\n", w.c_str());
+    EXPECT_EQ(e.frame, 15);
+    EXPECT_NE(w.find("COMAK frame 15 (t = 0.15 s)"), std::string::npos) << w;
+    EXPECT_NE(w.find("ik.mot:25"), std::string::npos) << w;
+    EXPECT_NE(w.find("'knee_angle_r'"), std::string::npos) << w;
+    EXPECT_EQ(e.summary.frames, 3);
+    EXPECT_EQ(e.summary.stopped, w);
+  }
+  EXPECT_EQ(solved, (std::vector<int>{12, 13, 14}));
+
+  // A NaN produced inside the knee loads (not from a file) stops the same
+  // way at its frame.
+  msk::KneeLoads bad = trial_loads();
+  bad.M_ext_T(13, 2) = std::nan("");
+  solved.clear();
+  try {
+    msk::run_comak(p, msk::comak_frame_inputs(bad, 12, 14, 1),
+                   [&](const auto& f, const auto&, const auto&) { solved.push_back(f.index); });
+    ADD_FAILURE() << "expected ComakRunStopped";
+  } catch (const msk::ComakRunStopped& e) {
+    EXPECT_NE(std::string(e.what()).find("COMAK frame 13"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("M_ext_T"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(solved, (std::vector<int>{12}));
+}
+
+// The same trial through the executable: non-zero exit, the message names
+// the frame, file and column, and the frames before it are readable in the
+// kinematics file (with the `stopped` attribute).
+TEST(ComakStability, NanInTrialStopsArthrosimComak) {
+  const fs::path dir = scratch_trial("nan_executable");
+  add_spikes(dir);
+  edit_mot(dir / "grf.mot", 0.16, "ground_force_vx", [](double) { return std::nan(""); });
+  const std::string exe = std::string(ARTHROSIM_BINARY_DIR) + "/bin/arthrosim-comak";
+  ASSERT_TRUE(fs::exists(exe)) << exe << " not built";
+  const fs::path out = dir / "kinematics.h5", log = dir / "stderr.txt";
+  fs::remove(out);
+  const std::string cmd = exe + " --quiet --model " +
+                          msk::test::source("data/models/knee_parametric/knee_coarse.urdf") +
+                          " --trial " + dir.string() + " --out " + out.string() +
+                          " --first-frame 11 --last-frame 30 2> " + log.string() + " > /dev/null";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  std::ifstream in(log);
+  const std::string err((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::printf("[nan, arthrosim-comak] exit %d, stderr:\n%s", WEXITSTATUS(status), err.c_str());
+  EXPECT_NE(err.find("COMAK frame 16 (t = 0.16 s)"), std::string::npos) << err;
+  EXPECT_NE(err.find("grf.mot:26"), std::string::npos) << err;
+  EXPECT_NE(err.find("'ground_force_vx'"), std::string::npos) << err;
+
+  arthrosim::common::H5File f(out.string(), arthrosim::common::H5File::Mode::kRead);
+  const Eigen::VectorXi idx = f.read_vector_int("/frame_index");
+  ASSERT_EQ(idx.size(), 5);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(idx[i], 11 + i);
+  const Eigen::MatrixXd q = f.read_matrix("/coordinates/values");
+  EXPECT_EQ(q.rows(), 5);
+  EXPECT_TRUE(q.allFinite());
+  EXPECT_EQ(f.attribute_int("/", "frames"), 5);
+  EXPECT_NE(f.attribute_string("/", "stopped").find("COMAK frame 16"), std::string::npos);
+  EXPECT_TRUE(fs::exists(dir / "kinematics_activations.sto"));
 }
