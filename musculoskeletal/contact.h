@@ -62,8 +62,15 @@ double foundation_modulus(const ElasticFoundationParameters& p);
 /// One cartilage surface: mesh in its body's frame [m], thickness per triangle [m].
 struct ContactSurface {
   int body = -1;
-  common::TriangleMesh mesh;
+  common::TriangleMesh mesh;  ///< in the body frame [m]
   Eigen::VectorXd thickness;  ///< one entry per triangle, >= 0 (0 = rigid)
+  // Provenance (set by the model loader; not used by the contact itself):
+  std::string name;           ///< surface name in the model file
+  std::string mesh_file;      ///< mesh file it was read from (empty: built in code)
+  /// Pose of the mesh file's frame in the body frame (identity for
+  /// frame="body", X_WB(0)^-1 for frame="reference"), so a replacement mesh
+  /// in the file's frame (a prepared model) can be placed the same way.
+  Pose X_BM = Pose::Identity();
 };
 
 /// Constant part of a contact pair (geometry precomputed, tree built once).

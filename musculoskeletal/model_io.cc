@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "common/hdf5.h"
 #include "common/mesh_io.h"
 
 namespace arthrosim::musculoskeletal {
@@ -333,6 +334,9 @@ void read_surface(Context& c, const XMLElement* e) {
   const Pose X = to_body(c, e, s.body);
   for (int i = 0; i < s.mesh.num_vertices(); ++i)
     s.mesh.V.row(i) = (X * Vec3(s.mesh.V.row(i).transpose())).transpose();
+  s.name = n;
+  s.mesh_file = mesh;
+  s.X_BM = X;
   if (!c.surfaces.emplace(n, std::move(s)).second) c.rd.fail(e, "duplicate surface '" + n + "'");
   c.surface_line[n] = e->GetLineNum();
 }
@@ -488,6 +492,77 @@ Model load_model(const std::string& urdf_path) {
   std::stringstream ss;
   ss << in.rdbuf();
   return parse_model(ss.str(), urdf_path, fs::path(urdf_path).parent_path().string());
+}
+
+}  // namespace arthrosim::musculoskeletal
+
+// ------------------------------------------------------ prepared surfaces --
+
+namespace arthrosim::musculoskeletal {
+
+PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
+  common::H5File f(prepared_path, common::H5File::Mode::kRead);
+  const std::vector<std::string> names = f.read_strings("/surfaces/names");
+  // Prepared surfaces by the file name of their source mesh.
+  std::map<std::string, std::string> by_file;
+  for (const auto& n : names)
+    by_file[std::filesystem::path(f.attribute_string("/surfaces/" + n, "source_file"))
+                .filename()
+                .string()] = n;
+  PreparedSurfacesReport report;
+  std::map<std::string, ContactSurface> replaced;  // by model surface name
+  auto replace = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
+    if (auto it = replaced.find(s.name); it != replaced.end()) return it->second;
+    const std::string file = std::filesystem::path(s.mesh_file).filename().string();
+    auto it = by_file.find(file);
+    if (s.mesh_file.empty() || it == by_file.end()) {
+      std::string list;
+      for (const auto& [k, v] : by_file) list += (list.empty() ? "" : ", ") + k;
+      throw InputError(prepared_path, 0,
+                       "contact pair '" + pair + "': expected a prepared surface made from '" +
+                           file + "' (surface '" + s.name + "'), found surfaces from: " + list);
+    }
+    const std::string g = "/surfaces/" + it->second + "/triangles/";
+    common::TriangleMesh mesh;
+    mesh.V = f.read_matrix(g + "vertices", 3);
+    mesh.F = f.read_matrix_int(g + "faces", 3);
+    const Eigen::VectorXd tv = f.read_vector(g + "thickness");
+    if (tv.size() != mesh.num_vertices() || mesh.num_triangles() == 0)
+      throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
+                                             std::to_string(tv.size()) + " values for " +
+                                             std::to_string(mesh.num_vertices()) + " vertices");
+    // Same place as the model's own mesh (in the file frame): the centroids
+    // of the two surfaces must agree to within 2 mm, else the prepared file
+    // belongs to another geometry.
+    const Vec3 c_model = s.X_BM.inverse() * Vec3(s.mesh.V.colwise().mean().transpose());
+    const Vec3 c_prep = mesh.V.colwise().mean().transpose();
+    if ((c_model - c_prep).norm() > 2e-3) {
+      std::ostringstream m;
+      m << g << ": the prepared surface's centroid lies " << (c_model - c_prep).norm() * 1e3
+        << " mm from that of the model's '" << s.name << "' (" << s.mesh_file
+        << "); expected <= 2 mm (prepared from another geometry?)";
+      throw InputError(prepared_path, 0, m.str());
+    }
+    ContactSurface r = s;
+    r.mesh_file = prepared_path + ":" + g;
+    r.thickness.resize(mesh.num_triangles());
+    for (int t = 0; t < mesh.num_triangles(); ++t)
+      r.thickness[t] = (tv[mesh.F(t, 0)] + tv[mesh.F(t, 1)] + tv[mesh.F(t, 2)]) / 3.0;
+    for (int i = 0; i < mesh.num_vertices(); ++i)
+      mesh.V.row(i) = (s.X_BM * Vec3(mesh.V.row(i).transpose())).transpose();
+    r.mesh = std::move(mesh);
+    report.lines.push_back(s.name + ": " + std::to_string(s.mesh.num_triangles()) + " -> " +
+                           std::to_string(r.mesh.num_triangles()) + " triangles (prepared '" +
+                           it->second + "')");
+    replaced.emplace(s.name, r);
+    return r;
+  };
+  std::vector<ContactPair> pairs;
+  for (const ContactPair& c : model.contacts)
+    pairs.emplace_back(c.name(), replace(c.casting(), c.name()), replace(c.target(), c.name()),
+                       c.material());
+  model.contacts = std::move(pairs);
+  return report;
 }
 
 }  // namespace arthrosim::musculoskeletal

@@ -5,6 +5,7 @@
 // surfaces, contact pairs, prescribed joints) are read with tinyxml2 so every
 // error names file:line. Neither library appears in this header.
 #include <string>
+#include <vector>
 
 #include "musculoskeletal/model.h"
 
@@ -17,5 +18,20 @@ Model load_model(const std::string& urdf_path);
 /// relative file names. Throws common::InputError("file:line: error: ...").
 Model parse_model(const std::string& xml, const std::string& file_name,
                   const std::string& base_dir);
+
+struct PreparedSurfacesReport {
+  std::vector<std::string> lines;  ///< per replaced surface: "name: n -> m triangles (...)"
+};
+
+/// Replaces the cartilage surfaces of every contact pair by those of a
+/// prepared model (docs/prepared_model.md: remeshed articular surface and
+/// per-vertex thickness cast to the bone; a triangle gets the mean of its
+/// vertices, as thickness_csv). A model surface is matched to the prepared
+/// surface made from the mesh file of the same name; the prepared vertices
+/// (model frame of the mesh files) are placed in the body frame exactly as
+/// the model file places its own mesh (ContactSurface::X_BM). Materials and
+/// pairs are kept. Throws InputError naming the file when a surface has no
+/// prepared counterpart or the two lie more than 2 mm apart (centroids).
+PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path);
 
 }  // namespace arthrosim::musculoskeletal

@@ -79,8 +79,8 @@ int main(int argc, char** argv) {
   app.add_option("--scene", scene_path,
                  "scene YAML: its comak block gives effects and options (explicit flags win)");
   app.add_option("--prepared", prepared_path,
-                 "prepared-model HDF5 (accepted from the runner; not used: contact uses the "
-                 "model's own cartilage meshes)");
+                 "prepared-model HDF5 (arthrosim-prepare): contact uses its remeshed cartilage "
+                 "surfaces and cast thickness instead of the model file's meshes");
   app.add_option("--trial", trial_path, "trial description or its folder")->required();
   app.add_option("--out", out, "kinematics file to write (.h5)")->required();
   app.add_option("--first-frame", first, "first trial frame (0-based)")->capture_default_str();
@@ -156,11 +156,16 @@ int main(int argc, char** argv) {
                                "evaluates all contact pairs as one term)");
     o.forces.ligaments = wants("ligaments");
     o.forces.contact = wants("tibiofemoral_contact");
-    if (!prepared_path.empty())
-      common::log_info("--prepared " + prepared_path +
-                       ": not used by this stage (contact uses the model's own meshes)");
     model_path = resolve_model(model_path);
-    const msk::Model model = msk::load_model(model_path);
+    msk::Model model = msk::load_model(model_path);
+    if (!prepared_path.empty()) {
+      // The prepare stage's cartilage (its edge length sets the contact
+      // resolution of this stage too).
+      const auto rep = msk::use_prepared_surfaces(model, prepared_path);
+      std::string text;
+      for (const auto& l : rep.lines) text += "\n  " + l;
+      common::log_info("contact surfaces from " + prepared_path + ":" + text);
+    }
     msk::GaitTrialOptions to;
     to.lowpass.cutoff_hz = lowpass_hz;
     // A non-finite trial value: run the frames before it, then stop naming
@@ -175,7 +180,8 @@ int main(int argc, char** argv) {
     msk::ComakProblem problem(model, o);
 
     std::ostringstream opts;
-    opts << "model: " << model_path << "\ntrial: " << trial_path << "\nfirst_frame: " << first
+    opts << "model: " << model_path << "\nprepared: " << (prepared_path.empty() ? "none" : prepared_path)
+         << "\ntrial: " << trial_path << "\nfirst_frame: " << first
          << "\nlast_frame: " << last << "\nstride: " << stride
          << "\nforce_tolerance_n: " << o.force_tolerance << "\nlength_scale_m: " << o.length_scale
          << "\nipopt_tolerance: " << o.ipopt_tolerance << "\nmax_iterations: " << o.max_iterations

@@ -12,6 +12,7 @@
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
+#include "common/scene.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/kinematics_file.h"
@@ -372,4 +373,23 @@ TEST(Comak, FailedFramesAreMarked) {
   EXPECT_EQ(f.read_vector_int("/solver/status"), Eigen::VectorXi::Ones(2));
   EXPECT_EQ(f.read_vector_int("/solver/failed_frames"), (Eigen::VectorXi(2) << 20, 21).finished());
   EXPECT_EQ(f.attribute_int("/", "frames_failed"), 2);
+}
+
+// The scene schema's comak defaults (common/scene.cc) are the solver's own
+// (ComakOptions, GaitTrialOptions): a scene that leaves a key out runs the
+// stage exactly as arthrosim-comak without flags does.
+TEST(Comak, SceneDefaultsAreTheSolverDefaults) {
+  auto number = [](const char* key) {
+    const auto* spec = arthrosim::common::find_option("comak", key);
+    EXPECT_NE(spec, nullptr) << key;
+    return spec ? std::stod(std::string(spec->default_value)) : std::nan("");
+  };
+  const msk::ComakOptions o;
+  EXPECT_EQ(number("ipopt_tolerance"), o.ipopt_tolerance);
+  EXPECT_EQ(number("ipopt_max_iterations"), o.max_iterations);
+  EXPECT_EQ(number("activation_min"), o.activation_min);
+  EXPECT_EQ(number("lowpass_cutoff_hz"), msk::GaitTrialOptions{}.lowpass.cutoff_hz);
+  const auto* reserve = arthrosim::common::find_option("comak", "reserve_actuators");
+  ASSERT_NE(reserve, nullptr);
+  EXPECT_EQ(reserve->default_value == "true", o.reserve_actuators);
 }

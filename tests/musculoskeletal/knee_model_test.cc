@@ -5,8 +5,15 @@
 // at several angles; see the report on issue 3.)
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <set>
+#include <string>
+#include <vector>
 
+#include "common/error.h"
+#include "common/hdf5.h"
 #include "musculoskeletal/model_io.h"
 
 namespace msk = arthrosim::musculoskeletal;
@@ -45,4 +52,78 @@ TEST(KneeModel, LoadsWithLenhartSoftTissues) {
       EXPECT_GT(r.num_contacting, 0) << m.contacts[i].name();
     }
   }
+}
+
+// use_prepared_surfaces: a prepared file holding the model's own meshes (in
+// the mesh files' frame, as arthrosim-prepare writes them) with a uniform
+// 2 mm per-vertex thickness gives back the same body-frame meshes with that
+// thickness; a prepared file without one of the surfaces, or with a surface
+// moved by 5 mm, is rejected naming the file.
+TEST(KneeModel, PreparedSurfacesReplaceTheContactMeshes) {
+  namespace fs = std::filesystem;
+  const auto m0 = msk::load_model(model_path("knee_coarse.urdf"));
+  const fs::path dir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / "knee_model";
+  fs::create_directories(dir);
+  // Writes a prepared file from the model's surfaces; `shift` moves the
+  // named surface [m]; `skip` leaves one out.
+  auto write_prepared = [&](const std::string& path, const std::string& skip,
+                            const std::string& shifted, double shift) {
+    arthrosim::common::H5File f(path, arthrosim::common::H5File::Mode::kTruncate);
+    std::vector<std::string> names;
+    std::set<std::string> done;
+    for (const auto& c : m0.contacts) {
+      for (const auto* s : {&c.casting(), &c.target()}) {
+        if (s->name == skip || !done.insert(s->name).second) continue;
+        const std::string n = s->name.substr(0, s->name.find("_cartilage"));
+        names.push_back(n);
+        const std::string g = "/surfaces/" + n;
+        f.create_group(g + "/triangles");
+        f.set_attribute(g, "source_file", "/somewhere/else/" + fs::path(s->mesh_file).filename().string());
+        Eigen::MatrixXd V(s->mesh.num_vertices(), 3);
+        for (int i = 0; i < V.rows(); ++i)
+          V.row(i) = (s->X_BM.inverse() * Eigen::Vector3d(s->mesh.V.row(i).transpose())).transpose();
+        if (s->name == shifted) V.col(0).array() += shift;
+        f.write(g + "/triangles/vertices", V);
+        f.write(g + "/triangles/faces", Eigen::MatrixXi(s->mesh.F));
+        f.write(g + "/triangles/thickness", Eigen::VectorXd::Constant(V.rows(), 2e-3));
+      }
+    }
+    std::sort(names.begin(), names.end());
+    f.write("/surfaces/names", names);
+  };
+  const std::string good = (dir / "prepared_good.h5").string();
+  write_prepared(good, "", "", 0.0);
+  auto m = msk::load_model(model_path("knee_coarse.urdf"));
+  const auto rep = msk::use_prepared_surfaces(m, good);
+  EXPECT_EQ(rep.lines.size(), 4u);
+  ASSERT_EQ(m.contacts.size(), m0.contacts.size());
+  for (size_t i = 0; i < m.contacts.size(); ++i) {
+    const auto& a = m.contacts[i].casting();
+    const auto& b = m0.contacts[i].casting();
+    EXPECT_EQ(m.contacts[i].name(), m0.contacts[i].name());
+    ASSERT_EQ(a.mesh.V.rows(), b.mesh.V.rows());
+    // The round trip X_BM^-1 then X_BM: rounding only (1e-12 m).
+    EXPECT_LE((a.mesh.V - b.mesh.V).cwiseAbs().maxCoeff(), 1e-12) << m.contacts[i].name();
+    EXPECT_LE((a.thickness.array() - 2e-3).abs().maxCoeff(), 1e-15);
+    EXPECT_EQ(m.contacts[i].material().youngs_modulus, m0.contacts[i].material().youngs_modulus);
+  }
+  auto message_of = [&](const std::string& path) {
+    auto mm = msk::load_model(model_path("knee_coarse.urdf"));
+    try {
+      msk::use_prepared_surfaces(mm, path);
+    } catch (const arthrosim::common::InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string missing = (dir / "prepared_missing.h5").string();
+  write_prepared(missing, "patella_cartilage", "", 0.0);
+  const std::string e1 = message_of(missing);
+  EXPECT_NE(e1.find("prepared_missing.h5"), std::string::npos) << e1;
+  EXPECT_NE(e1.find("patella_cartilage.stl"), std::string::npos) << e1;
+  const std::string moved = (dir / "prepared_moved.h5").string();
+  write_prepared(moved, "", "tibia_medial_cartilage", 5e-3);
+  const std::string e2 = message_of(moved);
+  EXPECT_NE(e2.find("prepared_moved.h5"), std::string::npos) << e2;
+  EXPECT_NE(e2.find("5 mm"), std::string::npos) << e2;
 }
