@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -214,8 +215,9 @@ std::string quote(const std::string& arg) {
 
 // Runs `exe args...` with this process's stdout/stderr (so the stage's own
 // output and progress display stream through). Returns the exit code, or 128
-// + signal number when the stage was killed.
-int execute(const fs::path& exe, const std::vector<std::string>& args) {
+// + signal number when the stage was killed; `usage` receives the stage
+// process's resource usage (wait4), which studies report per stage.
+int execute(const fs::path& exe, const std::vector<std::string>& args, struct rusage& usage) {
   std::cout.flush();
   std::cerr.flush();
   std::fflush(nullptr);
@@ -233,7 +235,8 @@ int execute(const fs::path& exe, const std::vector<std::string>& args) {
     _exit(127);
   }
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
+  usage = {};
+  while (wait4(pid, &status, 0, &usage) < 0) {
     if (errno != EINTR) return 127;
   }
   if (WIFEXITED(status)) return WEXITSTATUS(status);
@@ -494,9 +497,13 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
     std::error_code ec;
     fs::remove(stamp_path(out_dir, step.name), ec);
     const auto t0 = std::chrono::steady_clock::now();
-    outcome.exit_code = execute(exe, step.arguments);
+    struct rusage usage {};
+    outcome.exit_code = execute(exe, step.arguments, usage);
     outcome.wall_time_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    outcome.cpu_time_s = static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+                         1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+    outcome.max_rss_kb = usage.ru_maxrss;  // kilobytes on Linux (getrusage(2))
     if (outcome.exit_code != 0) {
       outcome.status = StageStatus::kFailed;
       outcome.reason = outcome.exit_code > 128

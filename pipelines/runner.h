@@ -29,6 +29,7 @@
 // says what changed and runs it. The stamp is deleted before a stage starts,
 // so a stage that fails or is killed never looks up to date. A run holds an
 // exclusive lock on DIR/.arthrosim.lock, so two runs never share a folder.
+#include <cstdint>
 #include <filesystem>
 #include <iosfwd>
 #include <optional>
@@ -88,6 +89,11 @@ struct StageOutcome {
   std::string key;      ///< SHA-256 stage key (empty if not computed)
   int exit_code = 0;    ///< of the executable (128 + signal when killed)
   double wall_time_s = 0.0;
+  /// Of a stage that was executed (kRan or kFailed), from wait4's rusage of
+  /// the stage process (its waited-for children included): user + system CPU
+  /// time, and the peak resident set size of the largest of those processes.
+  double cpu_time_s = 0.0;
+  std::int64_t max_rss_kb = 0;
 };
 
 enum class RunStatus {

@@ -5,6 +5,7 @@
 // Scene format: docs/scenes.md. Runner: pipelines/runner.h.
 #include <CLI/CLI.hpp>
 
+#include <filesystem>
 #include <iostream>
 
 #include "common/effects.h"
@@ -12,6 +13,7 @@
 #include "common/scene.h"
 #include "common/version.h"
 #include "pipelines/runner.h"
+#include "pipelines/study.h"
 
 namespace {
 
@@ -34,16 +36,67 @@ Sample runs (from the repository root, after scripts/build.sh):
       the seed's osmotic scenario: prepare, then the surface stage (no COMAK)
   build/bin/arthrosim schema
       every scene key with its type, unit, default and range, and every effect
+  build/bin/arthrosim study accuracy data/studies/surface_edge_length.yaml \
+      --vary prepare.edge_length_mm=4,3,2.5,2 --out out/study_surface
+      what accuracy costs in time (see `arthrosim study accuracy --help`)
 
 Stage programs are looked up next to this executable, or in
 $ARTHROSIM_STAGE_DIR when set.
 Exit status: 0 success; 1 bad scene, missing stage program or failed stage.)";
+
+constexpr const char* kStudyDescription = R"(arthrosim study accuracy: what accuracy costs in time.
+
+Runs SCENE at every setting of the --vary keys (the full grid when several
+are given), each through the scene runner in its own folder OUT/runs/<setting>
+(a stage whose options and inputs equal those of an earlier setting is copied
+from it and reused by the runner's stamps, not rerun), and measures per stage
+the wall time, the CPU time and the peak memory (max RSS) of the stage
+process, and the error of the stage's key outputs against the reference
+setting (the last value of every --vary, or --reference):
+  comak            tibiofemoral contact force (RMS of |F - F_ref| over the
+                   cycle / mean |F_ref|), muscle activations (RMS)
+  surface.<S>      max deflection (relative), tibiofemoral contact force
+                   (relative RMS) when the surface output has it
+  post             mean model-map angle per scenario (relative)
+List the values from coarsest to finest. The recommended setting of each stage
+is the coarsest one from which refining further changes its key outputs by no
+more than 5 % (seed 001's convergence rule).
+
+KEY is a dotted scene key: model, prepare.edge_length_mm, comak.ipopt_tolerance,
+surface.time_step_s (every scenario that does not set it),
+surface.scenarios.osmotic.time_step_s, post.outline_points, ... (`arthrosim
+schema` lists the keys; an unknown key is refused with the list of this
+scene's keys). A relative path value is relative to the scene file.
+
+Writes OUT/study.json (everything), OUT/study.csv (one row per setting and
+stage), OUT/report.html (error-versus-time plot with Pareto fronts, tables,
+recommended settings), OUT/scenes/ (each setting's scene).
+
+Sample runs (from the repository root, after scripts/build.sh):
+  build/bin/arthrosim study accuracy data/studies/post_outline_points.yaml \
+      --vary post.outline_points=50,100,200,400,800 --out out/study_post
+      post stage: CPD outline resolution (prepare and surface run once)
+  build/bin/arthrosim study accuracy data/studies/surface_edge_length.yaml \
+      --vary prepare.edge_length_mm=4,3,2.5,2 --out out/study_surface
+      stage 2: the osmotic scenario at four shell resolutions (medium knee)
+  build/bin/arthrosim study accuracy data/studies/comak_tolerance.yaml \
+      --vary comak.ipopt_tolerance=1e-2,1e-3,1e-4,1e-6,1e-8 --out out/study_comak
+      stage 1: Ipopt tolerance on the coarse knee
+  build/bin/arthrosim study accuracy data/scenes/cantilever_plate.yaml \
+      --vary surface.scenarios.cantilever.youngs_modulus_mpa=100,400 \
+      --vary surface.scenarios.cantilever.shell_thickness_mm=1,2 --reference \
+      surface.scenarios.cantilever.youngs_modulus_mpa=400 --out out/study_grid
+      a 2 x 2 grid
+
+Exit status: 0 every setting ran; 1 bad input (nothing runs) or a setting
+failed (the outputs are still written and name it).)";
 
 }  // namespace
 
 int main(int argc, char** argv) {
   namespace pl = arthrosim::pipelines;
   namespace cm = arthrosim::common;
+  namespace fs = std::filesystem;
   CLI::App app{kDescription, "arthrosim"};
   app.set_version_flag("--version", std::string(cm::kVersion) + " (" + cm::kGitRevision + ")");
   app.require_subcommand(1);
@@ -59,7 +112,54 @@ int main(int argc, char** argv) {
 
   CLI::App* schema = app.add_subcommand("schema", "print every scene key and effect");
 
+  CLI::App* study = app.add_subcommand("study", "studies of a scene (accuracy versus time)");
+  study->require_subcommand(1);
+  CLI::App* accuracy = study->add_subcommand("accuracy", kStudyDescription);
+  std::string study_scene;
+  std::vector<std::string> vary;
+  pl::study::StudyOptions study_options;
+  std::string study_out;
+  accuracy->add_option("SCENE", study_scene, "scene file (YAML)")->required()->check(CLI::ExistingFile);
+  accuracy->add_option("--vary", vary, "KEY=V1,V2,... (coarsest first); repeat for a grid")
+      ->required()
+      ->allow_extra_args(false);
+  accuracy->add_option("--out", study_out, "output folder (created when missing)")->required();
+  accuracy->add_option("--reference", study_options.reference,
+                       "reference value: V (one --vary) or KEY=V; default the last value of each")
+      ->allow_extra_args(false);
+  accuracy->add_flag("--force", study_options.force, "rerun every stage of every setting");
+
   CLI11_PARSE(app, argc, argv);
+
+  if (accuracy->parsed()) {
+    try {
+      study_options.scene_file = study_scene;
+      study_options.out_dir = study_out;
+      study_options.stage_dir = pl::default_stage_dir();
+      for (int i = 0; i < argc; ++i) {
+        study_options.command_line += (i ? " " : "") + std::string(i ? argv[i] : "arthrosim");
+      }
+      for (const std::string& v : vary) study_options.axes.push_back(pl::study::parse_vary(v));
+      const pl::study::StudyResult result = pl::study::run_accuracy_study(study_options, std::cout);
+      pl::study::write_study_outputs(study_options, result);
+      const fs::path out = fs::absolute(study_out).lexically_normal();
+      std::cout << "study: wrote " << (out / "study.json").string() << ", "
+                << (out / "study.csv").string() << ", " << (out / "report.html").string() << "\n";
+      bool all_ok = true;
+      for (const pl::study::SettingResult& r : result.settings) all_ok = all_ok && r.ok;
+      if (!all_ok) {
+        std::cerr << "arthrosim study: error: at least one setting failed (see the report)\n";
+        return 1;
+      }
+      return 0;
+    } catch (const cm::InputError& e) {
+      std::cerr << "arthrosim study: " << e.what() << "\n";
+      return 1;
+    } catch (const std::filesystem::filesystem_error& e) {
+      std::cerr << "arthrosim study: error: " << e.what() << "\n";
+      return 1;
+    }
+  }
 
   if (schema->parsed()) {
     std::cout << "# Scene keys (from option_schema() in common/scene.cc)\n"

@@ -48,3 +48,20 @@ if(EXISTS ${CMAKE_SOURCE_DIR}/pipelines/apps/arthrosim-surface.cc)
     PASS_REGULAR_EXPRESSION "plan: prepare surface.osmotic\n.*surface.osmotic: effects built: foundation_springs [0-9]+, foundation_damping [0-9]+, osmotic_pressure [0-9]+, periphery_fixed [0-9]+, inertia [0-9]+\n.*arthrosim: finished: prepare ran .*surface.osmotic ran"
     FAIL_REGULAR_EXPRESSION "mesh_contact|comak")
 endif()
+
+# `arthrosim study accuracy --help`: the accuracy-versus-time study and its sample runs.
+add_test(NAME sample.arthrosim.study_accuracy_help COMMAND arthrosim study accuracy --help)
+set_tests_properties(sample.arthrosim.study_accuracy_help PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "Sample runs.*arthrosim study accuracy data/studies/.*--vary TEXT.*KEY=V1,V2")
+
+# The 2 x 2 grid of `arthrosim study accuracy --help` on the cantilever plate
+# (surface stage only, about a second): every setting runs, prepare is reused.
+add_test(NAME sample.arthrosim.study_accuracy_grid
+  COMMAND arthrosim study accuracy data/scenes/cantilever_plate.yaml
+    --vary surface.scenarios.cantilever.youngs_modulus_mpa=100,400
+    --vary surface.scenarios.cantilever.shell_thickness_mm=1,2
+    --reference surface.scenarios.cantilever.youngs_modulus_mpa=400
+    --out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_study_grid
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.study_accuracy_grid PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "study: \\[4/4\\] done.*prepare reused.*recommended for surface.cantilever: .*study: wrote .*report.html")
