@@ -577,12 +577,23 @@ std::string stage_signature(const StageStep& step, const fs::path& run_dir) {
   return s;
 }
 
+// A "field<TAB>value" line of a runner stamp (pipelines/runner.cc).
+std::string stamp_field(const fs::path& stamp, const std::string& field) {
+  std::ifstream in(stamp);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(field + "\t", 0) == 0) return line.substr(field.size() + 1);
+  }
+  return "";
+}
+
 // Copies the outputs (and files sharing their stem, e.g. .xdmf and .sto
 // sidecars) and the stamp of every stage of `donor` whose signature equals the
 // same stage of `target`, when the target folder has no stamp of its own for
-// it. The runner then decides from the stamps, as in any other folder: a
-// copied stage is reused only if its inputs' hashes still match. Copies, not
-// links: a stage rerun may rewrite its output file in place.
+// it, or one written by another build of the stage program. The runner then
+// decides from the stamps, as in any other folder: a copied stage is reused
+// only if its inputs' hashes still match. Copies, not links: a stage rerun
+// may rewrite its output file in place.
 std::vector<std::string> seed_run_folder(const std::vector<StageStep>& donor_plan,
                                          const fs::path& donor_dir,
                                          const std::vector<StageStep>& target_plan,
@@ -595,7 +606,16 @@ std::vector<std::string> seed_run_folder(const std::vector<StageStep>& donor_pla
     if (stage_signature(*d, donor_dir) != stage_signature(t, target_dir)) continue;
     const fs::path donor_stamp = donor_dir / ".stamps" / (t.name + ".txt");
     const fs::path target_stamp = target_dir / ".stamps" / (t.name + ".txt");
-    if (!fs::exists(donor_stamp) || fs::exists(target_stamp)) continue;
+    // The donor ran (or was checked) earlier in this study with the current
+    // stage program; a target stamp written by another build of it is stale
+    // and is replaced too. (A target stamp of the current build is left
+    // alone: it may differ from the donor's only through its own upstream
+    // files, and then it is the right one.)
+    if (!fs::exists(donor_stamp)) continue;
+    if (fs::exists(target_stamp) &&
+        stamp_field(target_stamp, "executable") == stamp_field(donor_stamp, "executable")) {
+      continue;
+    }
     fs::create_directories(target_stamp.parent_path());
     for (const fs::path& o : d->outputs) {
       const std::string stem = o.stem().string();
