@@ -53,8 +53,10 @@ std::string percent(double v) {
 std::string folder_name(const std::string& label) {
   std::string s;
   for (char c : label) {
-    const bool plain = std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '=' ||
-                       c == '-' || c == '+' || c == '_';
+    // No '=': stage programs take NAME=FILE arguments (arthrosim-post
+    // --surface), so a path holding '=' would be split.
+    const bool plain = std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' ||
+                       c == '+' || c == '_';
     s += plain ? c : '_';
   }
   if (s.size() > 80) s = s.substr(0, 60) + "_" + common::sha256_hex(label).substr(0, 12);
@@ -577,6 +579,26 @@ std::string stage_signature(const StageStep& step, const fs::path& run_dir) {
   return s;
 }
 
+// Stage -> every stage it depends on (transitively), from the plan's files.
+std::map<std::string, std::set<std::string>> upstream_stages(const std::vector<StageStep>& plan) {
+  std::map<std::string, std::set<std::string>> up;
+  for (const StageStep& s : plan) {
+    std::set<std::string>& u = up[s.name];
+    for (const auto& [label, path] : s.inputs) {
+      for (const StageStep& p : plan) {
+        if (&p == &s) continue;
+        for (const fs::path& o : p.outputs) {
+          if (o == path) {
+            u.insert(p.name);
+            u.insert(up[p.name].begin(), up[p.name].end());
+          }
+        }
+      }
+    }
+  }
+  return up;
+}
+
 // A "field<TAB>value" line of a runner stamp (pipelines/runner.cc).
 std::string stamp_field(const fs::path& stamp, const std::string& field) {
   std::ifstream in(stamp);
@@ -599,11 +621,20 @@ std::vector<std::string> seed_run_folder(const std::vector<StageStep>& donor_pla
                                          const std::vector<StageStep>& target_plan,
                                          const fs::path& target_dir) {
   std::vector<std::string> seeded;
+  std::set<std::string> same;  // stages equal in both settings, upstream included
+  const std::map<std::string, std::set<std::string>> upstream = upstream_stages(target_plan);
   for (const StageStep& t : target_plan) {
     const auto d = std::find_if(donor_plan.begin(), donor_plan.end(),
                                 [&](const StageStep& s) { return s.name == t.name; });
     if (d == donor_plan.end()) continue;
     if (stage_signature(*d, donor_dir) != stage_signature(t, target_dir)) continue;
+    // A stage fed by a stage that differs gets other input files: copying
+    // its output would only be rerun.
+    const std::set<std::string>& up = upstream.at(t.name);
+    if (!std::all_of(up.begin(), up.end(), [&](const std::string& u) { return same.count(u) > 0; })) {
+      continue;
+    }
+    same.insert(t.name);
     const fs::path donor_stamp = donor_dir / ".stamps" / (t.name + ".txt");
     const fs::path target_stamp = target_dir / ".stamps" / (t.name + ".txt");
     // The donor ran (or was checked) earlier in this study with the current
@@ -641,26 +672,6 @@ int count_matching_stages(const std::vector<StageStep>& a, const fs::path& a_dir
     }
   }
   return n;
-}
-
-// Stage -> every stage it depends on (transitively), from the plan's files.
-std::map<std::string, std::set<std::string>> upstream_stages(const std::vector<StageStep>& plan) {
-  std::map<std::string, std::set<std::string>> up;
-  for (const StageStep& s : plan) {
-    std::set<std::string>& u = up[s.name];
-    for (const auto& [label, path] : s.inputs) {
-      for (const StageStep& p : plan) {
-        if (&p == &s) continue;
-        for (const fs::path& o : p.outputs) {
-          if (o == path) {
-            u.insert(p.name);
-            u.insert(up[p.name].begin(), up[p.name].end());
-          }
-        }
-      }
-    }
-  }
-  return up;
 }
 
 // Measured runs, by stage key, kept in DIR/.stage_measurements.tsv so that a
@@ -1002,7 +1013,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
     // Seed from the earlier setting that shares the most stages.
     int donor = -1, best = 0;
     for (std::size_t j = 0; j < i; ++j) {
-      if (options.force || !result.settings[j].ok) continue;
+      if (options.force) continue;  // a failed setting still has the stamps of what worked
       const int m = count_matching_stages(plans[j], result.settings[j].dir, plans[i], r.dir);
       if (m > best) best = m, donor = static_cast<int>(j);
     }
@@ -1039,6 +1050,14 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
         case StageStatus::kSkipped: rec.run = "reused"; break;
         case StageStatus::kFailed: rec.run = "failed"; break;
         default: rec.run = "not run";
+      }
+      if (o.status == StageStatus::kFailed) {
+        rec.failure = o.reason;
+        for (const StageStep& st : plans[i]) {
+          if (st.name != o.name) continue;
+          rec.failed_with_output = std::all_of(st.outputs.begin(), st.outputs.end(),
+                                               [](const fs::path& f) { return fs::exists(f); });
+        }
       }
       if (o.status == StageStatus::kRan || o.status == StageStatus::kFailed) {
         rec.wall_time_s = o.wall_time_s;
@@ -1096,17 +1115,19 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
   const SettingResult& ref = result.settings[result.reference];
   if (!ref.ok) {
     result.notes.push_back("the reference setting " + ref.label + " failed (" + ref.failure +
-                           "), so no error could be computed");
+                           "): errors exist only for stages whose reference output was written");
   }
   std::set<std::string> noted;
   for (SettingResult& r : result.settings) {
     for (StageRecord& rec : r.stages) {
       if (rec.stage == "prepare") continue;
-      const bool have = rec.run == "ran" || rec.run == "reused";
+      const auto usable = [](const StageRecord& x) {
+        return x.run == "ran" || x.run == "reused" || x.failed_with_output;
+      };
+      const bool have = usable(rec);
       const auto ref_rec = std::find_if(ref.stages.begin(), ref.stages.end(),
                                         [&](const StageRecord& x) { return x.stage == rec.stage; });
-      const bool have_ref = ref_rec != ref.stages.end() &&
-                            (ref_rec->run == "ran" || ref_rec->run == "reused");
+      const bool have_ref = ref_rec != ref.stages.end() && usable(*ref_rec);
       try {
         if (rec.stage == "comak") {
           if (have && have_ref) rec.metrics = comak_metrics(r.dir / "kinematics.h5", ref.dir / "kinematics.h5");
@@ -1121,6 +1142,17 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
         m.name = "read";
         m.note = std::string("cannot read the output: ") + e.what();
         rec.metrics = {m};
+      }
+      std::string caveat;
+      if (have && rec.failed_with_output) {
+        caveat = "the stage failed (" + rec.failure + ") but wrote its output; compared over it. ";
+      }
+      if (have_ref && ref_rec->failed_with_output) {
+        caveat += "The reference's stage failed (" + ref_rec->failure +
+                  ") but wrote its output; compared with it. ";
+      }
+      if (!caveat.empty()) {
+        for (Metric& m : rec.metrics) m.note = caveat + m.note;
       }
       if (!have || !have_ref) {
         Metric m;
@@ -1157,13 +1189,29 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
     for (const SettingResult& r : result.settings) {
       const auto it = std::find_if(r.stages.begin(), r.stages.end(),
                                    [&](const StageRecord& x) { return x.stage == stage; });
-      err.push_back(it != r.stages.end() ? it->stage_error : kNaN);
+      // A stage that failed (even with an output) never qualifies.
+      err.push_back(it != r.stages.end() && it->run != "failed" ? it->stage_error : kNaN);
       cost.push_back(it != r.stages.end() ? it->time_to_output_s : kNaN);
     }
     Recommendation rec;
     rec.stage = stage;
     rec.setting = recommend_setting(gi, err, cost, options.tolerance);
-    if (rec.setting >= 0) {
+    std::set<std::string> keys;
+    for (const SettingResult& r : result.settings) {
+      for (const StageRecord& x : r.stages) {
+        if (x.stage == stage) keys.insert(x.key);
+      }
+    }
+    if (keys.size() == 1 && !keys.begin()->empty() && result.settings.size() > 1) {
+      rec.setting = -1;
+      rec.reason = "not affected by the varied keys: the same stage key (inputs, options, code) "
+                   "in every setting";
+    } else if (rec.setting >= 0 && static_cast<std::size_t>(rec.setting) == result.reference) {
+      rec.reason = "only the reference itself qualifies: every coarser setting, or one finer than "
+                   "it, differs from the reference by more than " + percent(options.tolerance) +
+                   " or failed; convergence to " + percent(options.tolerance) +
+                   " is not shown by this study";
+    } else if (rec.setting >= 0) {
       const std::size_t s = static_cast<std::size_t>(rec.setting);
       rec.reason = "coarsest setting from which every finer setting stays within " +
                    percent(options.tolerance) + " of the reference (stage error " +
@@ -1338,6 +1386,7 @@ void write_study_outputs(const StudyOptions& options, const StudyResult& result)
     for (const StageRecord& rec : r.stages) {
       j.begin_object().value("stage", rec.stage).value("run", rec.run);
       if (!rec.produced_by.empty()) j.value("produced_by", rec.produced_by);
+      if (!rec.failure.empty()) j.value("failure", rec.failure);
       j.value("stage_key", rec.key)
           .value("wall_time_s", rec.wall_time_s)
           .value("cpu_time_s", rec.cpu_time_s)
@@ -1500,7 +1549,8 @@ void write_study_outputs(const StudyOptions& options, const StudyResult& result)
         const bool marked = rec_setting == static_cast<int>(i) && stage != "prepare";
         h += std::string(marked ? "<tr class=\"rec\">" : "<tr>") + "<td>" + report::escape(r.label) +
              (i == result.reference ? " (reference)" : "") + (marked ? " — recommended" : "") + "</td><td>" +
-             report::escape(rec.run + (rec.produced_by.empty() ? "" : " (" + rec.produced_by + ")")) +
+             report::escape(rec.run + (rec.produced_by.empty() ? "" : " (" + rec.produced_by + ")") +
+                            (rec.failure.empty() ? "" : " (" + rec.failure + ")")) +
              "</td><td>" + fixed(rec.wall_time_s, 2) + "</td><td>" + fixed(rec.cpu_time_s, 2) + "</td><td>" +
              fixed(rec.max_rss_mb, 0) + "</td><td>" + fixed(rec.time_to_output_s, 2) + "</td>";
         for (const std::string& name : metric_cols) {

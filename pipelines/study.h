@@ -94,6 +94,13 @@ struct StageRecord {
   /// earlier study run"); empty when it ran here.
   std::string produced_by;
   std::string key;                ///< the runner's stage key
+  /// For a failed stage: the runner's reason ("exited with status 2").
+  std::string failure;
+  /// A failed stage whose output files all exist (e.g. arthrosim-comak exits
+  /// 2 when frames failed, with them marked in the file): its metrics are
+  /// computed over what it wrote, but the setting never qualifies for the
+  /// recommendation.
+  bool failed_with_output = false;
   double wall_time_s = kNaN;      ///< of the run that produced the output
   double cpu_time_s = kNaN;
   double max_rss_mb = kNaN;       ///< peak resident set size of the stage process

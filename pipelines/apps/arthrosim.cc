@@ -37,7 +37,7 @@ Sample runs (from the repository root, after scripts/build.sh):
   build/bin/arthrosim schema
       every scene key with its type, unit, default and range, and every effect
   build/bin/arthrosim study accuracy data/studies/surface_edge_length.yaml \
-      --vary prepare.edge_length_mm=4,3,2.5,2 --out out/study_surface
+      --vary prepare.edge_length_mm=3,2.5,2,1.5 --out out/study_surface
       what accuracy costs in time (see `arthrosim study accuracy --help`)
 
 Stage programs are looked up next to this executable, or in
@@ -77,8 +77,8 @@ Sample runs (from the repository root, after scripts/build.sh):
       --vary post.outline_points=50,100,200,400,800 --out out/study_post
       post stage: CPD outline resolution (prepare and surface run once)
   build/bin/arthrosim study accuracy data/studies/surface_edge_length.yaml \
-      --vary prepare.edge_length_mm=4,3,2.5,2 --out out/study_surface
-      stage 2: the osmotic scenario at four shell resolutions (medium knee)
+      --vary prepare.edge_length_mm=3,2.5,2,1.5 --out out/study_surface
+      stage 2: the osmotic scenario at four shell resolutions (coarse knee)
   build/bin/arthrosim study accuracy data/studies/comak_tolerance.yaml \
       --vary comak.ipopt_tolerance=1e-2,1e-3,1e-4,1e-6,1e-8 --out out/study_comak
       stage 1: Ipopt tolerance on the coarse knee

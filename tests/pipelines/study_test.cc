@@ -300,6 +300,8 @@ TEST_F(StudyRun, CantileverResolutionStudyRecommendsFourQuads) {
   std::vector<double> err;
   for (const SettingResult& s : r.settings) {
     ASSERT_TRUE(s.ok) << s.failure << log.str();
+    // Stage programs split NAME=FILE arguments (arthrosim-post --surface).
+    EXPECT_EQ(s.dir.string().find('='), std::string::npos) << s.dir;
     ASSERT_EQ(s.stages.size(), 2u);
     EXPECT_EQ(s.stages[0].stage, "prepare");
     EXPECT_EQ(s.stages[1].stage, "surface.cantilever");
@@ -312,6 +314,8 @@ TEST_F(StudyRun, CantileverResolutionStudyRecommendsFourQuads) {
   }
   // prepare runs once; the other settings reuse its output (copied, hashes checked).
   EXPECT_EQ(r.settings[0].stages[0].run, "ran");
+  // prepare has no metric, so no recommendation: only the surface stage has one.
+  EXPECT_EQ(r.recommended.size(), 1u);
   for (std::size_t i = 1; i < 4; ++i) {
     EXPECT_EQ(r.settings[i].stages[0].run, "reused");
     EXPECT_EQ(r.settings[i].stages[0].produced_by, r.settings[0].label);
@@ -391,6 +395,35 @@ TEST_F(StudyRun, SecondRunReusesEveryStageAndKeepsItsMeasuredCost) {
     EXPECT_EQ(second.settings[i].stages[1].stage_error, first.settings[i].stages[1].stage_error);
   }
   EXPECT_EQ(second.recommended[0].setting, first.recommended[0].setting);
+}
+
+// A stage that fails but writes its output (arthrosim-comak exits 2 when
+// frames failed, marking them in the file): compared over what it wrote,
+// never recommended. Simulated by a wrapper around the real surface stage that
+// exits 2 for the 4-quad plate.
+TEST_F(StudyRun, FailedStageWithOutputIsComparedButNeverRecommended) {
+  const fs::path bin = kDir / "cantilever" / "wrapped_bin";
+  fs::create_directories(bin);
+  fs::remove(bin / "arthrosim-prepare");
+  fs::create_symlink(kBin / "arthrosim-prepare", bin / "arthrosim-prepare");
+  std::ofstream(bin / "arthrosim-surface") << "#!/bin/sh\n" << (kBin / "arthrosim-surface").string()
+                                           << " \"$@\" || exit $?\ncase \"$*\" in *plate4.obj*) exit 2;; esac\n";
+  fs::permissions(bin / "arthrosim-surface", fs::perms::owner_all);
+  StudyOptions o = options(kDir / "cantilever" / "wrapped");
+  o.stage_dir = bin;
+  std::ostringstream log;
+  const StudyResult r = run_accuracy_study(o, log);
+  ASSERT_EQ(r.settings.size(), 4u);
+  EXPECT_FALSE(r.settings[1].ok);
+  const StageRecord& failed = r.settings[1].stages[1];
+  EXPECT_EQ(failed.run, "failed");
+  EXPECT_EQ(failed.failure, "exited with status 2");
+  EXPECT_TRUE(failed.failed_with_output);
+  ASSERT_FALSE(failed.metrics.empty());
+  EXPECT_LT(failed.metrics[0].error, 0.05);  // the 4-quad plate's own (good) result
+  EXPECT_NE(failed.metrics[0].note.find("the stage failed (exited with status 2)"), std::string::npos);
+  // Without it plate4 would be recommended; failed, the next finer one is.
+  EXPECT_EQ(r.recommended.at(0).setting, 2);
 }
 
 // ---------------------------------------------------------------------------
