@@ -74,6 +74,11 @@ void check_frame_input(const ComakFrameInput& in) {
   common::check_finite(v, frame_name(in) +
                               ": input (time, knee flexion, hip flexion/adduction/rotation, ankle "
                               "flexion, F_ext_T xyz, M_ext_T xyz)");
+  if (in.has_foot_load) {
+    Eigen::VectorXd u(9);
+    u << in.F_foot_T, in.M_foot_T, in.ankle_centre_T;
+    common::check_finite(u, frame_name(in) + ": foot load (F_foot_T xyz, M_foot_T xyz, ankle centre xyz)");
+  }
 }
 
 }  // namespace
@@ -109,9 +114,20 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
     const Joint* j = joint_of(model, c);
     revolute_.push_back(j && j->type == JointType::kRevolute);
   }
-  const int nf = static_cast<int>(free_.size());
-  row_scale_.resize(nf);
-  for (int k = 0; k < nf; ++k) row_scale_[k] = revolute_[k] ? 1.0 / options.length_scale : 1.0;
+  rows_ = free_;
+  if (options.ankle_equilibrium) {
+    const Joint* j = joint_of(model, ankle_);
+    if (!j || j->type != JointType::kRevolute || j->parent != tibia_)
+      throw common::InputError(model.source + ": error: COMAK ankle equilibrium needs 'ankle_flexion' "
+                               "to be a revolute joint whose parent is the tibia");
+    ankle_axis_T_ = j->X_PJ.linear() * j->axis_J;
+    ankle_origin_T_ = j->X_PJ.translation();
+    rows_.push_back(ankle_);
+    revolute_.push_back(true);
+  }
+  const int nr = static_cast<int>(rows_.size());
+  row_scale_.resize(nr);
+  for (int k = 0; k < nr; ++k) row_scale_[k] = revolute_[k] ? 1.0 / options.length_scale : 1.0;
 
   // Volume weights from the path length at q = 0 (stand-in for l_opt).
   const int nm = static_cast<int>(model.muscles.size());
@@ -122,6 +138,27 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
   for (int i = 0; i < nm; ++i) {
     const PathState p = evaluate_path(model.muscles[i].path, kin.X_WB);
     V_[i] = model.muscles[i].max_isometric_force * p.length / options.muscle_stress;
+  }
+  if (options.ankle_equilibrium) {
+    // The ankle row must be balanceable both ways: plantarflexors (moment
+    // arm < 0 about the dorsiflexion axis) for push-off and dorsiflexors for
+    // the heel-strike moment. Checked at q = 0.
+    KinematicsData k0;
+    forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), k0);
+    ModelData d0 = make_data(model);
+    d0.kinematics = k0;
+    bool plantar = false, dorsi = false;
+    for (int i = 0; i < nm; ++i) {
+      const double r = moment_arms(model, d0, evaluate_path(model.muscles[i].path, k0.X_WB))[ankle_];
+      plantar = plantar || r < -1e-3;
+      dorsi = dorsi || r > 1e-3;
+    }
+    if (!plantar || !dorsi)
+      throw common::InputError(model.source + ": error: COMAK ankle equilibrium: the model has no " +
+                               std::string(!plantar ? "plantarflexor" : "dorsiflexor") +
+                               " (a muscle with an ankle moment arm beyond 1 mm of that sign at q "
+                               "= 0); add the uniarticular ankle muscles (add_ankle_muscles, "
+                               "arthrosim-comak --ankle-equilibrium does)");
   }
   for (const auto& [name, w] : options.muscle_weights) {
     const int i = model.muscle_index(name);
@@ -149,7 +186,16 @@ Eigen::VectorXd ComakProblem::external_generalized_force(const ModelData& data,
   const Eigen::Matrix3d R_WT = X_WT.linear();
   add_point_force(model_.tree, data.kinematics, tibia_, X_WT.translation(), R_WT * in.F_ext_T, Q);
   add_body_couple(model_.tree, data.kinematics, tibia_, R_WT * in.M_ext_T, Q);
+  if (options_.ankle_equilibrium) Q[ankle_] += external_ankle_moment(in);
   return Q;
+}
+
+double ComakProblem::external_ankle_moment(const ComakFrameInput& in) const {
+  if (!options_.ankle_equilibrium) return 0.0;
+  // The foot's load is given about the leg model's ankle centre; moved to a
+  // point on the model's ankle axis, projected on that axis.
+  const Vec3 M = in.M_foot_T + (in.ankle_centre_T - ankle_origin_T_).cross(in.F_foot_T);
+  return ankle_axis_T_.dot(M);
 }
 
 Eigen::VectorXd ComakProblem::residual(ModelData& data, const ComakFrameInput& in,
@@ -157,16 +203,17 @@ Eigen::VectorXd ComakProblem::residual(ModelData& data, const ComakFrameInput& i
                                        const Eigen::VectorXd& e) const {
   evaluate_forces(model_, data, q, Eigen::VectorXd(), a, options_.forces);
   const Eigen::VectorXd Qe = external_generalized_force(data, in);
-  const int nf = static_cast<int>(free_.size());
-  Eigen::VectorXd r(nf);
-  for (int k = 0; k < nf; ++k) r[k] = data.Q[free_[k]] + Qe[free_[k]] + (e.size() ? e[k] : 0.0);
+  const int nr = num_rows();
+  Eigen::VectorXd r(nr);
+  for (int k = 0; k < nr; ++k)
+    r[k] = data.Q[rows_[k]] + Qe[rows_[k]] + (k < e.size() ? e[k] : 0.0);
   return r;
 }
 
 Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFrameInput& in,
                                                 const Eigen::VectorXd& q,
                                                 const Eigen::VectorXd& a) const {
-  const int nf = static_cast<int>(free_.size());
+  const int nf = num_rows();
   const int nm = static_cast<int>(model_.muscles.size());
   const int ns = static_cast<int>(secondary_.size());
   // dQ/ds of the internal forces (central differences in model.cc).
@@ -176,7 +223,7 @@ Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFram
   if (options_.forces.muscles) {
     for (int i = 0; i < nm; ++i) {
       const Eigen::VectorXd r = moment_arms(model_, data, data.muscle_paths[i]);
-      for (int k = 0; k < nf; ++k) J(k, i) = model_.muscles[i].max_isometric_force * r[free_[k]];
+      for (int k = 0; k < nf; ++k) J(k, i) = model_.muscles[i].max_isometric_force * r[rows_[k]];
     }
   }
   // dQ_ext/ds by central differences of the kinematics (same step).
@@ -191,7 +238,7 @@ Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFram
     forward_kinematics(model_.tree, qm, work.kinematics);
     const Eigen::VectorXd Qm = external_generalized_force(work, in);
     for (int k = 0; k < nf; ++k)
-      J(k, nm + c) = data.dQ_dq(free_[k], secondary_[c]) + (Qp[free_[k]] - Qm[free_[k]]) / (2 * h);
+      J(k, nm + c) = data.dQ_dq(rows_[k], secondary_[c]) + (Qp[rows_[k]] - Qm[rows_[k]]) / (2 * h);
   }
   return J;
 }
@@ -220,7 +267,7 @@ class FrameNlp : public Ipopt::TNLP {
       : p_(p), data_(data), in_(in), x0_(x0) {
     nm_ = static_cast<int>(p.model().muscles.size());
     ns_ = static_cast<int>(p.secondary_coordinates().size());
-    nf_ = static_cast<int>(p.free_coordinates().size());
+    nf_ = p.num_rows();
     ne_ = p.options().reserve_actuators ? ns_ : 0;
     q_base_ = p.coordinates(in, Eigen::VectorXd());
     x_best_ = x0;
@@ -364,7 +411,7 @@ class FrameNlp : public Ipopt::TNLP {
 
   Eigen::VectorXd residual_at(const Ipopt::Number* x) {
     Eigen::Map<const Eigen::VectorXd> X(x, n());
-    Eigen::VectorXd e = Eigen::VectorXd::Zero(ne_ ? nf_ : 0);
+    Eigen::VectorXd e = Eigen::VectorXd::Zero(ne_ ? p_.free_coordinates().size() : 0);
     for (int c = 0; c < ne_; ++c) e[secondary_row(c)] = X[nm_ + ns_ + c];
     return p_.residual(data_, in_, q_of(x), X.head(nm_), e);
   }
@@ -407,7 +454,7 @@ struct Attempt {
 Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput& in,
                   const Eigen::VectorXd& x0, bool robust, const ComakMultipliers* warm) {
   Ipopt::SmartPtr<FrameNlp> nlp = new FrameNlp(p, data, in, x0);
-  const bool use_warm = warm && warm->lambda.size() == static_cast<int>(p.free_coordinates().size()) &&
+  const bool use_warm = warm && warm->lambda.size() == p.num_rows() &&
                         warm->z_lower.size() == x0.size();
   nlp->set_warm(use_warm ? warm : nullptr);
   Ipopt::SmartPtr<Ipopt::IpoptApplication> app = IpoptApplicationFactory();
@@ -467,6 +514,10 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   const int nf = static_cast<int>(p.free_coordinates().size());
   const int ne = o.reserve_actuators ? ns : 0;
   check_frame_input(in);
+  if (o.ankle_equilibrium && !in.has_foot_load)
+    throw common::InputError(frame_name(in) + ": COMAK ankle equilibrium needs the load on the foot "
+                             "from the inverse dynamics (a trial with pelvis and ground-reaction "
+                             "columns); this frame has none (knee loads given by the trial?)");
   if (a_start.size() != nm)
     throw common::InputError("COMAK: expected " + std::to_string(nm) + " start activations");
 
@@ -498,7 +549,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     res.reserves = e;
     res.objective = p.objective(a, ne ? e : Eigen::VectorXd());
     res.max_force_residual = res.max_moment_residual = 0.0;
-    for (int k = 0; k < nf; ++k) {
+    for (int k = 0; k < p.num_rows(); ++k) {
       double& m = p.revolute(k) ? res.max_moment_residual : res.max_force_residual;
       m = std::max(m, std::abs(r[k]));
     }
@@ -584,6 +635,12 @@ std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int firs
     f.ankle_flexion = loads.ankle_flexion[i];
     f.F_ext_T = loads.F_ext_T.row(i).transpose();
     f.M_ext_T = loads.M_ext_T.row(i).transpose();
+    if (loads.has_foot_loads) {
+      f.has_foot_load = true;
+      f.F_foot_T = loads.F_foot_T.row(i).transpose();
+      f.M_foot_T = loads.M_foot_T.row(i).transpose();
+      f.ankle_centre_T = loads.ankle_centre_T;
+    }
     out.push_back(f);
   }
   return out;

@@ -47,6 +47,13 @@
 // comak_test.cc); dc/de = S (exact). Hessian: Ipopt's limited-memory
 // quasi-Newton (L-BFGS) approximation of the Lagrangian's Hessian.
 //
+// Ankle equilibrium (ComakOptions::ankle_equilibrium, off by default): a
+// 13th row, the moment balance of the foot about the ankle axis under the
+// muscles that span the ankle and the foot's external load from the inverse
+// dynamics (ground reaction, weight and inertia of the foot). Without it the
+// ankle moment is internal to the shank+foot load and nothing asks the
+// gastrocnemii for ankle work (docs/comak.md).
+//
 // Inertia: the tibia belongs to the shank of the inverse dynamics
 // (knee_loads.h), so its weight and d'Alembert force are already in
 // F_ext/M_ext; the patella's (20 g) are neglected. No separate inertial
@@ -108,6 +115,17 @@ struct ComakOptions {
   int max_iterations = 300;
   /// Ipopt print level (0 = silent, 5 = Ipopt's default).
   int print_level = 0;
+  /// Ankle equilibrium (off by default): adds a 13th constraint row, the
+  /// moment balance of the foot about the model's ankle axis,
+  ///   Q_ankle(q, a) + n_A . (M_foot_T + (c_leg - c_A) x F_foot_T) = 0,
+  /// balanced by every muscle that spans the ankle (the gastrocnemii of the
+  /// knee model, plus uniarticular ankle muscles such as the stand-ins of
+  /// ankle_muscles.h, which the model must then contain). n_A, c_A: the
+  /// ankle joint's axis and origin in the tibia frame (the joint's parent
+  /// must be the tibia); c_leg, F_foot_T, M_foot_T: the inverse dynamics of
+  /// the foot (knee_loads.h), so a trial that gives knee loads directly
+  /// cannot be used. The row is scaled like the other moment rows.
+  bool ankle_equilibrium = false;
   /// Warm-start attempt 1 of each frame with the previous converged frame's
   /// multipliers too (Ipopt warm_start_init_point), not only its point.
   bool warm_start_multipliers = true;
@@ -130,6 +148,13 @@ struct ComakFrameInput {
   double ankle_flexion = 0.0;    ///< [rad]
   Eigen::Vector3d F_ext_T = Eigen::Vector3d::Zero();  ///< on the tibia, tibia frame [N]
   Eigen::Vector3d M_ext_T = Eigen::Vector3d::Zero();  ///< about the tibia origin [N m]
+  /// Load on the foot about the leg model's ankle centre, tibia frame
+  /// (KneeLoads::F_foot_T, M_foot_T, ankle_centre_T); used only with
+  /// ComakOptions::ankle_equilibrium, which needs has_foot_load.
+  bool has_foot_load = false;
+  Eigen::Vector3d F_foot_T = Eigen::Vector3d::Zero();  ///< [N]
+  Eigen::Vector3d M_foot_T = Eigen::Vector3d::Zero();  ///< [N m]
+  Eigen::Vector3d ankle_centre_T = Eigen::Vector3d::Zero();  ///< [m]
   /// Why this frame has no finite input, naming the trial file, line and
   /// column (set by comak_frame_inputs for the first frame after a trial
   /// that ended early at a non-finite value; its values are then NaN).
@@ -169,13 +194,21 @@ class ComakProblem {
 
   /// Free coordinates (12), the secondary ones (11) and the flexion index.
   const std::vector<int>& free_coordinates() const { return free_; }
+  /// Coordinates whose equilibrium is a constraint row: the free ones, then
+  /// the ankle with options().ankle_equilibrium (12 or 13 rows).
+  const std::vector<int>& equilibrium_coordinates() const { return rows_; }
+  int num_rows() const { return static_cast<int>(rows_.size()); }
+  int ankle_coordinate() const { return ankle_; }
+  /// External moment on the foot about the model's ankle axis [N m]
+  /// (the ankle row's external term; 0 without ankle_equilibrium).
+  double external_ankle_moment(const ComakFrameInput& in) const;
   const std::vector<int>& secondary_coordinates() const { return secondary_; }
   int flexion_coordinate() const { return flexion_; }
   int tibia_body() const { return tibia_; }
   /// Volume weights V_i [m^3] and weights w_i.
   const Eigen::VectorXd& volume_weights() const { return V_; }
   const Eigen::VectorXd& muscle_weights() const { return w_; }
-  /// S_k per free coordinate and whether it is revolute.
+  /// S_k per equilibrium row and whether it is revolute.
   const Eigen::VectorXd& row_scale() const { return row_scale_; }
   bool revolute(int k) const { return revolute_[k]; }
 
@@ -184,10 +217,11 @@ class ComakProblem {
   Eigen::VectorXd coordinates(const ComakFrameInput& in, const Eigen::VectorXd& q_source) const;
   /// Q_ext (all coordinates) at the kinematics in data.
   Eigen::VectorXd external_generalized_force(const ModelData& data, const ComakFrameInput& in) const;
-  /// Unscaled residual Q + Q_ext + e over the 12 free coordinates [N, N m].
+  /// Unscaled residual Q + Q_ext + e over the equilibrium rows [N, N m]
+  /// (e: one per free coordinate, or empty; the ankle row has none).
   Eigen::VectorXd residual(ModelData& data, const ComakFrameInput& in, const Eigen::VectorXd& q,
                            const Eigen::VectorXd& a, const Eigen::VectorXd& e) const;
-  /// d residual / d [a (muscles), s (secondary)]: 12 x (m + 11).
+  /// d residual / d [a (muscles), s (secondary)]: rows x (m + 11).
   Eigen::MatrixXd residual_jacobian(ModelData& data, const ComakFrameInput& in,
                                     const Eigen::VectorXd& q, const Eigen::VectorXd& a) const;
   /// sum w V a^2 + reserve terms [m^3].
@@ -199,7 +233,8 @@ class ComakProblem {
  private:
   const Model& model_;
   ComakOptions options_;
-  std::vector<int> free_, secondary_;
+  std::vector<int> free_, secondary_, rows_;
+  Vec3 ankle_axis_T_ = Vec3::UnitZ(), ankle_origin_T_ = Vec3::Zero();
   std::vector<bool> revolute_;
   int flexion_ = -1, tibia_ = -1;
   int hip_[3] = {-1, -1, -1};

@@ -96,6 +96,7 @@ KinematicsFileWriter::KinematicsFileWriter(const std::string& path, const ComakP
   f.set_attribute("/", "model", info.model_path);
   f.set_attribute("/", "trial", info.trial_path);
   f.set_attribute("/", "world_frame", "femur (the model's root body; its pose is the identity)");
+  f.set_attribute("/", "ankle_equilibrium", problem.options().ankle_equilibrium ? 1 : 0);
   for (int c : problem.free_coordinates()) impl_->coordinate_names.push_back(m.tree.coordinates[c]);
   f.write("/coordinates/names", impl_->coordinate_names);
   std::vector<std::string> pres;
@@ -181,6 +182,8 @@ void KinematicsFileWriter::append(const ComakFrameInput& in, const ComakFrameRes
   }
   w.a("/external_loads/force_T", {3}).append(in.F_ext_T);
   w.a("/external_loads/moment_T", {3}).append(in.M_ext_T);
+  if (p.options().ankle_equilibrium)
+    w.a("/external_loads/ankle_moment", {}).append(p.external_ankle_moment(in));
   if (p.options().reserve_actuators) w.a("/reserves/values", {nf}).append(r.reserves);
   w.a("/solver/status", {}, true).append(static_cast<int>(r.status));
   w.a("/solver/ipopt_status", {}, true).append(r.ipopt_status);

@@ -106,6 +106,10 @@ KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
     return out;
   }
   out.source = KneeLoadSource::kInverseDynamics;
+  out.has_foot_loads = true;
+  out.F_foot_T.resize(n, 3);
+  out.M_foot_T.resize(n, 3);
+  out.ankle_centre_T = Eigen::Vector3d(0.0, -leg.shank_length_m, 0.0);
   if (!trial.has_pelvis || !trial.has_grf) {
     throw common::InputError(
         trial.source, 0,
@@ -140,8 +144,12 @@ KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
     }
     const Eigen::Isometry3d& X_WT = P[1].X_WT;
     const Eigen::Vector3d p_knee = X_WT.translation();
+    const Eigen::Vector3d p_ankle = P[1].X_WC.translation();
     Eigen::Vector3d F = F_grf;
     Eigen::Vector3d M = (c - p_knee).cross(F_grf) + T_free;
+    // The foot alone, about the ankle centre (the b == 1 terms below).
+    Eigen::Vector3d F_foot = F_grf;
+    Eigen::Vector3d M_foot = (c - p_ankle).cross(F_grf) + T_free;
     for (int b = 0; b < 2; ++b) {
       const SegmentInertia& seg = *segs[b];
       Eigen::Vector3d p[3];
@@ -163,13 +171,22 @@ KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
       F += f;
       M += (p[1] - p_knee).cross(f);
       if (options.include_inertia) M -= I_W * alpha + w.cross(I_W * w);
+      if (b == 1) {
+        F_foot += f;
+        M_foot += (p[1] - p_ankle).cross(f);
+        if (options.include_inertia) M_foot -= I_W * alpha + w.cross(I_W * w);
+      }
     }
     Eigen::Vector3d F_T = X_WT.linear().transpose() * F;
     Eigen::Vector3d M_T = X_WT.linear().transpose() * M;
+    Eigen::Vector3d F_foot_T = X_WT.linear().transpose() * F_foot;
+    Eigen::Vector3d M_foot_T = X_WT.linear().transpose() * M_foot;
     Eigen::Isometry3d X = X_WT;
     if (left) {
       F_T = F_T.cwiseProduct(kMirrorPolar);
       M_T = M_T.cwiseProduct(kMirrorAxial);
+      F_foot_T = F_foot_T.cwiseProduct(kMirrorPolar);
+      M_foot_T = M_foot_T.cwiseProduct(kMirrorAxial);
       // Mirror the pose back: R -> S R S, p -> S p with S = diag(1, 1, -1).
       const Eigen::Matrix3d S = kMirrorPolar.asDiagonal();
       X.linear() = S * X_WT.linear() * S;
@@ -180,7 +197,11 @@ KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
           << trial.time(i) << " s)";
     common::check_finite(F_T, where.str());
     common::check_finite(M_T, where.str());
+    common::check_finite(F_foot_T, where.str() + " (foot)");
+    common::check_finite(M_foot_T, where.str() + " (foot)");
     out.F_ext_T.row(i) = F_T.transpose();
+    out.F_foot_T.row(i) = F_foot_T.transpose();
+    out.M_foot_T.row(i) = M_foot_T.transpose();
     out.M_ext_T.row(i) = M_T.transpose();
     out.X_WT[i] = X;
   }

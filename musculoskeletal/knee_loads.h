@@ -84,6 +84,20 @@ struct KneeLoads {
   Eigen::MatrixXd q, qd, qdd;
   Eigen::MatrixXd F_ext_T;              ///< n x 3 [N], on the tibia, tibia frame
   Eigen::MatrixXd M_ext_T;              ///< n x 3 [N m], about the knee centre, tibia frame
+  /// The load on the FOOT from the ground and from the foot's own weight and
+  /// inertia (d'Alembert), about the ankle joint centre, in the tibia frame:
+  ///   F_foot = F_grf + m_f (g - a_f),
+  ///   M_foot = (c - p_a) x F_grf + T_free + (p_f - p_a) x m_f (g - a_f)
+  ///            - (I_f alpha_f + w_f x I_f w_f).
+  /// The muscles spanning the ankle balance its component about the ankle
+  /// axis (COMAK's optional ankle equilibrium, comak.h). Inverse dynamics
+  /// only (has_foot_loads); empty for loads given by the trial.
+  bool has_foot_loads = false;
+  Eigen::MatrixXd F_foot_T;             ///< n x 3 [N]
+  Eigen::MatrixXd M_foot_T;             ///< n x 3 [N m], about the ankle centre
+  /// The ankle joint centre of the leg model in the tibia frame [m]:
+  /// (0, -shank_length, 0).
+  Eigen::Vector3d ankle_centre_T = Eigen::Vector3d::Zero();
   /// Tibia poses in the lab (inverse dynamics only; empty otherwise).
   std::vector<Eigen::Isometry3d> X_WT;
   /// Copied from the trial: set when a non-finite trial value ended it

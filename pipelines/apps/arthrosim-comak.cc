@@ -22,6 +22,7 @@
 #include "common/metadata.h"
 #include "common/progress.h"
 #include "common/scene.h"
+#include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/kinematics_file.h"
@@ -99,6 +100,9 @@ int main(int argc, char** argv) {
                  "objective weight w_i of a muscle, name=value (> 0; default 1), repeatable");
   app.add_flag("--reserve-actuators", o.reserve_actuators,
                "reserve actuators on the 11 secondary coordinates (heavy weight, reported)");
+  app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
+               "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
+               "anterior stand-in to the model (docs/comak.md)");
   app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0, 1 or 2")
       ->capture_default_str();
   app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
@@ -117,7 +121,10 @@ int main(int argc, char** argv) {
       "      --trial data/trials/synthetic_gait --out kinematics.h5 -v      # whole SYNTHETIC cycle\n"
       "  arthrosim-comak --model data/models/knee_parametric/coarse --scene data/scenes/demo.yaml \\\n"
       "      --trial data/trials/synthetic_gait --out comak_scene.h5 --first-frame 0 --last-frame 2\n"
-      "      # model folder + the scene's comak block (as `arthrosim run` calls it)\n");
+      "      # model folder + the scene's comak block (as `arthrosim run` calls it)\n"
+      "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --ankle-equilibrium \\\n"
+      "      --trial data/trials/synthetic_gait --out comak_ankle.h5 --first-frame 50 --last-frame 52\n"
+      "      # ankle moment balanced too (gastrocnemii, soleus, tibialis anterior)\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-comak");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -135,6 +142,7 @@ int main(int argc, char** argv) {
           o.max_iterations = static_cast<int>(c.integer("ipopt_max_iterations"));
         if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
         if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
+        if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.flag("ankle_equilibrium");
         if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
       }
     }
@@ -158,6 +166,12 @@ int main(int argc, char** argv) {
     o.forces.contact = wants("tibiofemoral_contact");
     model_path = resolve_model(model_path);
     msk::Model model = msk::load_model(model_path);
+    if (o.ankle_equilibrium) {
+      // Uniarticular ankle muscles so that the ankle row can be balanced in
+      // both directions (musculoskeletal/ankle_muscles.h).
+      msk::add_ankle_muscles(model);
+      common::log_info("ankle equilibrium: added the ankle muscles soleus and tibant");
+    }
     if (!prepared_path.empty()) {
       // The prepare stage's cartilage (its edge length sets the contact
       // resolution of this stage too).
@@ -187,6 +201,7 @@ int main(int argc, char** argv) {
          << "\nipopt_tolerance: " << o.ipopt_tolerance << "\nmax_iterations: " << o.max_iterations
          << "\nactivation_min: " << o.activation_min
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
+         << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
          << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
     for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";

@@ -7,6 +7,11 @@
 // median, max), and the tibiofemoral contact-force checks of issue 4 (first
 // and second stance peaks in body weights, medial/lateral at the first peak).
 //
+// The *Ankle variants add the ankle equilibrium row with the uniarticular
+// ankle stand-ins (ComakOptions::ankle_equilibrium, ankle_muscles.h) and
+// also print the mean activations of the quadriceps, gastrocnemii, soleus
+// and tibialis anterior per phase of the cycle.
+//
 // Optional: ARTHROSIM_COMAK_BENCH_STRIDE=k uses every k-th frame.
 #include <benchmark/benchmark.h>
 
@@ -18,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/kinematics_file.h"
@@ -28,24 +34,40 @@ namespace msk = arthrosim::musculoskeletal;
 
 namespace {
 
-void run_trial(benchmark::State& state, const char* model_file) {
+void run_trial(benchmark::State& state, const char* model_file, bool ankle) {
   const std::string root = ARTHROSIM_SOURCE_DIR;
-  const msk::Model model = msk::load_model(root + "/data/models/knee_parametric/" + model_file);
+  msk::Model model = msk::load_model(root + "/data/models/knee_parametric/" + model_file);
+  msk::ComakOptions options;
+  if (ankle) {
+    msk::add_ankle_muscles(model);
+    options.ankle_equilibrium = true;
+  }
   const auto trial = msk::load_gait_trial(root + "/data/trials/synthetic_gait");
   const auto loads = msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
   int stride = 1;
   if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_STRIDE")) stride = std::max(1, std::atoi(s));
   const auto frames = msk::comak_frame_inputs(loads, 0, -1, stride);
-  msk::ComakProblem problem(model, {});
+  msk::ComakProblem problem(model, options);
+  const int nm = static_cast<int>(model.muscles.size());
   const double bw = trial.body_mass_kg * 9.80665;
   for (auto _ : state) {
     std::vector<int> iters;
     std::vector<double> t, tf, med, lat;
+    std::vector<Eigen::VectorXd> act;
+    std::vector<double> knee_cost, ankle_moment;
     const std::clock_t c0 = std::clock();
     const auto sum = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
       iters.push_back(r.iterations);
       const auto c = msk::tibiofemoral_contact(model, d);
       t.push_back(f.time);
+      act.push_back(r.activations);
+      // Objective share of the model file's own (knee-crossing) muscles.
+      double fk = 0;
+      for (int k = 0; k < nm; ++k)
+        if (model.muscles[k].name != "soleus" && model.muscles[k].name != "tibant")
+          fk += problem.volume_weights()[k] * r.activations[k] * r.activations[k];
+      knee_cost.push_back(fk);
+      ankle_moment.push_back(problem.external_ankle_moment(f));
       tf.push_back(c.force.norm() / bw);
       med.push_back(c.medial_force.norm() / bw);
       lat.push_back(c.lateral_force.norm() / bw);
@@ -68,8 +90,51 @@ void run_trial(benchmark::State& state, const char* model_file) {
                 cpu / sum.frames, mean_it, sorted[sorted.size() / 2], sorted.back());
     if (i1 >= 0 && i2 >= 0)
       std::printf("  tibiofemoral |F|: first peak %.2f BW at %.2f s (medial %.2f, lateral %.2f BW), "
-                  "second peak %.2f BW at %.2f s\n",
-                  tf[i1], t[i1], med[i1], lat[i1], tf[i2], t[i2]);
+                  "second peak %.2f BW at %.2f s; knee-muscle cost sum V a^2 at the first peak %.4g m^3\n",
+                  tf[i1], t[i1], med[i1], lat[i1], tf[i2], t[i2], knee_cost[i1]);
+    // Mean activation of muscle groups per phase (docs/comak.md): early
+    // stance 0-0.2 s, mid stance 0.2-0.45 s, late stance 0.45-0.684 s
+    // (toe-off), swing after.
+    auto group = [&](const std::vector<const char*>& names, double t0, double t1) {
+      double sum_a = 0, max_a = 0;
+      int n = 0;
+      for (size_t i = 0; i < t.size(); ++i) {
+        if (t[i] < t0 || t[i] >= t1) continue;
+        double a = 0;
+        int k = 0;
+        for (const char* name : names) {
+          const int m = model.muscle_index(name);
+          if (m >= 0 && m < nm) a += act[i][m], ++k;
+        }
+        if (!k) return std::pair{-1.0, -1.0};
+        a /= k;
+        sum_a += a, max_a = std::max(max_a, a), ++n;
+      }
+      return std::pair{n ? sum_a / n : 0.0, max_a};
+    };
+    const std::vector<std::pair<const char*, std::vector<const char*>>> groups = {
+        {"quadriceps", {"recfem", "vasmed", "vaslat", "vasint"}},
+        {"hamstrings", {"bflh", "bfsh", "semimem", "semiten"}},
+        {"gastrocnemii", {"gasmed", "gaslat"}},
+        {"soleus", {"soleus"}},
+        {"tibialis anterior", {"tibant"}}};
+    const double phases[5] = {0.0, 0.2, 0.45, 0.684, 10.0};
+    std::printf("  activation mean/max: early stance 0-0.2 s | mid 0.2-0.45 s | late 0.45-0.684 s | swing\n");
+    for (const auto& [label, names] : groups) {
+      if (group(names, 0, 10).first < 0) continue;
+      std::printf("    %-18s", label);
+      for (int p = 0; p < 4; ++p) {
+        const auto [mean_a, max_a] = group(names, phases[p], phases[p + 1]);
+        std::printf(" %.3f/%.3f%s", mean_a, max_a, p < 3 ? " |" : "\n");
+      }
+    }
+    if (ankle) {
+      const auto lo = std::min_element(ankle_moment.begin(), ankle_moment.end()) - ankle_moment.begin();
+      const auto hi = std::max_element(ankle_moment.begin(), ankle_moment.end()) - ankle_moment.begin();
+      std::printf("  external moment on the foot about the ankle axis (dorsiflexing +): min %.1f N m at "
+                  "%.2f s, max %.1f N m at %.2f s\n",
+                  ankle_moment[lo], t[lo], ankle_moment[hi], t[hi]);
+    }
     for (int f : sum.failed_frames) std::printf("  failed frame %d\n", f);
     state.counters["s_per_frame"] = sum.wall_time / sum.frames;
     state.counters["cpu_s_per_frame"] = cpu / sum.frames;
@@ -78,10 +143,14 @@ void run_trial(benchmark::State& state, const char* model_file) {
   }
 }
 
-void BM_ComakTrialCoarse(benchmark::State& s) { run_trial(s, "knee_coarse.urdf"); }
-void BM_ComakTrialMedium(benchmark::State& s) { run_trial(s, "knee.urdf"); }
+void BM_ComakTrialCoarse(benchmark::State& s) { run_trial(s, "knee_coarse.urdf", false); }
+void BM_ComakTrialMedium(benchmark::State& s) { run_trial(s, "knee.urdf", false); }
+void BM_ComakTrialCoarseAnkle(benchmark::State& s) { run_trial(s, "knee_coarse.urdf", true); }
+void BM_ComakTrialMediumAnkle(benchmark::State& s) { run_trial(s, "knee.urdf", true); }
 BENCHMARK(BM_ComakTrialCoarse)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialMedium)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialCoarseAnkle)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialMediumAnkle)->Iterations(1)->Unit(benchmark::kSecond);
 
 }  // namespace
 

@@ -13,6 +13,7 @@
 #include "common/hdf5.h"
 #include "common/metadata.h"
 #include "common/scene.h"
+#include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/kinematics_file.h"
@@ -52,10 +53,16 @@ using msk::test::trial_loads;
 //    negligible), while h = 2e-6 already differs by 30 % on patellar columns
 //    (kinks within +-2 um). Tolerance 1e-2 at h = 5e-7.
 namespace {
-void check_jacobian(bool contact, double h, double rel_tol) {
-  const auto& m = coarse_model();
+void check_jacobian(bool contact, double h, double rel_tol, bool ankle = false) {
+  static const msk::Model with_ankle = [] {
+    msk::Model m = msk::load_model(source("data/models/knee_parametric/knee_coarse.urdf"));
+    msk::add_ankle_muscles(m);
+    return m;
+  }();
+  const auto& m = ankle ? with_ankle : coarse_model();
   msk::ComakOptions o;
   o.forces.contact = contact;
+  o.ankle_equilibrium = ankle;
   msk::ComakProblem p(m, o);
   msk::ComakFrameInput in;
   in.knee_flexion = deg(20);
@@ -63,6 +70,10 @@ void check_jacobian(bool contact, double h, double rel_tol) {
   in.ankle_flexion = deg(5);
   in.F_ext_T = Eigen::Vector3d(-60, 500, -30);
   in.M_ext_T = Eigen::Vector3d(25, 2, -40);
+  in.has_foot_load = true;
+  in.F_foot_T = Eigen::Vector3d(40, 560, -20);
+  in.M_foot_T = Eigen::Vector3d(3, -1, 45);
+  in.ankle_centre_T = Eigen::Vector3d(0.002, -0.404, 0.001);
   msk::ComakProblem p_settle(m, {});
   const Eigen::VectorXd q = p.coordinates(in, settled_pose(p_settle, in.knee_flexion, 0.1));
   const int nm = static_cast<int>(m.muscles.size());
@@ -72,6 +83,7 @@ void check_jacobian(bool contact, double h, double rel_tol) {
   const Eigen::MatrixXd J = p.residual_jacobian(d, in, q, a);
   const auto& sec = p.secondary_coordinates();
   ASSERT_EQ(J.cols(), nm + static_cast<int>(sec.size()));
+  ASSERT_EQ(J.rows(), ankle ? 13 : 12);
   double worst = 0.0;
   for (int c = 0; c < J.cols(); ++c) {
     Eigen::VectorXd qp = q, qm = q, ap = a, am = a;
@@ -88,14 +100,24 @@ void check_jacobian(bool contact, double h, double rel_tol) {
     EXPECT_LE(err, rel_tol) << "column " << c << "\nJ  " << J.col(c).transpose() << "\nfd "
                             << fd.transpose();
   }
-  std::printf("contact %s, h = %g: largest relative Jacobian error %.3g\n", contact ? "on" : "off", h,
-              worst);
+  std::printf("contact %s, ankle row %s, h = %g: largest relative Jacobian error %.3g\n",
+              contact ? "on" : "off", ankle ? "on" : "off", h, worst);
 }
 }  // namespace
 
 TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithoutContact) { check_jacobian(false, 1e-5, 2e-4); }
 
 TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithContact) { check_jacobian(true, 5e-7, 1e-2); }
+
+// The same with the ankle equilibrium row and the two ankle stand-ins (15
+// muscles, 13 rows): the ankle row's activation columns are exact, its
+// secondary columns come from the same dQ/dq (the gastrocnemii's ankle
+// moment arms move with the tibia), its external term is constant in s.
+// Same tolerances and reasons as above.
+TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithAnkleRow) {
+  check_jacobian(false, 1e-5, 2e-4, true);
+  check_jacobian(true, 5e-7, 1e-2, true);
+}
 
 // Q_ext: a pure force through the tibia origin along the flexion axis makes
 // no flexion moment; a couple about the tibia's Z moves only rotations.
@@ -392,4 +414,7 @@ TEST(Comak, SceneDefaultsAreTheSolverDefaults) {
   const auto* reserve = arthrosim::common::find_option("comak", "reserve_actuators");
   ASSERT_NE(reserve, nullptr);
   EXPECT_EQ(reserve->default_value == "true", o.reserve_actuators);
+  const auto* ankle = arthrosim::common::find_option("comak", "ankle_equilibrium");
+  ASSERT_NE(ankle, nullptr);
+  EXPECT_EQ(ankle->default_value == "true", o.ankle_equilibrium);
 }

@@ -78,6 +78,19 @@ TEST(KneeLoads, StaticStandingClosedForm) {
   }
   // The shank is vertical, so the tibia frame is the world frame.
   EXPECT_LT((k.X_WT[0].linear() - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+  // The foot alone about the ankle (the ankle row of COMAK): r_a = COP -
+  // ankle = (d, -h_a, e), F_foot = F - m_f g e_y, M_foot = r_a x F + T_free
+  // + (0, 0, -x_f m_f g) (x_f is also the foot COM's offset from the ankle).
+  ASSERT_TRUE(k.has_foot_loads);
+  EXPECT_EQ(k.ankle_centre_T, Eigen::Vector3d(0, -leg.shank_length_m, 0));
+  const Eigen::Vector3d r_a(d, -ankle_y, e);
+  const Eigen::Vector3d F_foot = F - mf * kG * Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d M_foot = r_a.cross(F) + Eigen::Vector3d(0, 1.5, 0) +
+                                 Eigen::Vector3d(0, 0, -x_f * mf * kG);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_LT((k.F_foot_T.row(i).transpose() - F_foot).norm(), 1e-9);
+    EXPECT_LT((k.M_foot_T.row(i).transpose() - M_foot).norm(), 1e-9);
+  }
 }
 
 // Swing, no ground reaction: shank and foot (ankle fixed) swing as one
@@ -208,6 +221,8 @@ TEST(KneeLoads, LeftLegIsMirrorOfRight) {
   for (int i = 0; i < r.num_samples(); ++i) {
     EXPECT_LT((kl.F_ext_T.row(i) - kr.F_ext_T.row(i).cwiseProduct(fp)).norm(), 1e-9);
     EXPECT_LT((kl.M_ext_T.row(i) - kr.M_ext_T.row(i).cwiseProduct(ax)).norm(), 1e-9);
+    EXPECT_LT((kl.F_foot_T.row(i) - kr.F_foot_T.row(i).cwiseProduct(fp)).norm(), 1e-9);
+    EXPECT_LT((kl.M_foot_T.row(i) - kr.M_foot_T.row(i).cwiseProduct(ax)).norm(), 1e-9);
     // The left knee lies on the other side of the sagittal plane.
     EXPECT_NEAR(kl.X_WT[i].translation().z(), -kr.X_WT[i].translation().z(), 1e-12);
   }
@@ -223,6 +238,7 @@ TEST(KneeLoads, GivenLoadsPassThroughAndMissingInputsAreErrors) {
   EXPECT_EQ(k.source, KneeLoadSource::kGivenByTrial);
   EXPECT_EQ(k.F_ext_T, t.knee_force_T);
   EXPECT_EQ(k.M_ext_T, t.knee_moment_T);
+  EXPECT_FALSE(k.has_foot_loads);  // no foot inverse dynamics: no ankle row possible
   GaitTrial u = empty_trial(5);
   u.has_pelvis = false;
   EXPECT_THROW(compute_knee_loads(u, leg), common::InputError);

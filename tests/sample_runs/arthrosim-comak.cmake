@@ -14,3 +14,10 @@ add_test(NAME sample.arthrosim-comak.scene
           --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
           --out ${CMAKE_BINARY_DIR}/sample_runs/comak_scene.h5 --first-frame 0 --last-frame 2)
 set_tests_properties(sample.arthrosim-comak.scene PROPERTIES LABELS sample TIMEOUT 120)
+# With the ankle equilibrium row (soleus and tibialis anterior stand-ins
+# added) over three push-off frames.
+add_test(NAME sample.arthrosim-comak.ankle
+  COMMAND arthrosim-comak --model ${CMAKE_SOURCE_DIR}/data/models/knee_parametric/knee_coarse.urdf
+          --ankle-equilibrium --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
+          --out ${CMAKE_BINARY_DIR}/sample_runs/comak_ankle.h5 --first-frame 50 --last-frame 52)
+set_tests_properties(sample.arthrosim-comak.ankle PROPERTIES LABELS sample TIMEOUT 120)
