@@ -223,7 +223,9 @@ Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFram
   if (options_.forces.muscles) {
     for (int i = 0; i < nm; ++i) {
       const Eigen::VectorXd r = moment_arms(model_, data, data.muscle_paths[i]);
-      for (int k = 0; k < nf; ++k) J(k, i) = model_.muscles[i].max_isometric_force * r[rows_[k]];
+      // With force-length scaling F = a F_max f_L(l(q)): still linear in a.
+      const double F = model_.muscles[i].max_isometric_force * data.muscle_force_length[i];
+      for (int k = 0; k < nf; ++k) J(k, i) = F * r[rows_[k]];
     }
   }
   // dQ_ext/ds by central differences of the kinematics (same step).

@@ -30,6 +30,11 @@ int Model::contact_index(const std::string& n) const {
   return -1;
 }
 
+double active_force_length(double x, double gamma) {
+  if (!(gamma > 0)) throw common::InputError("active_force_length: width gamma must be > 0");
+  return std::exp(-(x - 1.0) * (x - 1.0) / gamma);
+}
+
 ModelData make_data(const Model& model) {
   ModelData d;
   d.ligaments.resize(model.ligaments.size());
@@ -37,6 +42,7 @@ ModelData make_data(const Model& model) {
     d.ligaments[i].resize(model.ligaments[i].bundles.size());
   d.muscle_paths.resize(model.muscles.size());
   d.muscle_forces = Eigen::VectorXd::Zero(model.muscles.size());
+  d.muscle_force_length = Eigen::VectorXd::Ones(model.muscles.size());
   d.contacts.resize(model.contacts.size());
   const int n = model.num_coordinates();
   d.Q_ligaments = d.Q_muscles = d.Q_contact = d.Q = Eigen::VectorXd::Zero(n);
@@ -96,7 +102,18 @@ void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
       const Muscle& m = model.muscles[mi];
       const double a = activations.size() ? activations[mi] : 0.0;
       d.muscle_paths[mi] = evaluate_path(m.path, X);
-      d.muscle_forces[mi] = a * m.max_isometric_force;
+      double fl = 1.0;
+      if (opt.force_length) {
+        if (!(m.optimal_fiber_length > 0) || !(m.tendon_slack_length > 0))
+          throw common::InputError(model.source + ": error: muscle '" + m.name +
+                                   "': force-length scaling needs optimal_fiber_length and "
+                                   "tendon_slack_length (docs/model_format.md)");
+        fl = active_force_length(
+            (d.muscle_paths[mi].length - m.tendon_slack_length) / m.optimal_fiber_length,
+            opt.force_length_width);
+      }
+      d.muscle_force_length[mi] = fl;
+      d.muscle_forces[mi] = a * m.max_isometric_force * fl;
       if (a != 0.0) d.Q_muscles += d.muscle_forces[mi] * moment_arms(model, d, d.muscle_paths[mi]);
     }
     check_finite(d.Q_muscles, "muscle generalized forces");

@@ -38,8 +38,17 @@ struct Ligament {
 struct Muscle {
   std::string name;
   double max_isometric_force = 0.0;  ///< F_max [N], > 0
+  /// Optimal fibre length l_opt and tendon slack length l_ts [m] (both > 0,
+  /// or both 0 = not given). Used only by ForceOptions::force_length.
+  double optimal_fiber_length = 0.0;
+  double tendon_slack_length = 0.0;
   Path path;
 };
+
+/// Active force-length factor of Thelen (2003), f_L = exp(-(l~ - 1)^2 / gamma),
+/// l~ = (l_path - l_ts) / l_opt (rigid tendon, no pennation), gamma = the
+/// width parameter (Thelen: 0.45). f_L(1) = 1; f_L = 0.574 at l~ = 0.5 and 1.5.
+double active_force_length(double normalized_fiber_length, double gamma = 0.45);
 
 class Model {
  public:
@@ -65,6 +74,11 @@ struct ForceOptions {
   bool ligaments = true;
   bool muscles = true;
   bool contact = true;
+  /// Muscle force a F_max f_L(l~) instead of a F_max (COMAK's default, off):
+  /// every muscle must then give optimal_fiber_length and tendon_slack_length.
+  bool force_length = false;
+  /// gamma of active_force_length [-] (Thelen 2003: 0.45), > 0.
+  double force_length_width = 0.45;
   /// Central-difference step for dQ/dq [rad or m]. 1e-6: small against the
   /// scale of the kinematics (~1 rad, ~1e-2 m), large against the round-off of
   /// Q (~1e-16 x 1e3 N / 1e-6 = 1e-7 N per unit q) and against the faceting
@@ -82,6 +96,8 @@ struct ModelData {
   std::vector<std::vector<BundleResult>> ligaments;  ///< [ligament][bundle]
   std::vector<PathState> muscle_paths;
   Eigen::VectorXd muscle_forces;                     ///< [N]
+  /// f_L per muscle (1 without ForceOptions::force_length).
+  Eigen::VectorXd muscle_force_length;
   std::vector<ContactPairData> contacts;
   /// Generalized forces by term and in total (one entry per coordinate;
   /// N m for revolute, N for prismatic).

@@ -423,6 +423,15 @@ void read_muscle(Context& c, const XMLElement* e) {
   m.max_isometric_force = c.rd.number(e, "max_isometric_force");
   if (!(m.max_isometric_force > 0))
     c.rd.fail(e, "muscle '" + m.name + "' expected max_isometric_force > 0 N");
+  const bool lo = c.rd.has(e, "optimal_fiber_length"), ts = c.rd.has(e, "tendon_slack_length");
+  if (lo != ts)
+    c.rd.fail(e, "muscle '" + m.name + "' expected both optimal_fiber_length and tendon_slack_length, or neither");
+  if (lo) {
+    m.optimal_fiber_length = c.rd.number(e, "optimal_fiber_length");
+    m.tendon_slack_length = c.rd.number(e, "tendon_slack_length");
+    if (!(m.optimal_fiber_length > 0) || !(m.tendon_slack_length > 0))
+      c.rd.fail(e, "muscle '" + m.name + "' expected optimal_fiber_length > 0 m and tendon_slack_length > 0 m");
+  }
   m.path = read_path(c, e, "muscle '" + m.name + "'");
   c.model.muscles.push_back(std::move(m));
 }
@@ -554,6 +563,47 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
     report.lines.push_back(s.name + ": " + std::to_string(s.mesh.num_triangles()) + " -> " +
                            std::to_string(r.mesh.num_triangles()) + " triangles (prepared '" +
                            it->second + "')");
+    replaced.emplace(s.name, r);
+    return r;
+  };
+  std::vector<ContactPair> pairs;
+  for (const ContactPair& c : model.contacts)
+    pairs.emplace_back(c.name(), replace(c.casting(), c.name()), replace(c.target(), c.name()),
+                       c.material());
+  model.contacts = std::move(pairs);
+  return report;
+}
+
+PreparedSurfacesReport use_contact_meshes(Model& model, const std::map<std::string, SurfaceMesh>& by_file,
+                                          const std::string& source) {
+  PreparedSurfacesReport report;
+  std::map<std::string, ContactSurface> replaced;
+  auto replace = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
+    if (auto it = replaced.find(s.name); it != replaced.end()) return it->second;
+    const std::string file = std::filesystem::path(s.mesh_file).filename().string();
+    auto it = by_file.find(file);
+    if (s.mesh_file.empty() || it == by_file.end())
+      throw InputError(source, 0, "contact pair '" + pair + "': no mesh given for '" + file + "'");
+    const SurfaceMesh& in = it->second;
+    if (in.vertex_thickness.size() != in.mesh.num_vertices() || in.mesh.num_triangles() == 0)
+      throw InputError(source, 0, file + ": expected triangles and one thickness per vertex");
+    const Vec3 c_model = s.X_BM.inverse() * Vec3(s.mesh.V.colwise().mean().transpose());
+    const Vec3 c_new = in.mesh.V.colwise().mean().transpose();
+    if ((c_model - c_new).norm() > 2e-3)
+      throw InputError(source, 0, file + ": the mesh's centroid lies " +
+                                      std::to_string((c_model - c_new).norm() * 1e3) +
+                                      " mm from the model's; expected <= 2 mm");
+    ContactSurface r = s;
+    r.mesh_file = source + ":" + file;
+    const auto& F = in.mesh.F;
+    const auto& tv = in.vertex_thickness;
+    r.thickness.resize(F.rows());
+    for (int t = 0; t < F.rows(); ++t) r.thickness[t] = (tv[F(t, 0)] + tv[F(t, 1)] + tv[F(t, 2)]) / 3.0;
+    r.mesh = in.mesh;
+    for (int i = 0; i < r.mesh.num_vertices(); ++i)
+      r.mesh.V.row(i) = (s.X_BM * Vec3(r.mesh.V.row(i).transpose())).transpose();
+    report.lines.push_back(s.name + ": " + std::to_string(s.mesh.num_triangles()) + " -> " +
+                           std::to_string(r.mesh.num_triangles()) + " triangles (" + source + ")");
     replaced.emplace(s.name, r);
     return r;
   };

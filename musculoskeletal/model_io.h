@@ -4,6 +4,8 @@
 // <arthrosim:...> elements (ligaments, muscles, wrap cylinders, cartilage
 // surfaces, contact pairs, prescribed joints) are read with tinyxml2 so every
 // error names file:line. Neither library appears in this header.
+#include <Eigen/Core>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -33,5 +35,20 @@ struct PreparedSurfacesReport {
 /// pairs are kept. Throws InputError naming the file when a surface has no
 /// prepared counterpart or the two lie more than 2 mm apart (centroids).
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path);
+
+/// A cartilage surface in the model frame of the mesh files [m] with one
+/// thickness per vertex [m] (e.g. from pipelines/knee_generator.h).
+struct SurfaceMesh {
+  common::TriangleMesh mesh;
+  Eigen::VectorXd vertex_thickness;
+};
+
+/// As use_prepared_surfaces, from meshes in memory keyed by the file name of
+/// the model's mesh they replace ("femur_cartilage.stl"); `source` names them
+/// in messages. Same placement, triangle thickness and 2 mm centroid check.
+/// Used to time the fine generated knee (msk_bench, comak_bench) without
+/// committing its meshes.
+PreparedSurfacesReport use_contact_meshes(Model& model, const std::map<std::string, SurfaceMesh>& by_file,
+                                          const std::string& source);
 
 }  // namespace arthrosim::musculoskeletal

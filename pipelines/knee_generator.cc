@@ -889,6 +889,14 @@ TriangleMesh largest_component(const TriangleMesh& mesh) {
 
 }  // namespace
 
+KneeGeneratorOptions fine_knee_options() {
+  KneeGeneratorOptions o;
+  o.edge_length = 0.74e-3;
+  o.cartilage_edge_length[KneeCartilage::kTibiaMedial] = 0.57e-3;
+  o.cartilage_edge_length[KneeCartilage::kTibiaLateral] = 0.57e-3;
+  return o;
+}
+
 KneeGeometry ParametricKnee::generate(const KneeGeneratorOptions& options) const {
   if (!(options.edge_length >= mm(0.5) && options.edge_length <= mm(6.0)))
     throw common::InputError("knee generator", 0,
@@ -902,6 +910,11 @@ KneeGeometry ParametricKnee::generate(const KneeGeneratorOptions& options) const
   if (options.remesh_iterations < 1 || options.remesh_iterations > 20)
     throw common::InputError("knee generator", 0, "expected remesh iterations in [1, 20], found " +
                                                       std::to_string(options.remesh_iterations));
+  for (const auto& [c, e] : options.cartilage_edge_length)
+    if (!(e >= mm(0.5) && e <= mm(6.0)))
+      throw common::InputError("knee generator", 0,
+                               "expected the edge length of " + cartilage_file_stem(c) +
+                                   " in [0.5, 6] mm, found " + std::to_string(e * 1e3) + " mm");
   const Impl* m = impl_;
   const ParametricKnee& shape = *this;
 
@@ -939,7 +952,12 @@ KneeGeometry ParametricKnee::generate(const KneeGeneratorOptions& options) const
       r[v] = m->region(c, p, m->gradient(b, p).normalized());
     }
     TriangleMesh cut = largest_component(clip_by_vertex_field(bone, r, 0.3, cartilage_file_stem(c)));
-    TriangleMesh base = common::isotropic_remesh(cut, ro);
+    common::RemeshOptions rc = ro;
+    const auto own = options.cartilage_edge_length.find(c);
+    if (own != options.cartilage_edge_length.end()) rc.target_edge_length = own->second;
+    TriangleMesh base = common::isotropic_remesh(cut, rc);
+    if (rc.target_edge_length < ro.target_edge_length)
+      project_onto_implicit([&](const Vec3& p) { return m->implicit(b, p); }, 0.25 * h, &base);
     KneeCartilagePatch patch;
     patch.which = c;
     patch.mesh = base;

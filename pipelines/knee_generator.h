@@ -30,6 +30,7 @@
 // numerically, not assumed) so that opposing cartilage surfaces overlap by a
 // small designed amount at extension (contact_overlap, default 0.25 mm).
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -61,7 +62,19 @@ struct KneeGeneratorOptions {
   double grid_spacing = 0.0;
   /// Isotropic remeshing iterations. Range 1 .. 20.
   int remesh_iterations = 5;
+  /// Per-cartilage target edge length [m] replacing edge_length for that
+  /// patch only (same range), e.g. finer tibial than femoral triangles as in
+  /// MR-derived meshes. A patch remeshed finer than its bone gets its base
+  /// vertices projected back onto the bone's implicit surface (so the new
+  /// vertices do not sit on the bone mesh's chords). Empty: all edge_length.
+  std::map<KneeCartilage, double> cartilage_edge_length;
 };
+
+/// The fine resolution of the issue-3/4 benchmarks (about the triangle
+/// counts of lenhart2015's MR-derived meshes: femoral cartilage ~30,000,
+/// tibial ~8,600): edge 0.74 mm, tibial cartilage 0.57 mm. Generated on
+/// demand (msk_bench, comak_bench), never committed.
+KneeGeneratorOptions fine_knee_options();
 
 struct KneeLandmark {
   std::string body;  ///< "femur", "tibia", "patella" or "limb"

@@ -103,6 +103,9 @@ int main(int argc, char** argv) {
   app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
                "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
                "anterior stand-in to the model (docs/comak.md)");
+  app.add_flag("--force-length", o.forces.force_length,
+               "muscle force a F_max f_L(l~) (Thelen 2003 active force-length; every muscle of the "
+               "model must give optimal_fiber_length and tendon_slack_length, docs/model_format.md)");
   app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0, 1 or 2")
       ->capture_default_str();
   app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
@@ -202,6 +205,7 @@ int main(int argc, char** argv) {
          << "\nactivation_min: " << o.activation_min
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
          << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
+         << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
          << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
     for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";

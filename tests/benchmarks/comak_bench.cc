@@ -20,6 +20,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -29,14 +30,26 @@
 #include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
+#include "pipelines/knee_generator.h"
 
 namespace msk = arthrosim::musculoskeletal;
+namespace pl = arthrosim::pipelines;
 
 namespace {
 
-void run_trial(benchmark::State& state, const char* model_file, bool ankle) {
+void run_trial(benchmark::State& state, const char* model_file, bool ankle, bool fine = false) {
   const std::string root = ARTHROSIM_SOURCE_DIR;
   msk::Model model = msk::load_model(root + "/data/models/knee_parametric/" + model_file);
+  if (fine) {
+    // The fine resolution of issue 3 (femoral ~29k, tibial ~8.6k cartilage
+    // triangles), generated here and put in place of the model's cartilage.
+    const auto g = pl::ParametricKnee().generate(pl::fine_knee_options());
+    std::map<std::string, msk::SurfaceMesh> by_file;
+    for (const auto& p : g.cartilage)
+      by_file[pl::cartilage_file_stem(p.which) + ".stl"] = {p.mesh, p.thickness};
+    for (const auto& line : msk::use_contact_meshes(model, by_file, "fine generated knee").lines)
+      std::printf("  %s\n", line.c_str());
+  }
   msk::ComakOptions options;
   if (ankle) {
     msk::add_ankle_muscles(model);
@@ -147,10 +160,15 @@ void BM_ComakTrialCoarse(benchmark::State& s) { run_trial(s, "knee_coarse.urdf",
 void BM_ComakTrialMedium(benchmark::State& s) { run_trial(s, "knee.urdf", false); }
 void BM_ComakTrialCoarseAnkle(benchmark::State& s) { run_trial(s, "knee_coarse.urdf", true); }
 void BM_ComakTrialMediumAnkle(benchmark::State& s) { run_trial(s, "knee.urdf", true); }
+// Fine: the medium model's URDF (ligaments, muscles, frames) with the fine
+// generated cartilage (use_contact_meshes); the knee generation (~35 s) is
+// not timed.
+void BM_ComakTrialFine(benchmark::State& s) { run_trial(s, "knee.urdf", false, true); }
 BENCHMARK(BM_ComakTrialCoarse)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialMedium)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialCoarseAnkle)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialMediumAnkle)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialFine)->Iterations(1)->Unit(benchmark::kSecond);
 
 }  // namespace
 

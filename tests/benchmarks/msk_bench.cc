@@ -4,12 +4,17 @@
 //    the bundled medium model (data/models/knee_parametric/knee.urdf);
 //  - contact of the tibiofemoral (medial + lateral) and patellofemoral pairs
 //    on a fine parametric knee generated here (edge 0.74 mm: ~30,000 femoral
-//    cartilage triangles; the printed counters give the actual numbers):
+//    cartilage triangles; tibial cartilage at 0.57 mm: ~8,600 triangles, the
+//    counts of lenhart2015's MR-derived meshes; patella at 0.74 mm; the
+//    printed counters give the actual numbers):
 //    cold (no cached guesses), warm at a fixed pose, and warm while the tibia
-//    and patella move by 1 um per call (the finite-difference pattern).
+//    and patella move by 1 um per call (the finite-difference pattern);
+//  - the full evaluation and the one with dQ/dq on the medium model with its
+//    cartilage replaced by that fine knee's (use_contact_meshes).
 // Run: build/bench/msk_bench
 #include <benchmark/benchmark.h>
 
+#include <map>
 #include <memory>
 
 #include "musculoskeletal/contact.h"
@@ -83,9 +88,7 @@ msk::ContactSurface surface(const pl::KneeCartilagePatch& p, int body) {
 const FinePairs& fine_pairs() {
   static const FinePairs fp = [] {
     pl::ParametricKnee knee;
-    pl::KneeGeneratorOptions o;
-    o.edge_length = 0.74e-3;
-    const auto g = knee.generate(o);
+    const auto g = knee.generate(pl::fine_knee_options());
     FinePairs f;
     const auto& fem = g.patch(pl::KneeCartilage::kFemur);
     msk::ElasticFoundationParameters mat;  // 10 MPa, 0.45, linear (lenhart2015)
@@ -103,6 +106,51 @@ const FinePairs& fine_pairs() {
   }();
   return fp;
 }
+
+// The medium model with the fine generated cartilage (same generator, same
+// frame as its own meshes).
+const msk::Model& fine_model() {
+  static msk::Model m = [] {
+    msk::Model x =
+        msk::load_model(std::string(ARTHROSIM_SOURCE_DIR) + "/data/models/knee_parametric/knee.urdf");
+    const auto g = pl::ParametricKnee().generate(pl::fine_knee_options());
+    std::map<std::string, msk::SurfaceMesh> by_file;
+    for (const auto& p : g.cartilage)
+      by_file[pl::cartilage_file_stem(p.which) + ".stl"] = {p.mesh, p.thickness};
+    msk::use_contact_meshes(x, by_file, "fine generated knee");
+    return x;
+  }();
+  return m;
+}
+
+void BM_ModelEvaluate_Fine(benchmark::State& state) {
+  const auto& m = fine_model();
+  auto d = msk::make_data(m);
+  const Eigen::VectorXd q = loaded_pose(m);
+  const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.02);
+  msk::evaluate_forces(m, d, q, {}, a);
+  for (auto _ : state) {
+    msk::evaluate_forces(m, d, q, {}, a);
+    benchmark::DoNotOptimize(d.Q.data());
+  }
+  int n = 0;
+  for (const auto& c : d.contacts) n += c.result.num_contacting;
+  state.counters["contacting_triangles"] = n;
+}
+BENCHMARK(BM_ModelEvaluate_Fine)->Unit(benchmark::kMillisecond);
+
+void BM_ModelJacobian_Fine(benchmark::State& state) {
+  const auto& m = fine_model();
+  auto d = msk::make_data(m);
+  const Eigen::VectorXd q = loaded_pose(m);
+  const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.02);
+  msk::evaluate_forces(m, d, q, {}, a);
+  for (auto _ : state) {
+    msk::evaluate_jacobian(m, d, q, {}, a, {}, m.free_coordinates);
+    benchmark::DoNotOptimize(d.dQ_dq.data());
+  }
+}
+BENCHMARK(BM_ModelJacobian_Fine)->Unit(benchmark::kMillisecond);
 
 // mode 0: cold (caches reset every call); 1: warm, fixed pose; 2: warm, moving 1 um per call.
 void BM_ContactBothPairs_Fine(benchmark::State& state) {

@@ -12,6 +12,7 @@
 
 #include "common/error.h"
 #include "musculoskeletal/model.h"
+#include "musculoskeletal/comak.h"
 #include "musculoskeletal/model_io.h"
 
 namespace msk = arthrosim::musculoskeletal;
@@ -462,4 +463,70 @@ TEST(Settle, TibiaOnPlaneReachesEquilibriumFromDifferentStarts) {
   // Same equilibrium from both starts (to the accuracy the residual tolerance
   // allows: 0.1 N over a stiffness >~1e4 N/m -> 1e-5 m).
   EXPECT_LT((solutions[0] - solutions[1]).head(6).cwiseAbs().maxCoeff(), 2e-4);
+}
+
+// Force-length scaling (ForceOptions::force_length): the curve's closed
+// form (Thelen 2003, gamma 0.45), the muscle force a F_max f_L((l - l_ts) /
+// l_opt) at a pose, and the activation columns of COMAK's Jacobian (F_max
+// f_L r, exact) against central differences in a (the residual is linear in
+// a, so the quotient is exact to rounding: 1e-9 relative).
+TEST(ModelForces, ForceLengthScaling) {
+  EXPECT_EQ(msk::active_force_length(1.0), 1.0);
+  EXPECT_NEAR(msk::active_force_length(0.5), std::exp(-0.25 / 0.45), 1e-15);
+  EXPECT_NEAR(msk::active_force_length(1.5), 0.5738, 1e-4);
+  EXPECT_NEAR(msk::active_force_length(1.5, 0.1), std::exp(-2.5), 1e-15);
+  const std::string muscles = R"(
+  <arthrosim:muscle name="vasmed" max_isometric_force="1443.7" optimal_fiber_length="0.089" tendon_slack_length="0.126">
+    <point body="femur" xyz="0.01 0.2 -0.02"/><point body="femur" xyz="0.035 0.05 -0.015"/><point body="patella" xyz="0.0 0.02 0.0"/>
+  </arthrosim:muscle>
+  <arthrosim:muscle name="bfsh" max_isometric_force="631.6" optimal_fiber_length="0.173" tendon_slack_length="0.02">
+    <point body="femur" xyz="-0.01 0.15 0.02"/><point body="tibia" xyz="-0.02 -0.05 0.04"/>
+  </arthrosim:muscle>
+)";
+  const auto m = msk::parse_model(model_xml(muscles), "inline.urdf", ".");
+  EXPECT_EQ(m.muscles[0].optimal_fiber_length, 0.089);
+  EXPECT_EQ(m.muscles[1].tendon_slack_length, 0.02);
+  auto d = msk::make_data(m);
+  const Eigen::VectorXd q = some_q(m, 0.7);
+  const Eigen::Vector2d a(0.3, 0.2);
+  msk::ForceOptions o;
+  o.ligaments = o.contact = false;
+  o.force_length = true;
+  msk::evaluate_forces(m, d, q, {}, a, o);
+  for (int i = 0; i < 2; ++i) {
+    const auto& mu = m.muscles[i];
+    const double x = (d.muscle_paths[i].length - mu.tendon_slack_length) / mu.optimal_fiber_length;
+    std::printf("%s: path %.4f m, l~ = %.3f, f_L = %.4f\n", mu.name.c_str(), d.muscle_paths[i].length, x,
+                d.muscle_force_length[i]);
+    EXPECT_NEAR(d.muscle_force_length[i], std::exp(-(x - 1) * (x - 1) / 0.45), 1e-14);
+    EXPECT_NEAR(d.muscle_forces[i], a[i] * mu.max_isometric_force * d.muscle_force_length[i], 1e-9);
+    EXPECT_LT(d.muscle_force_length[i], 1.0);  // this pose is not at l_opt: the scaling acts
+  }
+  // COMAK activation columns.
+  msk::ComakOptions co;
+  co.forces = o;
+  msk::ComakProblem p(m, co);
+  msk::ComakFrameInput in;
+  in.knee_flexion = 0.3;
+  const Eigen::VectorXd qq = p.coordinates(in, q);
+  const Eigen::MatrixXd J = p.residual_jacobian(d, in, qq, a);
+  for (int i = 0; i < 2; ++i) {
+    const double h = 1e-3;
+    Eigen::VectorXd ap = a, am = a;
+    ap[i] += h, am[i] -= h;
+    const Eigen::VectorXd fd = (p.residual(d, in, qq, ap, {}) - p.residual(d, in, qq, am, {})) / (2 * h);
+    EXPECT_LT((J.col(i) - fd).cwiseAbs().maxCoeff(), 1e-9 * std::max(1.0, fd.cwiseAbs().maxCoeff())) << i;
+  }
+  // A model without the lengths cannot use the option; a file giving one of
+  // the two is rejected with its line.
+  const auto plain = msk::parse_model(model_xml(kSoftTissue), "inline.urdf", ".");
+  auto dp = msk::make_data(plain);
+  EXPECT_THROW(msk::evaluate_forces(plain, dp, some_q(plain, 0.5), {}, Eigen::VectorXd::Constant(4, 0.1), o),
+               arthrosim::common::InputError);
+  const std::string half = R"(
+  <arthrosim:muscle name="x" max_isometric_force="10" optimal_fiber_length="0.1">
+    <point body="femur" xyz="0 0.1 0"/><point body="tibia" xyz="0 -0.1 0"/>
+  </arthrosim:muscle>
+)";
+  EXPECT_NE(error_of(model_xml(half)).find("inline.urdf:"), std::string::npos) << error_of(model_xml(half));
 }

@@ -7,11 +7,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
 
+#include "common/error.h"
 #include "common/mesh_io.h"
 #include "common/mesh_validation.h"
 #include "common/spatial.h"
@@ -124,6 +126,34 @@ TEST(KneeGenerator, SameOptionsGiveIdenticalFiles) {
     ++files;
   }
   EXPECT_EQ(files, 12);  // 7 STL + 4 thickness CSV + landmarks.yaml
+}
+
+// Per-cartilage edge length (used by msk_bench for the fine knee with finer
+// tibial than femoral triangles): only the chosen patches change; their
+// triangle count grows about as (e / e_own)^2 (halving the edge: x4, with
+// boundary effects +-30 %), and the finer patch stays valid and within the
+// bone's thickness of its surface. 6 mm / 3 mm: quick.
+TEST(KneeGenerator, PerCartilageEdgeLength) {
+  KneeGeneratorOptions o;
+  o.edge_length = 6e-3;
+  o.grid_spacing = 2e-3;
+  o.remesh_iterations = 2;
+  const ParametricKnee knee;
+  const KneeGeometry a = knee.generate(o);
+  o.cartilage_edge_length[KneeCartilage::kTibiaMedial] = 3e-3;
+  const KneeGeometry b = knee.generate(o);
+  EXPECT_EQ(a.patch(KneeCartilage::kFemur).mesh.V, b.patch(KneeCartilage::kFemur).mesh.V);
+  EXPECT_EQ(a.patch(KneeCartilage::kTibiaLateral).mesh.F, b.patch(KneeCartilage::kTibiaLateral).mesh.F);
+  const double ratio = double(b.patch(KneeCartilage::kTibiaMedial).mesh.num_triangles()) /
+                       a.patch(KneeCartilage::kTibiaMedial).mesh.num_triangles();
+  std::printf("medial tibial cartilage: %d -> %d triangles (x%.2f)\n",
+              a.patch(KneeCartilage::kTibiaMedial).mesh.num_triangles(),
+              b.patch(KneeCartilage::kTibiaMedial).mesh.num_triangles(), ratio);
+  EXPECT_GT(ratio, 4.0 * 0.7);
+  EXPECT_LT(ratio, 4.0 * 1.3);
+  EXPECT_TRUE(common::validate(b.patch(KneeCartilage::kTibiaMedial).mesh, {}).ok());
+  o.cartilage_edge_length[KneeCartilage::kPatella] = 0.1e-3;
+  EXPECT_THROW(knee.generate(o), common::InputError);
 }
 
 TEST(KneeGenerator, BundledCoarseIsWhatTheGeneratorMakes) {

@@ -5,6 +5,10 @@
 // own report) and bounded forces. A trial with spikes and a NaN is run
 // through the library and through the arthrosim-comak executable.
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -400,4 +404,76 @@ TEST(ComakStability, NanInTrialStopsArthrosimComak) {
   EXPECT_EQ(f.attribute_int("/", "frames"), 5);
   EXPECT_NE(f.attribute_string("/", "stopped").find("COMAK frame 16"), std::string::npos);
   EXPECT_TRUE(fs::exists(dir / "kinematics_activations.sto"));
+}
+
+// arthrosim-comak SIGKILLed in the middle of a run: the frames it had
+// written stay readable. The child runs with -v (one log line per solved
+// frame, written before that frame is appended) and its stderr is read
+// through a pipe; after the line of the 6th frame it gets SIGKILL, so frames
+// 0-4 were appended (each append is flushed; common/hdf5.h). The file must
+// open, every per-frame dataset must have the same number n >= 5 of complete
+// rows (or one more: the kill may land between the datasets of a frame),
+// and the rows must be the frames in order with finite values.
+TEST(ComakStability, KilledArthrosimComakLeavesWrittenFramesReadable) {
+  const std::string exe = std::string(ARTHROSIM_BINARY_DIR) + "/bin/arthrosim-comak";
+  ASSERT_TRUE(fs::exists(exe)) << exe << " not built";
+  const fs::path dir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / "comak_stability" / "killed";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path out = dir / "kinematics.h5";
+  const std::string model = msk::test::source("data/models/knee_parametric/knee_coarse.urdf");
+  const std::string trial = msk::test::source("data/trials/synthetic_gait");
+  int fds[2];
+  ASSERT_EQ(pipe(fds), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    dup2(fds[1], 2);
+    close(fds[0]);
+    close(fds[1]);
+    const int null = open("/dev/null", O_WRONLY);
+    dup2(null, 1);
+    execl(exe.c_str(), exe.c_str(), "-v", "--model", model.c_str(), "--trial", trial.c_str(), "--out",
+          out.c_str(), "--first-frame", "20", "--last-frame", "80", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(fds[1]);
+  FILE* err = fdopen(fds[0], "r");
+  ASSERT_NE(err, nullptr);
+  char line[8192];
+  int solved = 0;
+  while (solved < 6 && std::fgets(line, sizeof line, err)) {
+    const std::string l(line);
+    if (l.find("COMAK frame ") != std::string::npos &&
+        (l.find("): converged") != std::string::npos || l.find("): failed") != std::string::npos))
+      ++solved;
+  }
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  std::fclose(err);
+  ASSERT_EQ(solved, 6) << "the child ended before 6 frames";
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << "child was not killed, status " << status;
+
+  arthrosim::common::H5File f(out.string(), arthrosim::common::H5File::Mode::kRead);
+  const Eigen::VectorXi idx = f.read_vector_int("/frame_index");
+  const Eigen::VectorXd t = f.read_vector("/time");
+  const Eigen::MatrixXd q = f.read_matrix("/coordinates/values");
+  const Eigen::MatrixXd a = f.read_matrix("/muscles/activation");
+  const Eigen::MatrixXd tf = f.read_matrix("/contact/tibiofemoral/force");
+  const Eigen::VectorXi st = f.read_vector_int("/solver/status");
+  const Eigen::Index n = std::min({idx.size(), t.size(), q.rows(), a.rows(), tf.rows(), st.size()});
+  const Eigen::Index most = std::max({idx.size(), t.size(), q.rows(), a.rows(), tf.rows(), st.size()});
+  std::printf("killed after 6 solved frames: %ld complete frames in the file (longest dataset %ld)\n",
+              static_cast<long>(n), static_cast<long>(most));
+  EXPECT_GE(n, 5);
+  EXPECT_LE(most, n + 1);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    EXPECT_EQ(idx[i], 20 + i);
+    EXPECT_NEAR(t[i], 0.01 * (20 + i), 1e-9);
+    EXPECT_TRUE(st[i] == 0 || st[i] == 1);
+  }
+  EXPECT_TRUE(q.topRows(n).allFinite());
+  EXPECT_TRUE(a.topRows(n).allFinite());
+  EXPECT_TRUE(tf.topRows(n).allFinite());
 }
