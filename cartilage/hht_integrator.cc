@@ -32,9 +32,21 @@ HhtIntegrator::HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& op
   gamma_ = 0.5 - opts_.alpha;
   beta_ = 0.25 * (1 - opts_.alpha) * (1 - opts_.alpha);
   dt_ = opts_.dt_s;
-  // Constraint elimination indices in the fixed pattern (rows/cols -> identity).
+  sync_pattern();
+  LinearSolverKind kind = LinearSolverKind::kUmfpack;
+  if (opts_.solver == LinearSolverChoice::kCholmod ||
+      (opts_.solver == LinearSolverChoice::kAuto && sys_.tangent_symmetric()))
+    kind = LinearSolverKind::kCholmod;
+  solver_ = std::make_unique<SparseDirectSolver>(kind);
+  stats_.linear_solver = to_string(kind);
+}
+
+void HhtIntegrator::sync_pattern() {
+  // Constraint elimination indices in the pattern (rows/cols -> identity).
   const auto& P = sys_.tangent_pattern();
   const auto& c = sys_.constrained();
+  zero_index_.clear();
+  diag_index_.clear();
   for (int j = 0; j < P.outerSize(); ++j)
     for (int k = P.outerIndexPtr()[j]; k < P.outerIndexPtr()[j + 1]; ++k) {
       const int i = P.innerIndexPtr()[k];
@@ -52,12 +64,13 @@ HhtIntegrator::HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& op
       if (it == end || *it != j) throw common::InputError("HHT: tangent pattern is not structurally symmetric");
       transpose_index_[k] = static_cast<int>(it - P.innerIndexPtr());
     }
-  LinearSolverKind kind = LinearSolverKind::kUmfpack;
-  if (opts_.solver == LinearSolverChoice::kCholmod ||
-      (opts_.solver == LinearSolverChoice::kAuto && sys_.tangent_symmetric()))
-    kind = LinearSolverKind::kCholmod;
-  solver_ = std::make_unique<SparseDirectSolver>(kind);
-  stats_.linear_solver = to_string(kind);
+  if (solver_ && pattern_revision_ != sys_.pattern_revision()) {
+    // A new pattern needs a new symbolic analysis (counted when it is done).
+    solver_ = std::make_unique<SparseDirectSolver>(solver_->kind());
+    factor_valid_ = false;
+    ++stats_.pattern_changes;
+  }
+  pattern_revision_ = sys_.pattern_revision();
 }
 
 HhtIntegrator::~HhtIntegrator() = default;
@@ -141,44 +154,60 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
   if (opts_.quasi_static && opts_.extrapolate_predictor && h_prev_ > 0) q += (h / h_prev_) * dq_prev_;
   sys_.apply_constraints(t1, q);
   const double ka = 1.0 / (beta_ * h * h), kv = gamma_ / (beta_ * h);
-  auto newmark = [&]() {
+  // Newmark relations: a and v of the iterate q.
+  auto newmark = [&](const Eigen::VectorXd& qq, Eigen::VectorXd& aa, Eigen::VectorXd& vv) {
     if (opts_.quasi_static) return;
-    a = ka * (q - q_ - h * v_) - (0.5 / beta_ - 1.0) * a_;
-    v = v_ + h * ((1 - gamma_) * a_ + gamma_ * a);
+    aa = ka * (qq - q_ - h * v_) - (0.5 / beta_ - 1.0) * a_;
+    vv = v_ + h * ((1 - gamma_) * a_ + gamma_ * aa);
+  };
+  auto request = [&](const Eigen::VectorXd& qq, const Eigen::VectorXd& vv, const Eigen::VectorXd& aa) {
+    EvalRequest req;
+    req.t = t1;
+    req.q = &qq;
+    req.v = opts_.quasi_static ? nullptr : &vv;
+    req.a = opts_.quasi_static ? nullptr : &aa;
+    req.force_scale = opts_.quasi_static ? 1.0 : 1.0 + opts_.alpha;
+    req.kq = 1.0;
+    req.kv = opts_.quasi_static ? 0.0 : kv;
+    req.ka = opts_.quasi_static ? 0.0 : ka;
+    return req;
+  };
+  // Residual of the step equation from F (and M a), constrained rows zeroed.
+  auto residual = [&](const Eigen::VectorXd& FF, const Eigen::VectorXd& MMa, Eigen::VectorXd& GG) {
+    GG = opts_.quasi_static ? FF : Eigen::VectorXd(MMa + (1 + opts_.alpha) * FF - opts_.alpha * F_);
+    for (int i = 0; i < n; ++i)
+      if (c[i]) GG(i) = 0;
+    return GG.norm();
   };
   StepRecord rec;
   rec.t_start = t_;
   rec.dt = h;
   double r_ref = 0, last_inc = std::numeric_limits<double>::infinity();
   const Eigen::VectorXd& w = sys_.increment_weights();
+  bool evaluated = false;  // F, Ma, K_ already hold the iterate (from the line search)
+  bool have_K = false;
   for (int k = 0;; ++k) {
-    newmark();
-    EvalRequest req;
-    req.t = t1;
-    req.q = &q;
-    req.v = opts_.quasi_static ? nullptr : &v;
-    req.a = opts_.quasi_static ? nullptr : &a;
-    req.force_scale = opts_.quasi_static ? 1.0 : 1.0 + opts_.alpha;
-    req.kq = 1.0;
-    req.kv = opts_.quasi_static ? 0.0 : kv;
-    req.ka = opts_.quasi_static ? 0.0 : ka;
+    newmark(q, a, v);
+    const EvalRequest req = request(q, v, a);
     // Tangent reuse (modified Newton): assemble the matrix only when a new
     // factorisation will be needed.
     const bool reuse = opts_.reuse_factorization && factor_valid_ && factor_h_ == h && !refactor_next_;
-    auto ta = Clock::now();
-    try {
-      sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, reuse ? nullptr : &K_);
-    } catch (const common::NumericalError& e) {
+    if (!evaluated) {
+      auto ta = Clock::now();
+      try {
+        sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, reuse ? nullptr : &K_);
+        if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
+      } catch (const common::NumericalError& e) {
+        stats_.assembly_s += since(ta);
+        factor_valid_ = false;
+        reason = e.what();
+        return false;
+      }
       stats_.assembly_s += since(ta);
-      factor_valid_ = false;
-      reason = e.what();
-      return false;
+      have_K = !reuse;
     }
-    stats_.assembly_s += since(ta);
-    G = opts_.quasi_static ? F : Eigen::VectorXd(Ma + (1 + opts_.alpha) * F - opts_.alpha * F_);
-    for (int i = 0; i < n; ++i)
-      if (c[i]) G(i) = 0;
-    const double r = G.norm();
+    evaluated = false;
+    const double r = residual(F, Ma, G);
     last_residual = r;
     rec.residual_norms.push_back(r);
     if (!std::isfinite(r)) {
@@ -218,10 +247,13 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
       // tangent at this iterate and refactorise.
       auto tb = Clock::now();
       sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
+      if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
       stats_.assembly_s += since(tb);
       refactor_next_ = true;
+      have_K = true;
     }
     if (!reuse || refactor_next_) {
+      if (!have_K) throw common::NumericalError("HHT: internal error: no tangent to factorise");
       constrain_matrix(K_);
       if (!factorize(K_, reason)) {
         factor_valid_ = false;
@@ -241,8 +273,48 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
     }
     for (int i = 0; i < n; ++i)
       if (c[i]) dq(i) = 0;
-    q += dq;
-    last_inc = weighted_max(dq, w);
+    if (opts_.line_search_halvings > 0 && !opts_.reuse_factorization) {
+      // Backtracking on the residual norm: the full step is tried with its
+      // tangent (kept for the next iteration when accepted); shorter steps
+      // need the residual only. Accept the first step with
+      // ||G(q + s dq)|| <= (1 - 1e-4 s) ||G(q)||, else the last one tried.
+      double s = 1.0;
+      Eigen::VectorXd qt, vt = v, at = a, Ft, Mat, Gt;
+      for (int ls = 0;; ++ls) {
+        qt = q + s * dq;
+        newmark(qt, at, vt);
+        const EvalRequest rt = request(qt, vt, at);
+        auto ta = Clock::now();
+        double rt_norm = std::numeric_limits<double>::infinity();
+        try {
+          sys_.evaluate(rt, Ft, opts_.quasi_static ? nullptr : &Mat, ls == 0 ? &K_ : nullptr);
+          if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
+          rt_norm = residual(Ft, Mat, Gt);
+        } catch (const common::NumericalError&) {
+          // a trial outside the admissible region: shorten the step
+        }
+        stats_.assembly_s += since(ta);
+        if (ls == 0) have_K = std::isfinite(rt_norm);
+        const bool decrease = std::isfinite(rt_norm) && rt_norm <= (1 - 1e-4 * s) * r;
+        if (decrease || ls >= opts_.line_search_halvings) {
+          if (!std::isfinite(rt_norm)) {
+            reason = "non-finite residual on every line-search trial";
+            return false;
+          }
+          q = qt;
+          F = Ft;
+          Ma = Mat;
+          evaluated = ls == 0;  // the full step's evaluation carries the tangent
+          if (ls > 0) ++stats_.line_search_reductions;
+          break;
+        }
+        s *= 0.5;
+      }
+      last_inc = weighted_max(s * dq, w);
+    } else {
+      q += dq;
+      last_inc = weighted_max(dq, w);
+    }
     rec.increment_norms.push_back(last_inc);
   }
 }

@@ -71,6 +71,11 @@ struct IntegratorOptions {
   /// (full Newton, quadratic convergence).
   bool reuse_factorization = false;
   double refactor_ratio = 0.25;
+  /// Backtracking line search on the residual norm (Newton globalisation for
+  /// penalty contact, whose active set changes between iterates): up to this
+  /// many halvings of the Newton step; 0 = full steps (pure Newton). Not
+  /// combined with reuse_factorization.
+  int line_search_halvings = 0;
   int max_halvings = 10;           ///< consecutive halvings before giving up
   int steps_before_growth = 4;     ///< successful steps before doubling dt back
   LinearSolverChoice solver = LinearSolverChoice::kAuto;
@@ -93,6 +98,8 @@ struct IntegratorStatistics {
   long factorizations = 0;
   long symbolic_analyses = 0;
   long solver_switches = 0;    ///< CHOLMOD -> UMFPACK after a non-SPD matrix
+  long pattern_changes = 0;    ///< tangent pattern changed (contact): new symbolic analysis
+  long line_search_reductions = 0;  ///< Newton steps shortened by the line search
   long roundoff_acceptances = 0;  ///< steps accepted by round-off stagnation
   double assembly_s = 0, factorization_s = 0, solve_s = 0, total_s = 0;  ///< wall time
   std::string linear_solver;   ///< solver in use
@@ -126,6 +133,9 @@ class HhtIntegrator {
   bool attempt(double h, std::string& reason, double& last_residual);
   bool factorize(Eigen::SparseMatrix<double>& K, std::string& reason);
   void constrain_matrix(Eigen::SparseMatrix<double>& K) const;
+  /// (Re)computes the pattern-dependent indices; a changed pattern also
+  /// discards the symbolic analysis.
+  void sync_pattern();
 
   TimeIntegrable& sys_;
   IntegratorOptions opts_;
@@ -139,6 +149,7 @@ class HhtIntegrator {
   double factor_h_ = 0;
   Eigen::SparseMatrix<double> K_;
   std::vector<int> zero_index_, diag_index_, transpose_index_;
+  long pattern_revision_ = 0;
   std::unique_ptr<SparseDirectSolver> solver_;
   IntegratorStatistics stats_;
 };

@@ -101,10 +101,16 @@ struct FoundationGeometry {
 
 class FoundationSpringsTerm final : public ShellTerm {
  public:
-  FoundationSpringsTerm(const ShellModel& model, double k, BoneMotion bone)
-      : ShellTerm("foundation_springs"), geo_(model, std::move(bone)), k_(k) {
-    if (!(k >= 0) || !std::isfinite(k))
-      throw common::InputError("foundation_springs: stiffness k must be >= 0 N/m^3, found " + std::to_string(k));
+  FoundationSpringsTerm(const ShellModel& model, Eigen::VectorXd k, BoneMotion bone, bool compressive_only)
+      : ShellTerm("foundation_springs"), geo_(model, std::move(bone)), k_(std::move(k)),
+        compressive_only_(compressive_only) {
+    if (k_.size() != model.num_nodes())
+      throw common::InputError("foundation_springs: expected " + std::to_string(model.num_nodes()) +
+                               " nodal stiffnesses, found " + std::to_string(k_.size()));
+    for (int i = 0; i < k_.size(); ++i)
+      if (!(k_(i) >= 0) || !std::isfinite(k_(i)))
+        throw common::InputError("foundation_springs: stiffness k must be >= 0 N/m^3, found " +
+                                 std::to_string(k_(i)) + " at node " + std::to_string(i));
   }
   void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
     const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
@@ -113,11 +119,11 @@ class FoundationSpringsTerm final : public ShellTerm {
       Eigen::Vector3d p, n, pd, nd;
       geo_.at(ctx.t, X, V, static_cast<int>(i), p, n, pd, nd);
       const double delta = n.dot(p - ctx.q.segment<3>(6 * i));
-      // Compressive-only. At delta = 0 (the reference state) the spring is
-      // taken as engaged: zero force but its stiffness in the tangent, so the
-      // first Newton step from rest sees the foundation.
-      if (delta < 0) continue;
-      const double kA = k_ * geo_.area(i);
+      // Compressive-only (the seed's elements). At delta = 0 (the reference
+      // state) the spring counts as engaged: zero force but its stiffness in
+      // the tangent, so the first Newton step from rest sees the foundation.
+      if (compressive_only_ && delta < 0) continue;
+      const double kA = k_(static_cast<Eigen::Index>(i)) * geo_.area(i);
       F.segment<3>(6 * i) -= kA * delta * n;
       if (K) K->add_block3(i, 0, i, 0, ctx.kq * kA * n * n.transpose());
     }
@@ -125,7 +131,8 @@ class FoundationSpringsTerm final : public ShellTerm {
 
  private:
   FoundationGeometry geo_;
-  double k_;
+  Eigen::VectorXd k_;
+  bool compressive_only_;
 };
 
 class FoundationDampingTerm final : public ShellTerm {
@@ -452,8 +459,14 @@ ShellTerm& ShellModel::add_internal_forces() {
   return register_term(std::make_unique<InternalForcesTerm>(*this), num_elements());
 }
 
-ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone) {
-  return register_term(std::make_unique<FoundationSpringsTerm>(*this, k, std::move(bone)), num_nodes_);
+ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone, bool compressive_only) {
+  return add_foundation_springs(Eigen::VectorXd::Constant(num_nodes_, k), std::move(bone), compressive_only);
+}
+
+ShellTerm& ShellModel::add_foundation_springs(const Eigen::VectorXd& k_per_node, BoneMotion bone,
+                                              bool compressive_only) {
+  return register_term(std::make_unique<FoundationSpringsTerm>(*this, k_per_node, std::move(bone), compressive_only),
+                       num_nodes_);
 }
 
 ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only) {

@@ -138,7 +138,14 @@ class ShellModel : public TimeIntegrable {
   /// length (reference projection onto the bone) cancels out of delta_i.
   /// At delta_i = 0 the spring counts as engaged in the tangent (zero force).
   /// k_N_m3: foundation modulus [N/m^3] (seed 002: 0.7 N/mm^3 = 7e8 N/m^3).
-  ShellTerm& add_foundation_springs(double k_N_m3, BoneMotion bone = BoneMotion::fixed());
+  /// compressive_only = false makes the springs act in tension too (tests
+  /// of the elastic-foundation closed forms).
+  ShellTerm& add_foundation_springs(double k_N_m3, BoneMotion bone = BoneMotion::fixed(),
+                                    bool compressive_only = true);
+  /// As above with a modulus per node [N/m^3] (e.g. k_i = K / h_i from the
+  /// local cartilage thickness h_i, the elastic-foundation layer modulus).
+  ShellTerm& add_foundation_springs(const Eigen::VectorXd& k_per_node_N_m3, BoneMotion bone,
+                                    bool compressive_only = true);
   /// Matching dampers: force c A_i d(delta_i)/dt n_i(t), active while
   /// delta_i >= 0 when compressive_only (the seed's spring-dampers are
   /// compressive elements). c_N_s_m3 [N s/m^3].

@@ -19,7 +19,7 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
   for (const std::string& e : effects) {
     const bool supported = e == "foundation_springs" || e == "foundation_damping" || e == "osmotic_pressure" ||
                            e == "periphery_fixed" || e == "inertia" || e == "imposed_kinematics" || e == "fixed_nodes" || e == "point_loads" ||
-                           e == "pressure" || e == "prescribed_displacement";
+                           e == "pressure" || e == "prescribed_displacement" || e == "mesh_contact";
     if (!supported) {
       if (!common::find_effect(e)) throw common::InputError("surface " + surface.name + ": unknown effect '" + e + "'");
       throw common::InputError("surface " + surface.name + ": effect '" + e +
@@ -63,7 +63,15 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
   // independent (their sum is the residual).
   for (const std::string& e : effects) {
     if (e == "foundation_springs") {
-      model->add_foundation_springs(parameters.foundation_stiffness_N_m3, bone);
+      if (parameters.foundation_stiffness_per_node_N_m3.size() > 0) {
+        if (parameters.foundation_stiffness_per_node_N_m3.size() != mesh.num_nodes())
+          throw common::InputError("surface " + surface.name + ": " +
+                                   std::to_string(parameters.foundation_stiffness_per_node_N_m3.size()) +
+                                   " nodal foundation stiffnesses for " + std::to_string(mesh.num_nodes()) + " nodes");
+        model->add_foundation_springs(parameters.foundation_stiffness_per_node_N_m3, bone);
+      } else {
+        model->add_foundation_springs(parameters.foundation_stiffness_N_m3, bone);
+      }
     } else if (e == "foundation_damping") {
       model->add_foundation_damping(parameters.foundation_damping_N_s_m3, bone, true);
     } else if (e == "osmotic_pressure") {
@@ -230,6 +238,37 @@ Eigen::VectorXd nodal_deflection(const ShellModel& model, const Eigen::VectorXd&
   Eigen::VectorXd w(model.num_nodes());
   for (int i = 0; i < model.num_nodes(); ++i)
     w(i) = (q.segment<3>(6 * i) - model.reference_position(i)).dot(model.reference_director(i).normalized());
+  return w;
+}
+
+Eigen::VectorXd matched_foundation_stiffness(const Eigen::VectorXd& thickness_m, double E, double nu,
+                                             const std::string& where) {
+  if (!(E > 0) || !(nu >= 0 && nu < 0.5))
+    throw common::InputError(where + ": matched foundation needs E > 0 and 0 <= nu < 0.5, found E = " +
+                             std::to_string(E) + " Pa, nu = " + std::to_string(nu));
+  const double K = (1 - nu) * E / ((1 + nu) * (1 - 2 * nu));
+  Eigen::VectorXd k(thickness_m.size());
+  for (Eigen::Index i = 0; i < thickness_m.size(); ++i) {
+    if (!(thickness_m(i) > 0) || !std::isfinite(thickness_m(i)))
+      throw common::InputError(where + ": node " + std::to_string(i) + ": expected a cartilage thickness > 0, found " +
+                               std::to_string(thickness_m(i)) + " m");
+    k(i) = K / thickness_m(i);
+  }
+  return k;
+}
+
+Eigen::MatrixXd nodal_displacement(const ShellModel& model, const Eigen::VectorXd& q, const Eigen::Isometry3d& T) {
+  Eigen::MatrixXd u(model.num_nodes(), 3);
+  for (int i = 0; i < model.num_nodes(); ++i)
+    u.row(i) = (q.segment<3>(6 * i) - T * model.reference_position(i)).transpose();
+  return u;
+}
+
+Eigen::VectorXd nodal_deflection(const ShellModel& model, const Eigen::VectorXd& q, const Eigen::Isometry3d& T) {
+  Eigen::VectorXd w(model.num_nodes());
+  for (int i = 0; i < model.num_nodes(); ++i)
+    w(i) = (q.segment<3>(6 * i) - T * model.reference_position(i))
+               .dot(T.linear() * model.reference_director(i).normalized());
   return w;
 }
 

@@ -58,16 +58,30 @@ struct SurfaceParameters {
   double foundation_stiffness_N_m3 = 7e8;   ///< k [N/m^3] (0.7 N/mm^3)
   double foundation_damping_N_s_m3 = 7e15;  ///< c [N s/m^3] (7e6 N s/mm^3)
   double osmotic_pressure_Pa = 0.2e6;       ///< on the internal face [Pa]
+  /// If non-empty (one value per node, N/m^3), used by foundation_springs
+  /// instead of foundation_stiffness_N_m3, e.g. k_i = K / h_i matched to the
+  /// musculoskeletal stage's elastic-foundation contact (see
+  /// matched_foundation_stiffness).
+  Eigen::VectorXd foundation_stiffness_per_node_N_m3;
 };
+
+/// Per-node foundation modulus of an elastic layer of thickness h_i with the
+/// elastic-foundation modulus K = (1 - nu) E / ((1 + nu)(1 - 2 nu)) of the
+/// musculoskeletal stage's contact (Bei & Fregly 2004): k_i = K / h_i. Two
+/// such layers in series reproduce that stage's p = K d / (h_1 + h_2).
+/// Throws InputError naming `where` for a thickness <= 0 or bad E, nu.
+Eigen::VectorXd matched_foundation_stiffness(const Eigen::VectorXd& thickness_m, double youngs_modulus_Pa,
+                                             double poisson_ratio, const std::string& where);
 
 /// Builds the shell model of one surface with its internal forces and the
 /// listed effects (foundation_springs, foundation_damping, osmotic_pressure,
 /// periphery_fixed, inertia; for generic meshes also fixed_nodes,
 /// point_loads, pressure, prescribed_displacement with the node sets of
 /// surface.generic, an empty set being an error). Each term is recorded in
-/// `ledger` (part = surface name) by the model when it is constructed. Any other effect name
-/// (mesh_contact: not simulated by this build) throws InputError naming it
-/// before anything is built: an effect is never silently ignored. `bone`
+/// `ledger` (part = surface name) by the model when it is constructed.
+/// mesh_contact is accepted and left to the caller (it couples two models:
+/// CoupledShellSystem::add_contact). Any other effect name throws InputError
+/// naming it before anything is built: an effect is never silently ignored. `bone`
 /// moves the foundation anchors and the fixed periphery; imposed_kinematics
 /// means `bone` comes from a kinematics file (it must not be at rest) and is
 /// recorded with count 1 per surface.
@@ -110,5 +124,10 @@ NodalStrains nodal_strains(const ShellModel& model, const NodeBasis& basis, cons
 Eigen::VectorXd nodal_deflection(const ShellModel& model, const Eigen::VectorXd& q);
 /// Displacement r_i - r_i0 per node (N x 3) [m].
 Eigen::MatrixXd nodal_displacement(const ShellModel& model, const Eigen::VectorXd& q);
+/// The same relative to the bone's rigid motion T = X_WB(t) X_WB(0)^-1:
+/// u_i = r_i - T r_i0 (world components) and w_i = u_i . (R_T n_i), so a
+/// surface carried rigidly by its bone has zero displacement and deflection.
+Eigen::MatrixXd nodal_displacement(const ShellModel& model, const Eigen::VectorXd& q, const Eigen::Isometry3d& T);
+Eigen::VectorXd nodal_deflection(const ShellModel& model, const Eigen::VectorXd& q, const Eigen::Isometry3d& T);
 
 }  // namespace arthrosim::cartilage

@@ -40,6 +40,10 @@ class TimeIntegrable {
                         Eigen::SparseMatrix<double>* K) = 0;
   /// Compressed column pattern (values irrelevant) shared by every tangent.
   virtual const Eigen::SparseMatrix<double>& tangent_pattern() const = 0;
+  /// Increases whenever tangent_pattern() changes (e.g. contact couples new
+  /// nodes); an evaluation with a tangent may change it. The integrator then
+  /// redoes its symbolic analysis. Fixed-pattern systems keep 0.
+  virtual long pattern_revision() const { return 0; }
   /// 1 for coordinates fixed/prescribed by a constraint (eliminated), else 0.
   virtual const std::vector<char>& constrained() const = 0;
   /// Writes the prescribed values at time t into the constrained entries of q.

@@ -123,6 +123,46 @@ const std::vector<OptionSpec>& schema_table() {
        true,
        "sparse solver of the Newton steps: auto (CHOLMOD when every tangent is symmetric, else "
        "UMFPACK), cholmod (on the symmetric part (K + K^T)/2), umfpack"},
+      // Deformable mesh contact (effect mesh_contact; cartilage/mesh_contact.h,
+      // docs/contact.md) and the seating of imposed kinematics.
+      {"surface", "contact_pairs", T::kTextList, U::kNone, "[femur:tibia_medial, femur:tibia_lateral]",
+       false, 0, 0, "", true,
+       "surface pairs in mesh contact, each 'a:b' (both must be simulated); force output is on b "
+       "(the tibia: /contact/tibiofemoral/...)"},
+      {"surface", "contact_stiffness_n_per_mm3", T::kNumber, U::kNewtonPerCubicMillimetre, "20", false,
+       1e-6, 1e9, "", true,
+       "penalty pressure per unit interpenetration; the seed's accuracy rule (penetration below a tenth "
+       "of the deflection) needs about ten times the foundation stiffness or more"},
+      {"surface", "contact_damping_n_s_per_mm3", T::kNumber, U::kNewtonSecondPerCubicMillimetre, "0",
+       false, 0, 1e12, "", true, "penalty damping per unit interpenetration rate (0: none, symmetric tangent)"},
+      {"surface", "contact_max_depth_mm", T::kNumber, U::kMillimetre, "1", false, 1e-3, 100, "", true,
+       "deeper overlaps are not contacts (the far side of a surface)"},
+      {"surface", "contact_smoothing_mm", T::kNumber, U::kMillimetre, "0.001", false, 1e-9, 1, "", true,
+       "width of the quadratic toe of the penalty law (continuous tangent at first touch)"},
+      {"surface", "contact_edge_edge", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
+       "also evaluate edge-edge pairs (sharp features); the vertex test with edge and corner features "
+       "covers smooth surfaces"},
+      {"surface", "penetration_limit", T::kNumber, U::kNone, "0.1", false, 0, 1e6, "", true,
+       "the seed's accuracy rule: largest interpenetration / largest deflection allowed per step"},
+      {"surface", "penetration_action", T::kText, U::kNone, "warn", false, 0, 0, "warn|stop", true,
+       "when a step breaks penetration_limit: warn (counted, reported) or stop the run"},
+      {"surface", "seating_time_s", T::kNumber, U::kSecond, "0.02", false, 0, 10, "", true,
+       "imposed kinematics start with a seating ramp of this duration: bones other than the femur "
+       "move from seating_offset_mm away along their own -Y axis to their first pose (the seed's "
+       "run began with a 0.02 s seating)"},
+      {"surface", "seating_offset_mm", T::kNumber, U::kMillimetre, "1", false, 0, 100, "", true,
+       "initial separation of the seating ramp; must exceed the first frame's overlap"},
+      {"surface", "foundation_from_thickness", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
+       "foundation_springs stiffness per node k_i = K / h_i (h_i: the prepared cartilage thickness, "
+       "K from matched_youngs_modulus_mpa and matched_poisson_ratio), matching the musculoskeletal "
+       "stage's elastic-foundation contact, instead of foundation_stiffness_n_per_mm3"},
+      {"surface", "matched_youngs_modulus_mpa", T::kNumber, U::kMegapascal, "10", false, 1e-6, 1e6, "", true,
+       "E of the elastic-foundation layer used by foundation_from_thickness (the bundled knee's "
+       "contact: 10 MPa)"},
+      {"surface", "matched_poisson_ratio", T::kNumber, U::kNone, "0.45", false, 0, 0.499, "", true,
+       "nu of the elastic-foundation layer used by foundation_from_thickness (bundled knee: 0.45)"},
+      {"surface", "max_newton_iterations", T::kNumber, U::kNone, "15", false, 1, 1000, "", true,
+       "Newton iterations per step attempt before the step is halved"},
       // --- one scenario --------------------------------------------------------
       {"scenario", "description", T::kText, U::kNone, "", false, 0, 0, "", false,
        "free text for reports"},

@@ -7,9 +7,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <sstream>
 
+#include "cartilage/coupled_system.h"
 #include "cartilage/hht_integrator.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
@@ -208,13 +210,36 @@ std::vector<int> nodes_in_box(const common::QuadMesh& m, const std::vector<doubl
 struct SurfaceRun {
   cartilage::SurfaceInput input;
   std::unique_ptr<ShellModel> model;
-  std::unique_ptr<HhtIntegrator> integrator;
+  cartilage::BoneMotion bone = cartilage::BoneMotion::fixed();
+  std::string bone_name;  // "" for generic meshes
+  Eigen::Isometry3d X_WB0 = Eigen::Isometry3d::Identity();  // bone pose at t = 0
   cartilage::NodeBasis basis;
-  std::vector<H5File::Appender> frame_out;   // displacement, deflection, E, e1, e1_dir, e2
-  std::vector<H5File::Appender> solver_out;  // time, dt, iterations, residual, tolerance, rejections, wall
-  long last_iterations = 0, last_rejections = 0;
+  std::vector<H5File::Appender> frame_out;  // displacement, deflection, E, e1, e1_dir, e2 [, contact_pressure]
   SurfaceSummary summary;
 };
+
+/// Seating ramp in front of imposed kinematics: for t < T the bone sits at
+/// its first pose moved by -(1 - t/T) offset_B (bone frame); afterwards it
+/// follows `base` delayed by T. A bone without offset is only delayed.
+cartilage::BoneMotion seated(const cartilage::BoneMotion& base, double T, const Eigen::Vector3d& offset_B) {
+  if (!(T > 0)) return base;
+  cartilage::BoneMotion m;
+  m.at_rest = false;
+  const Eigen::Isometry3d X0 = base.pose(0.0);
+  m.pose = [base, T, offset_B, X0](double t) {
+    if (t >= T) return base.pose(t - T);
+    Eigen::Isometry3d X = X0;
+    X.translation() += X0.linear() * (-(1 - t / T) * offset_B);
+    return X;
+  };
+  m.spatial_velocity = [base, T, offset_B, X0](double t) {
+    if (t >= T) return base.spatial_velocity(t - T);
+    Eigen::Matrix<double, 6, 1> V = Eigen::Matrix<double, 6, 1>::Zero();
+    V.tail<3>() = X0.linear() * offset_B / T;
+    return V;
+  };
+  return m;
+}
 
 }  // namespace
 
@@ -306,11 +331,15 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   common::EffectLedger ledger("surface:" + sc->name);
   std::vector<SurfaceRun> runs;
   const bool generic = o.has("mesh");
+  const bool contact = sc->wants("mesh_contact");
   for (const char* e : {"fixed_nodes", "point_loads", "pressure", "prescribed_displacement"}) {
     if (sc->wants(e) && !generic)
       throw common::InputError(scene.file.string(), sc->line,
                                "scenario '" + sc->name + "': effect '" + e + "' needs a generic `mesh`");
   }
+  if (contact && generic)
+    throw common::InputError(scene.file.string(), sc->line,
+                             "scenario '" + sc->name + "': mesh_contact needs the prepared model's surfaces, not a generic `mesh`");
   auto require = [&](const char* key, const char* effect) {
     if (sc->wants(effect) && !o.has(key))
       throw common::InputError(scene.file.string(), sc->line,
@@ -364,7 +393,30 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     prepared_file = std::make_unique<H5File>(options.prepared, H5File::Mode::kRead);
     names = prepared_file->read_strings("/surfaces/names");
   }
-  for (const std::string& name : generic ? std::vector<std::string>{} : o.list("surfaces")) {
+  const std::vector<std::string> surface_names = generic ? std::vector<std::string>{} : o.list("surfaces");
+  // Contact pairs: "a:b", both simulated.
+  std::vector<std::pair<int, int>> pair_index;
+  std::vector<std::string> pair_names;
+  if (contact) {
+    for (const std::string& pr : o.list("contact_pairs")) {
+      const auto colon = pr.find(':');
+      const std::string a = pr.substr(0, colon), b = colon == std::string::npos ? "" : pr.substr(colon + 1);
+      const auto ia = std::find(surface_names.begin(), surface_names.end(), a);
+      const auto ib = std::find(surface_names.begin(), surface_names.end(), b);
+      if (colon == std::string::npos || ia == surface_names.end() || ib == surface_names.end() || ia == ib)
+        throw common::InputError(scene.file.string(), o.value("contact_pairs").line,
+                                 "contact pair '" + pr + "': expected 'a:b' with two different surfaces of this "
+                                 "scenario's `surfaces`");
+      pair_index.emplace_back(static_cast<int>(ia - surface_names.begin()), static_cast<int>(ib - surface_names.begin()));
+      pair_names.push_back(pr);
+    }
+    if (pair_index.empty())
+      throw common::InputError(scene.file.string(), sc->line,
+                               "scenario '" + sc->name + "' lists mesh_contact but contact_pairs is empty");
+  }
+  const double seating = moving ? o.si("seating_time_s") : 0.0;
+  const double seat_offset = o.si("seating_offset_mm");
+  for (const std::string& name : surface_names) {
     const H5File& prepared = *prepared_file;
     if (std::find(names.begin(), names.end(), name) == names.end()) {
       std::string have;
@@ -375,23 +427,51 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     }
     SurfaceRun r;
     r.input = read_prepared_surface(prepared, name);
-    cartilage::BoneMotion bone = cartilage::BoneMotion::fixed();
+    r.bone_name = prepared.attribute_string("/surfaces/" + name, "bone");
     if (moving) {
       // Prepared coordinates are bone-frame coordinates (the model frame at
       // q = 0, docs/kinematics_file.md); the shell's reference is the surface
-      // placed by the bone's pose at the first kinematics frame.
-      bone = bone_motion(prepared.attribute_string("/surfaces/" + name, "bone"));
-      const Eigen::Isometry3d X0 = bone.pose(0.0);
-      r.input.mesh.V = ((r.input.mesh.V * X0.linear().transpose()).rowwise() + X0.translation().transpose()).eval();
-      r.input.normals = (r.input.normals * X0.linear().transpose()).eval();
+      // placed by the bone's pose at t = 0 (after the seating offset).
+      const Eigen::Vector3d offset = r.bone_name == "femur" ? Eigen::Vector3d::Zero()
+                                                            : Eigen::Vector3d(0, seat_offset, 0);
+      r.bone = seated(bone_motion(r.bone_name), seating, offset);
+      r.X_WB0 = r.bone.pose(0.0);
+      r.input.mesh.V = ((r.input.mesh.V * r.X_WB0.linear().transpose()).rowwise() + r.X_WB0.translation().transpose()).eval();
+      r.input.normals = (r.input.normals * r.X_WB0.linear().transpose()).eval();
     }
-    r.model = cartilage::build_surface_model(r.input, par, sc->effects, bone, &ledger);
+    cartilage::SurfaceParameters p = par;
+    if (o.flag("foundation_from_thickness") && sc->wants("foundation_springs")) {
+      const Eigen::VectorXd h = prepared.read_vector("/surfaces/" + name + "/quads/thickness");
+      p.foundation_stiffness_per_node_N_m3 = cartilage::matched_foundation_stiffness(
+          h, o.si("matched_youngs_modulus_mpa"), o.si("matched_poisson_ratio"),
+          options.prepared + ": dataset /surfaces/" + name + "/quads/thickness");
+    }
+    r.model = cartilage::build_surface_model(r.input, p, sc->effects, r.bone, &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
     r.summary.name = name;
     r.summary.nodes = r.model->num_nodes();
     r.summary.elements = r.model->num_elements();
     runs.push_back(std::move(r));
   }
+  const double total_time = end_time + seating;
+  // One system of all surfaces (side by side, exactly the separate models
+  // when there is no contact), coupled by the contact pairs.
+  std::vector<ShellModel*> model_ptrs;
+  std::vector<std::string> model_names;
+  for (SurfaceRun& r : runs) {
+    model_ptrs.push_back(r.model.get());
+    model_names.push_back(r.summary.name);
+  }
+  cartilage::CoupledShellSystem system(model_ptrs, model_names);
+  system.attach_ledger(&ledger);
+  cartilage::ContactOptions copt;
+  copt.stiffness_N_m3 = o.si("contact_stiffness_n_per_mm3");
+  copt.damping_N_s_m3 = o.si("contact_damping_n_s_per_mm3");
+  copt.max_depth_m = o.si("contact_max_depth_mm");
+  copt.smoothing_m = o.si("contact_smoothing_mm");
+  copt.edge_edge = o.flag("contact_edge_edge");
+  for (size_t k = 0; k < pair_index.size(); ++k)
+    system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
   ledger.require_only(sc->effects);
   common::log_info(ledger.to_text());
 
@@ -403,17 +483,20 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     common::write_metadata(out, common::collect_run_metadata("arthrosim-surface", static_cast<int>(argv.size()),
                                                              argv.data(), options.scene, o.canonical_text()));
   }
-  out.set_attribute("/", "schema", "arthrosim surface output 1");
+  out.set_attribute("/", "schema", "arthrosim surface output 2");
   out.set_attribute("/", "scenario", sc->name);
   out.set_attribute("/", "prepared_model", generic ? std::string() : options.prepared);
   out.set_attribute("/", "mesh", generic ? o.path("mesh").string() : std::string());
   out.set_attribute("/", "mode", steady ? "steady_state" : (quasi_static ? "quasi_static" : "hht"));
   out.set_attribute("/", "status", "running");
+  out.set_attribute("/", "seating_time_s", seating);
   common::write_effect_ledger(out, ledger);
-  const auto n_frames_expected = static_cast<std::int64_t>(std::floor(end_time / interval + 1e-9)) + 1 +
-                                 (std::fmod(end_time, interval) > 1e-12 * interval ? 1 : 0);
-  const auto n_steps_expected = static_cast<std::int64_t>(std::ceil(end_time / (steady ? end_time : dt) - 1e-9));
+  const auto n_frames_expected = static_cast<std::int64_t>(std::floor(total_time / interval + 1e-9)) + 1 +
+                                 (std::fmod(total_time, interval) > 1e-12 * interval ? 1 : 0);
+  const auto n_steps_expected = static_cast<std::int64_t>(std::ceil(total_time / (steady ? total_time : dt) - 1e-9));
   H5File::Appender time_out = out.appender("/time", {}, {n_frames_expected, 0});
+  std::unique_ptr<H5File::Appender> trial_time_out;
+  if (moving) trial_time_out = std::make_unique<H5File::Appender>(out.appender("/trial_time", {}, {n_frames_expected, 0}));
   for (SurfaceRun& r : runs) {
     const std::string g = "/surfaces/" + r.summary.name + "/";
     const std::int64_t N = r.model->num_nodes();
@@ -422,6 +505,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     out.write(g + "normals", Eigen::MatrixXd(r.basis.n));
     out.write(g + "basis_a1", Eigen::MatrixXd(r.basis.a1));
     out.write(g + "basis_a2", Eigen::MatrixXd(r.basis.a2));
+    if (!r.bone_name.empty()) out.set_attribute("/surfaces/" + r.summary.name, "bone", r.bone_name);
     std::vector<int> fixed(r.model->constrained().size() / 6);
     for (size_t i = 0; i < fixed.size(); ++i) fixed[i] = r.model->constrained()[6 * i] ? 1 : 0;
     out.write(g + "fixed", fixed);
@@ -432,15 +516,33 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     r.frame_out.push_back(out.appender(g + "strain/e1", {N}, fo));
     r.frame_out.push_back(out.appender(g + "strain/e1_dir", {N, 3}, fo));
     r.frame_out.push_back(out.appender(g + "strain/e2", {N}, fo));
-    const std::string s = "/solver/" + r.summary.name + "/";
-    const common::H5AppendOptions so{n_steps_expected, 0};
-    r.solver_out.push_back(out.appender(s + "time", {}, so));
-    r.solver_out.push_back(out.appender(s + "dt", {}, so));
-    r.solver_out.push_back(out.appender_int(s + "newton_iterations", {}, so));
-    r.solver_out.push_back(out.appender(s + "residual_N", {}, so));
-    r.solver_out.push_back(out.appender(s + "residual_tolerance_N", {}, so));
-    r.solver_out.push_back(out.appender_int(s + "rejections", {}, so));
-    r.solver_out.push_back(out.appender(s + "wall_s", {}, so));
+    if (contact) r.frame_out.push_back(out.appender(g + "contact_pressure", {N}, fo));
+  }
+  const common::H5AppendOptions so{n_steps_expected, 0};
+  std::vector<H5File::Appender> solver_out;  // per step
+  for (const char* name : {"time", "dt"}) solver_out.push_back(out.appender(std::string("/solver/") + name, {}, so));
+  solver_out.push_back(out.appender_int("/solver/newton_iterations", {}, so));
+  solver_out.push_back(out.appender("/solver/residual_N", {}, so));
+  solver_out.push_back(out.appender("/solver/residual_tolerance_N", {}, so));
+  solver_out.push_back(out.appender_int("/solver/rejections", {}, so));
+  solver_out.push_back(out.appender("/solver/wall_s", {}, so));
+  solver_out.push_back(out.appender("/solver/max_deflection_m", {}, so));
+  if (contact) {
+    solver_out.push_back(out.appender("/solver/max_penetration_m", {}, so));
+    solver_out.push_back(out.appender("/solver/penetration_ratio", {}, so));
+    solver_out.push_back(out.appender_int("/solver/active_contacts", {}, so));
+  }
+  // Tibiofemoral contact force per frame (on the second surface of each
+  // pair, in its bone's frame; pairs named medial/lateral are the
+  // compartments), as in the kinematics file.
+  std::vector<H5File::Appender> contact_out;
+  if (contact) {
+    contact_out.push_back(out.appender("/contact/tibiofemoral/force", {3}, {n_frames_expected, 0}));
+    contact_out.push_back(out.appender("/contact/tibiofemoral/medial_force", {3}, {n_frames_expected, 0}));
+    contact_out.push_back(out.appender("/contact/tibiofemoral/lateral_force", {3}, {n_frames_expected, 0}));
+    contact_out.push_back(out.appender("/contact/tibiofemoral/area", {}, {n_frames_expected, 0}));
+    contact_out.push_back(out.appender("/contact/tibiofemoral/max_penetration", {}, {n_frames_expected, 0}));
+    out.write("/contact/pairs", pair_names);
   }
   out.flush();
 
@@ -459,16 +561,48 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       s.fields = {{"displacement", g + "displacement"}, {"deflection", g + "deflection"},
                   {"E", g + "strain/E"},                {"e1", g + "strain/e1"},
                   {"e1_dir", g + "strain/e1_dir"},      {"e2", g + "strain/e2"}};
+      if (contact) s.fields.push_back({"contact_pressure", g + "contact_pressure"});
       series.surfaces.push_back(std::move(s));
     }
     common::write_xdmf(xdmf_path, out, series);
   };
-  // One frame: every surface's fields, then /time (so /time counts complete frames).
-  auto write_frame = [&](double t) {
-    for (SurfaceRun& r : runs) {
-      const Eigen::VectorXd& q = r.integrator->q();
-      const Eigen::MatrixXd u = cartilage::nodal_displacement(*r.model, q);
-      const Eigen::VectorXd w = cartilage::nodal_deflection(*r.model, q);
+  // Bone-relative rigid motion of surface r at time t.
+  auto rigid = [&](const SurfaceRun& r, double t) { return Eigen::Isometry3d(r.bone.pose(t) * r.X_WB0.inverse()); };
+  auto max_abs_deflection = [&](const Eigen::VectorXd& qs, double t) {
+    double m = 0;
+    for (int k = 0; k < static_cast<int>(runs.size()); ++k)
+      m = std::max(m, cartilage::nodal_deflection(*runs[k].model, system.segment(k, qs), rigid(runs[k], t))
+                          .cwiseAbs()
+                          .maxCoeff());
+    return m;
+  };
+  long penetration_warnings = 0;
+  double worst_ratio = 0;
+  // One frame: every surface's fields, the contact forces, then /time (so
+  // /time counts complete frames).
+  auto write_frame = [&](const Eigen::VectorXd& qs, double t) {
+    std::vector<Eigen::VectorXd> pressure(runs.size());
+    for (size_t k = 0; k < runs.size(); ++k) pressure[k] = Eigen::VectorXd::Zero(runs[k].model->num_nodes());
+    Eigen::Vector3d total = Eigen::Vector3d::Zero(), medial = total, lateral = total;
+    double area = 0, max_pen = 0;
+    for (int k = 0; k < system.num_contacts(); ++k) {
+      const cartilage::ContactPairReport rep = system.contact_report(k, qs);
+      const int a = pair_index[k].first, b = pair_index[k].second;
+      pressure[a] += rep.pressure_a;
+      pressure[b] += rep.pressure_b;
+      const Eigen::Vector3d f_B = runs[b].bone.pose(t).linear().transpose() * rep.total_force_b;
+      total += f_B;
+      if (pair_names[k].find("medial") != std::string::npos) medial += f_B;
+      if (pair_names[k].find("lateral") != std::string::npos) lateral += f_B;
+      area += rep.contact_area_m2;
+      max_pen = std::max(max_pen, rep.counts.max_penetration_m);
+    }
+    for (size_t k = 0; k < runs.size(); ++k) {
+      SurfaceRun& r = runs[k];
+      const Eigen::VectorXd q = system.segment(static_cast<int>(k), qs);
+      const Eigen::Isometry3d T = rigid(r, t);
+      const Eigen::MatrixXd u = cartilage::nodal_displacement(*r.model, q, T);
+      const Eigen::VectorXd w = cartilage::nodal_deflection(*r.model, q, T);
       const cartilage::NodalStrains st = cartilage::nodal_strains(*r.model, r.basis, q);
       common::check_finite(u, "surface " + r.summary.name + ": displacement at t = " + std::to_string(t));
       common::check_finite(st.E, "surface " + r.summary.name + ": strain at t = " + std::to_string(t));
@@ -478,62 +612,130 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       r.frame_out[3].append(st.e1);
       r.frame_out[4].append(st.e1_dir);
       r.frame_out[5].append(st.e2);
+      if (contact) r.frame_out[6].append(pressure[k]);
       Eigen::Index imax = 0;
       w.cwiseAbs().maxCoeff(&imax);
-      r.summary.max_deflection_m = w(imax);
-      r.summary.e1_min = st.e1.minCoeff();
-      r.summary.e1_max = st.e1.maxCoeff();
+      if (std::abs(w(imax)) >= std::abs(r.summary.max_deflection_m)) {
+        r.summary.max_deflection_m = w(imax);
+        r.summary.max_deflection_time_s = t;
+      }
+      r.summary.e1_min = std::min(r.summary.e1_min, st.e1.minCoeff());
+      r.summary.e1_max = std::max(r.summary.e1_max, st.e1.maxCoeff());
+      r.summary.e2_min = std::min(r.summary.e2_min, st.e2.minCoeff());
+    }
+    if (contact) {
+      contact_out[0].append(total);
+      contact_out[1].append(medial);
+      contact_out[2].append(lateral);
+      contact_out[3].append(area);
+      contact_out[4].append(max_pen);
     }
     time_out.append(t);
+    if (trial_time_out) trial_time_out->append(t - seating + kin_times.front());
     times.push_back(t);
     write_sidecar();
   };
 
   // ---- integrate ----------------------------------------------------------
-  for (SurfaceRun& r : runs) {
-    r.integrator = std::make_unique<HhtIntegrator>(*r.model, iopt);
-    r.integrator->initialize(0.0, r.model->reference_state());
+  if (contact) {
+    iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
+    iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
+  } else {
+    iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
   }
+  Eigen::VectorXd q0(system.num_dofs());
+  for (int k = 0; k < system.num_models(); ++k)
+    q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();
+  if (contact) {
+    // The surfaces must start apart (or the first frame's overlap is applied
+    // as an impact): the seating offset has to exceed the initial overlap.
+    for (int k = 0; k < system.num_contacts(); ++k) {
+      const cartilage::ContactPairReport rep = system.contact_report(k, q0);
+      if (rep.counts.vertex_face + rep.counts.edge_edge > 0)
+        throw common::InputError(scene.file.string(), sc->line,
+                                 "scenario '" + sc->name + "': contact pair " + pair_names[k] + " overlaps by " +
+                                     std::to_string(rep.counts.max_penetration_m * 1e3) +
+                                     " mm at t = 0; increase seating_offset_mm (now " +
+                                     std::to_string(seat_offset * 1e3) + " mm)");
+    }
+  }
+  HhtIntegrator integrator(system, iopt);
+  integrator.initialize(0.0, q0);
   common::log_info("scenario " + sc->name + ": " +
                    (steady ? std::string("steady state (static equilibrium at t = ") + std::to_string(end_time) + " s)"
                            : (quasi_static ? "quasi-static" : "HHT alpha " + std::to_string(iopt.alpha)) +
-                                 std::string(", dt ") + std::to_string(dt) + " s to " + std::to_string(end_time) +
-                                 " s"));
-  write_frame(0.0);
+                                 std::string(", dt ") + std::to_string(dt) + " s to " + std::to_string(total_time) +
+                                 " s" + (seating > 0 ? " (" + std::to_string(seating) + " s seating first)" : "")));
+  write_frame(integrator.q(), 0.0);
   common::ProgressOptions popt;
   if (!options.progress) popt.mode = common::ProgressOptions::Mode::kOff;
   common::Progress progress("surface " + sc->name, std::max<std::int64_t>(n_steps_expected, 1), popt);
-  const double step = steady ? end_time : dt;
+  const double step = steady ? total_time : dt;
+  const double limit = o.si("penetration_limit");
+  const bool stop_on_penetration = o.text("penetration_action") == "stop";
   double t = 0;
   int k_out = 1;
+  long last_iterations = 0, last_rejections = 0;
+  SurfaceStageResult res;
   try {
-    while (t < end_time * (1 - 1e-12)) {
-      const double t_out = std::min(k_out * interval, end_time);
+    while (t < total_time * (1 - 1e-12)) {
+      const double t_out = std::min(k_out * interval, total_time);
       while (t < t_out * (1 - 1e-12)) {
         const double t_next = std::min(t + step, t_out);
-        for (SurfaceRun& r : runs) {
-          const double w0 = now_s();
-          r.integrator->advance_to(t_next);
-          const double wall = now_s() - w0;
-          const cartilage::IntegratorStatistics& s = r.integrator->statistics();
-          const cartilage::StepRecord& rec = s.log.back();
-          const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
-          r.summary.final_residual_N = rl;
-          r.summary.residual_tolerance_N = std::max(iopt.residual_rtol * r0, iopt.residual_atol_N);
-          r.solver_out[0].append(t_next);
-          r.solver_out[1].append(rec.dt);
-          r.solver_out[2].append(static_cast<int>(s.newton_iterations - r.last_iterations));
-          r.solver_out[3].append(rl);
-          r.solver_out[4].append(r.summary.residual_tolerance_N);
-          r.solver_out[5].append(static_cast<int>(s.rejected_steps - r.last_rejections));
-          r.solver_out[6].append(wall);
-          r.last_iterations = s.newton_iterations;
-          r.last_rejections = s.rejected_steps;
+        const double w0 = now_s();
+        integrator.advance_to(t_next);
+        const double wall = now_s() - w0;
+        const cartilage::IntegratorStatistics& s = integrator.statistics();
+        const cartilage::StepRecord& rec = s.log.back();
+        const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
+        res.final_residual_N = rl;
+        res.residual_tolerance_N = std::max(iopt.residual_rtol * r0, iopt.residual_atol_N);
+        const double max_def = max_abs_deflection(integrator.q(), t_next);
+        solver_out[0].append(t_next);
+        solver_out[1].append(rec.dt);
+        solver_out[2].append(static_cast<int>(s.newton_iterations - last_iterations));
+        solver_out[3].append(rl);
+        solver_out[4].append(res.residual_tolerance_N);
+        solver_out[5].append(static_cast<int>(s.rejected_steps - last_rejections));
+        solver_out[6].append(wall);
+        solver_out[7].append(max_def);
+        if (contact) {
+          double pen = 0;
+          long active = 0;
+          for (int k = 0; k < system.num_contacts(); ++k) {
+            const cartilage::ContactPairReport rep = system.contact_report(k, integrator.q());
+            pen = std::max(pen, rep.counts.max_penetration_m);
+            active += rep.counts.vertex_face + rep.counts.edge_edge;
+          }
+          const double ratio = max_def > 0 ? pen / max_def : (pen > 0 ? std::numeric_limits<double>::infinity() : 0.0);
+          solver_out[8].append(pen);
+          solver_out[9].append(ratio);
+          solver_out[10].append(static_cast<int>(active));
+          res.max_penetration_m = std::max(res.max_penetration_m, pen);
+          res.contact_steps += active > 0 ? 1 : 0;
+          res.active_contacts_sum += active;
+          // The seed's accuracy rule, enforced: interpenetration below
+          // penetration_limit x the largest deflection (checked while in contact).
+          if (active > 0 && ratio > limit) {
+            ++penetration_warnings;
+            if (ratio > worst_ratio) worst_ratio = ratio;
+            std::ostringstream m;
+            m << "t = " << t_next << " s: max interpenetration " << pen * 1e3 << " mm is " << ratio
+              << " of the max deflection " << max_def * 1e3 << " mm (limit " << limit << ")";
+            if (stop_on_penetration)
+              throw common::NumericalError("surface " + sc->name + ": accuracy rule broken: " + m.str() +
+                                           "; raise contact_stiffness_n_per_mm3 or set penetration_action: warn");
+            if (penetration_warnings <= 5 || penetration_warnings % 1000 == 0)
+              common::log_warn("surface " + sc->name + ": " + m.str() + " (warning " +
+                               std::to_string(penetration_warnings) + ")");
+          }
         }
+        last_iterations = s.newton_iterations;
+        last_rejections = s.rejected_steps;
         t = t_next;
         progress.step();
       }
-      write_frame(t);
+      write_frame(integrator.q(), t);
       ++k_out;
     }
   } catch (const std::exception& e) {
@@ -544,44 +746,61 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   progress.finish();
 
   // ---- statistics -----------------------------------------------------------
-  SurfaceStageResult res;
   res.scenario = sc->name;
   res.frames = static_cast<int>(times.size());
   for (SurfaceRun& r : runs) {
     for (auto& a : r.frame_out) a.close();
-    for (auto& a : r.solver_out) a.close();
-    const cartilage::IntegratorStatistics& s = r.integrator->statistics();
-    const std::string sg = "/solver/" + r.summary.name;
-    out.set_attribute(sg, "steps", static_cast<std::int64_t>(s.steps));
-    out.set_attribute(sg, "newton_iterations", static_cast<std::int64_t>(s.newton_iterations));
-    out.set_attribute(sg, "rejected_steps", static_cast<std::int64_t>(s.rejected_steps));
-    out.set_attribute(sg, "factorizations", static_cast<std::int64_t>(s.factorizations));
-    out.set_attribute(sg, "symbolic_analyses", static_cast<std::int64_t>(s.symbolic_analyses));
-    out.set_attribute(sg, "solver_switches", static_cast<std::int64_t>(s.solver_switches));
-    out.set_attribute(sg, "linear_solver", s.linear_solver);
-    out.set_attribute(sg, "assembly_s", s.assembly_s);
-    out.set_attribute(sg, "factorization_s", s.factorization_s);
-    out.set_attribute(sg, "solve_s", s.solve_s);
-    out.set_attribute(sg, "total_s", s.total_s);
-    std::string rej;
-    for (const auto& x : s.rejections) rej += x + "\n";
-    out.set_attribute(sg, "rejections", rej);
     const std::string g = "/surfaces/" + r.summary.name;
     out.set_attribute(g, "max_deflection_m", r.summary.max_deflection_m);
+    out.set_attribute(g, "max_deflection_time_s", r.summary.max_deflection_time_s);
     out.set_attribute(g, "e1_min", r.summary.e1_min);
     out.set_attribute(g, "e1_max", r.summary.e1_max);
-    out.set_attribute(g, "final_residual_N", r.summary.final_residual_N);
-    out.set_attribute(g, "residual_tolerance_N", r.summary.residual_tolerance_N);
-    res.steps += s.steps;
-    res.newton_iterations += s.newton_iterations;
-    res.rejected_steps += s.rejected_steps;
-    res.factorizations += s.factorizations;
-    res.assembly_s += s.assembly_s;
-    res.factorization_s += s.factorization_s;
-    res.solve_s += s.solve_s;
+    out.set_attribute(g, "e2_min", r.summary.e2_min);
+    r.summary.final_residual_N = res.final_residual_N;
+    r.summary.residual_tolerance_N = res.residual_tolerance_N;
+    out.set_attribute(g, "final_residual_N", res.final_residual_N);
+    out.set_attribute(g, "residual_tolerance_N", res.residual_tolerance_N);
     res.surfaces.push_back(r.summary);
   }
+  for (auto& a : solver_out) a.close();
+  for (auto& a : contact_out) a.close();
+  const cartilage::IntegratorStatistics& s = integrator.statistics();
+  const cartilage::CoupledSystemStatistics& cs = system.statistics();
+  out.set_attribute("/solver", "steps", static_cast<std::int64_t>(s.steps));
+  out.set_attribute("/solver", "newton_iterations", static_cast<std::int64_t>(s.newton_iterations));
+  out.set_attribute("/solver", "rejected_steps", static_cast<std::int64_t>(s.rejected_steps));
+  out.set_attribute("/solver", "factorizations", static_cast<std::int64_t>(s.factorizations));
+  out.set_attribute("/solver", "symbolic_analyses", static_cast<std::int64_t>(s.symbolic_analyses));
+  out.set_attribute("/solver", "solver_switches", static_cast<std::int64_t>(s.solver_switches));
+  out.set_attribute("/solver", "pattern_changes", static_cast<std::int64_t>(s.pattern_changes));
+  out.set_attribute("/solver", "line_search_reductions", static_cast<std::int64_t>(s.line_search_reductions));
+  out.set_attribute("/solver", "linear_solver", s.linear_solver);
+  out.set_attribute("/solver", "assembly_s", s.assembly_s);
+  out.set_attribute("/solver", "contact_s", cs.contact_time_s);
+  out.set_attribute("/solver", "factorization_s", s.factorization_s);
+  out.set_attribute("/solver", "solve_s", s.solve_s);
+  out.set_attribute("/solver", "total_s", s.total_s);
+  std::string rej;
+  for (const auto& x : s.rejections) rej += x + "\n";
+  out.set_attribute("/solver", "rejections", rej);
+  if (contact) {
+    out.set_attribute("/solver", "penetration_warnings", static_cast<std::int64_t>(penetration_warnings));
+    out.set_attribute("/solver", "worst_penetration_ratio", worst_ratio);
+    out.set_attribute("/solver", "max_penetration_m", res.max_penetration_m);
+  }
+  res.steps = s.steps;
+  res.newton_iterations = s.newton_iterations;
+  res.rejected_steps = s.rejected_steps;
+  res.factorizations = s.factorizations;
+  res.assembly_s = s.assembly_s;
+  res.contact_s = cs.contact_time_s;
+  res.factorization_s = s.factorization_s;
+  res.solve_s = s.solve_s;
+  res.pattern_changes = s.pattern_changes;
+  res.penetration_warnings = penetration_warnings;
+  res.worst_penetration_ratio = worst_ratio;
   time_out.close();
+  if (trial_time_out) trial_time_out->close();
   res.wall_s = now_s() - t_start;
   out.set_attribute("/solver", "wall_s", res.wall_s);
   out.set_attribute("/", "status", "completed");

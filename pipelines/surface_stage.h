@@ -26,8 +26,10 @@ enum class SurfaceStageStatus { kCompleted, kFailed };
 struct SurfaceSummary {
   std::string name;
   int nodes = 0, elements = 0;
-  double max_deflection_m = 0;  ///< largest |deflection| (signed value of that node)
-  double e1_min = 0, e1_max = 0;  ///< range of the first principal strain
+  double max_deflection_m = 0;  ///< largest |deflection| over the run (signed value of that node)
+  double max_deflection_time_s = 0;  ///< when it occurred
+  double e1_min = 0, e1_max = 0;  ///< range of the first principal strain over the run
+  double e2_min = 0;              ///< smallest second principal strain over the run
   double final_residual_N = 0;    ///< residual norm of the last accepted step
   double residual_tolerance_N = 0;  ///< the tolerance that step met
 };
@@ -36,9 +38,16 @@ struct SurfaceStageResult {
   SurfaceStageStatus status = SurfaceStageStatus::kFailed;
   std::string scenario;
   std::vector<SurfaceSummary> surfaces;
-  long steps = 0, newton_iterations = 0, rejected_steps = 0, factorizations = 0;
+  long steps = 0, newton_iterations = 0, rejected_steps = 0, factorizations = 0, pattern_changes = 0;
   int frames = 0;
-  double wall_s = 0, assembly_s = 0, factorization_s = 0, solve_s = 0;
+  double wall_s = 0, assembly_s = 0, contact_s = 0, factorization_s = 0, solve_s = 0;
+  double final_residual_N = 0, residual_tolerance_N = 0;  ///< last accepted step
+  // mesh_contact only:
+  double max_penetration_m = 0;        ///< largest interpenetration of any step
+  long contact_steps = 0;              ///< steps with at least one active contact
+  long active_contacts_sum = 0;        ///< sum over steps of active contacts
+  long penetration_warnings = 0;       ///< steps breaking the accuracy rule
+  double worst_penetration_ratio = 0;  ///< largest penetration / deflection of those
 };
 
 /// Runs the stage. Throws common::InputError on bad input (naming file and

@@ -106,8 +106,10 @@ TEST(SurfaceModel, BuildsExactlyTheListedEffects) {
 TEST(SurfaceModel, EffectsItCannotBuildAreErrorsNotOmissions) {
   const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.0);
   common::EffectLedger ledger("test");
-  for (const char* e : {"mesh_contact", "imposed_kinematics", "no_such_effect"}) {
-    // imposed_kinematics: rejected here because the bone is at rest.
+  // mesh_contact is accepted (it couples two models: the caller builds it,
+  // CoupledShellSystem); imposed_kinematics is rejected here because the
+  // bone is at rest.
+  for (const char* e : {"imposed_kinematics", "no_such_effect"}) {
     try {
       build_surface_model(s, SurfaceParameters{}, {"foundation_springs", e}, BoneMotion::fixed(), &ledger);
       FAIL() << e;

@@ -1,0 +1,522 @@
+#include "cartilage/mesh_contact.h"
+
+#include <unsupported/Eigen/AutoDiff>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "cartilage/shell_model.h"
+#include "common/broad_phase.h"
+#include "common/error.h"
+
+namespace arthrosim::cartilage {
+namespace {
+
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+using Ad = Eigen::AutoDiffScalar<Vec12>;
+template <class T>
+using V3 = Eigen::Matrix<T, 3, 1>;
+
+// The four weights w_k and the unit normal n of a contact, as functions of
+// the four points (templated so that the same code gives values and, with
+// Ad, their derivatives). Returns g = n . sum_k w_k x_k.
+//  vertex-face: x0 vertex, x1..x3 triangle; w = (1, -N1, -N2, -N3).
+//  edge-edge:   x0, x1 first edge, x2, x3 second; w = (1-s, s, -(1-u), -u).
+template <class T>
+T gap_kernel(ContactKind kind, const V3<T>* x, double sign, V3<T>& n, T* w, T* p1 = nullptr, T* p2 = nullptr) {
+  using std::sqrt;
+  if (kind == ContactKind::kVertexFace) {
+    const V3<T> e1 = x[2] - x[1], e2 = x[3] - x[1], d = x[0] - x[1];
+    const V3<T> c = e1.cross(e2);
+    n = c / sqrt(c.squaredNorm());
+    const T a11 = e1.dot(e1), a12 = e1.dot(e2), a22 = e2.dot(e2);
+    const T b1 = d.dot(e1), b2 = d.dot(e2);
+    const T det = a11 * a22 - a12 * a12;
+    const T xi = (a22 * b1 - a12 * b2) / det, eta = (a11 * b2 - a12 * b1) / det;
+    w[0] = T(1.0);
+    w[1] = -(T(1.0) - xi - eta);
+    w[2] = -xi;
+    w[3] = -eta;
+    if (p1) *p1 = xi;
+    if (p2) *p2 = eta;
+    return d.dot(n);
+  }
+  if (kind == ContactKind::kVertexEdge || kind == ContactKind::kVertexVertex) {
+    // Closest point c on the segment x1-x2 (or the point x1); the vertex is
+    // behind the surface, so g = -|x0 - c| and n = (c - x0)/|c - x0|.
+    T u = T(0.0);
+    if (kind == ContactKind::kVertexEdge) {
+      const V3<T> e = x[2] - x[1];
+      u = (x[0] - x[1]).dot(e) / e.squaredNorm();
+    }
+    const V3<T> c = x[1] + u * (x[2] - x[1]);
+    const V3<T> r = c - x[0];
+    const T l = sqrt(r.squaredNorm());
+    n = r / l;
+    w[0] = T(1.0);
+    w[1] = -(T(1.0) - u);
+    w[2] = -u;
+    w[3] = T(0.0);
+    if (p1) *p1 = u;
+    return -l;
+  }
+  const V3<T> ea = x[1] - x[0], eb = x[3] - x[2], r = x[0] - x[2];
+  const V3<T> m = ea.cross(eb);
+  n = (sign / sqrt(m.squaredNorm())) * m;
+  const T A = ea.dot(ea), B = ea.dot(eb), C = eb.dot(eb), D = ea.dot(r), E = eb.dot(r);
+  const T den = A * C - B * B;
+  const T s = (B * E - C * D) / den, u = (A * E - B * D) / den;
+  w[0] = T(1.0) - s;
+  w[1] = s;
+  w[2] = -(T(1.0) - u);
+  w[3] = -u;
+  if (p1) *p1 = s;
+  if (p2) *p2 = u;
+  return r.dot(n);
+}
+
+// Closest point of p on triangle (a, b, c) (Ericson, Real-Time Collision
+// Detection, 5.1.5): barycentric weights and the feature it lies on
+// (0 face, 1..3 edge ab/bc/ca, 4..6 vertex a/b/c).
+struct TriangleClosest {
+  Eigen::Vector3d point;
+  double bary[3];
+  int feature;
+};
+TriangleClosest closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                    const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return {a, {1, 0, 0}, 4};
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return {b, {0, 1, 0}, 5};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return {a + v * ab, {1 - v, v, 0}, 1};
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return {c, {0, 0, 1}, 6};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double w = d2 / (d2 - d6);
+    return {a + w * ac, {1 - w, 0, w}, 3};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {b + w * (c - b), {0, 1 - w, w}, 2};
+  }
+  const double den = 1.0 / (va + vb + vc);
+  const double v = vb * den, w = vc * den;
+  return {a + ab * v + ac * w, {1 - v - w, v, w}, 0};
+}
+
+// g, G = dg/dx and optionally H = d2g/dx2 (AD of the closed-form gradient).
+double gap_and_derivatives(ContactKind kind, const Eigen::Vector3d* x, double sign, Vec12& G,
+                           Eigen::Matrix<double, 12, 12>* H) {
+  Eigen::Vector3d n;
+  double w[4];
+  const double g = gap_kernel<double>(kind, x, sign, n, w);
+  for (int k = 0; k < 4; ++k) G.segment<3>(3 * k) = w[k] * n;
+  if (H) {
+    V3<Ad> xa[4];
+    for (int k = 0; k < 4; ++k)
+      for (int c = 0; c < 3; ++c) xa[k](c) = Ad(x[k](c), 12, 3 * k + c);
+    V3<Ad> na;
+    Ad wa[4];
+    gap_kernel<Ad>(kind, xa, sign, na, wa);
+    for (int k = 0; k < 4; ++k)
+      for (int c = 0; c < 3; ++c) H->row(3 * k + c) = (wa[k] * na(c)).derivatives().transpose();
+  }
+  return g;
+}
+
+Eigen::Vector3d row(const common::Points3& P, int i) { return P.row(i).transpose(); }
+
+// Current unit normals of triangles and area-weighted vertex normals.
+void current_normals(const ContactSurface& s, const common::Points3& x, common::Points3& tn, common::Points3& vn) {
+  tn.resize(s.F.rows(), 3);
+  vn = common::Points3::Zero(s.num_nodes, 3);
+  for (int t = 0; t < s.F.rows(); ++t) {
+    const Eigen::Vector3d c =
+        (row(x, s.F(t, 1)) - row(x, s.F(t, 0))).cross(row(x, s.F(t, 2)) - row(x, s.F(t, 0)));
+    const double l = c.norm();
+    tn.row(t) = (l > 0 ? Eigen::Vector3d(c / l) : Eigen::Vector3d::Zero()).transpose();
+    for (int k = 0; k < 3; ++k) vn.row(s.F(t, k)) += 0.5 * c.transpose();
+  }
+  for (int i = 0; i < s.num_nodes; ++i) {
+    const double l = vn.row(i).norm();
+    if (l > 0) vn.row(i) /= l;
+  }
+}
+
+common::Box3 point_box(const Eigen::Vector3d& p, double r) {
+  return {p.array() - r, p.array() + r};
+}
+common::Box3 triangle_box(const ContactSurface& s, const common::Points3& x, int t, double r) {
+  Eigen::Vector3d lo = row(x, s.F(t, 0)), hi = lo;
+  for (int k = 1; k < 3; ++k) {
+    lo = lo.cwiseMin(row(x, s.F(t, k)));
+    hi = hi.cwiseMax(row(x, s.F(t, k)));
+  }
+  return {lo.array() - r, hi.array() + r};
+}
+common::Box3 edge_box(const ContactSurface& s, const common::Points3& x, int e, double r) {
+  const Eigen::Vector3d a = row(x, s.edges(e, 0)), b = row(x, s.edges(e, 1));
+  return {a.cwiseMin(b).array() - r, a.cwiseMax(b).array() + r};
+}
+
+void check_positions(const ContactSurface& s, const common::Points3& x, const char* which, const std::string& name) {
+  if (x.rows() != s.num_nodes)
+    throw common::InputError("mesh contact " + name + ": surface " + which + " has " + std::to_string(s.num_nodes) +
+                             " nodes, positions for " + std::to_string(x.rows()) + " given");
+}
+
+void build_from_triangles(ContactSurface& s, const common::TriangleMesh& tri) {
+  s.num_nodes = tri.num_vertices();
+  s.F = tri.F;
+  const common::MeshTopology topo = common::build_topology(tri);
+  s.edges = topo.edges;
+  s.edge_triangles.resize(topo.edges.rows());
+  for (int e = 0; e < topo.edges.rows(); ++e) {
+    const auto& et = topo.edge_triangles[e];
+    s.edge_triangles[e] = {et.size() > 0 ? et[0] : -1, et.size() > 1 ? et[1] : -1};
+  }
+  s.triangle_edges.resize(tri.num_triangles(), 3);
+  {
+    std::vector<std::vector<std::pair<int, int>>> by_vertex(s.num_nodes);  // (other vertex, edge)
+    for (int e = 0; e < s.edges.rows(); ++e) by_vertex[s.edges(e, 0)].emplace_back(s.edges(e, 1), e);
+    for (int t = 0; t < tri.num_triangles(); ++t)
+      for (int k = 0; k < 3; ++k) {
+        const int u = std::min(tri.F(t, k), tri.F(t, (k + 1) % 3)), v = std::max(tri.F(t, k), tri.F(t, (k + 1) % 3));
+        s.triangle_edges(t, k) = -1;
+        for (const auto& [w, e] : by_vertex[u])
+          if (w == v) s.triangle_edges(t, k) = e;
+      }
+  }
+  const Eigen::VectorXd area = common::triangle_areas(tri);
+  s.vertex_area = Eigen::VectorXd::Zero(s.num_nodes);
+  for (int t = 0; t < tri.num_triangles(); ++t)
+    for (int k = 0; k < 3; ++k) s.vertex_area(tri.F(t, k)) += area(t) / 3.0;
+  s.vertex_triangles = topo.vertex_triangles;
+  s.boundary_vertex.assign(s.num_nodes, 0);
+  for (int v : topo.boundary_vertices) s.boundary_vertex[v] = 1;
+  s.edge_area = Eigen::VectorXd::Zero(s.edges.rows());
+  for (int e = 0; e < s.edges.rows(); ++e)
+    for (int t : s.edge_triangles[e])
+      if (t >= 0) s.edge_area(e) += area(t) / 3.0;
+}
+
+// The closest point of surface Sf to every vertex of Sv within `radius`
+// (broad phase: vertex boxes of half-width radius against tight triangle
+// boxes, so every triangle within radius is a candidate), with the signed
+// distance: negative behind Sf. The sign comes from the pseudo-normal of the
+// closest point's feature (face normal; edge: sum of the adjacent face
+// normals; corner: vertex normal; Baerentzen & Aanaes 2005). The signed
+// distance is continuous as a vertex slides from one facet to the next (no
+// force jumps at kinks). Vertices whose normal does not oppose the
+// pseudo-normal (surfaces not facing each other) get no hit.
+struct VertexHit {
+  int vertex = -1, triangle = -1;
+  TriangleClosest closest{};
+  double signed_distance = 0;
+};
+std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Points3& Xv, const common::Points3& vnv,
+                                   const ContactSurface& Sf, const common::Points3& Xf, const common::Points3& tnf,
+                                   const common::Points3& vnf, double radius, double min_opposition,
+                                   long* candidates) {
+  std::vector<common::Box3> vb(Sv.num_nodes), fb(Sf.F.rows());
+  for (int i = 0; i < Sv.num_nodes; ++i) vb[i] = point_box(row(Xv, i), radius);
+  for (int t = 0; t < Sf.F.rows(); ++t) fb[t] = triangle_box(Sf, Xf, t, 0.0);
+  const auto pairs = common::overlapping_boxes(vb, fb);
+  if (candidates) *candidates += static_cast<long>(pairs.size());
+  // Group by vertex (pairs are sorted by vertex, then triangle).
+  std::vector<size_t> starts;
+  for (size_t k = 0; k < pairs.size(); ++k)
+    if (k == 0 || pairs[k].first != pairs[k - 1].first) starts.push_back(k);
+  starts.push_back(pairs.size());
+  const int ng = static_cast<int>(starts.size()) - 1;
+  std::vector<VertexHit> hits(std::max(ng, 0));
+#pragma omp parallel for schedule(dynamic, 64) if (ng > 256)
+  for (int gi = 0; gi < ng; ++gi) {
+    const int i = pairs[starts[gi]].first;
+    const Eigen::Vector3d p = row(Xv, i);
+    double best = std::numeric_limits<double>::infinity();
+    VertexHit h;
+    for (size_t k = starts[gi]; k < starts[gi + 1]; ++k) {
+      const int t = pairs[k].second;
+      if (tnf.row(t).squaredNorm() == 0) continue;
+      const TriangleClosest cp = closest_on_triangle(p, row(Xf, Sf.F(t, 0)), row(Xf, Sf.F(t, 1)), row(Xf, Sf.F(t, 2)));
+      const double d2 = (p - cp.point).squaredNorm();
+      if (d2 < best) {  // ties: the first (lower) triangle index
+        best = d2;
+        h.triangle = t;
+        h.closest = cp;
+      }
+    }
+    if (h.triangle < 0) continue;
+    // Beyond the open boundary of Sf nothing is behind it: a closest point on
+    // a boundary edge or corner is no contact (otherwise a vertex beside the
+    // boundary, nearly in the surface's plane, would flip between "in front"
+    // and "behind" with a gap as large as its distance to the boundary).
+    const int f = h.closest.feature;
+    if (f >= 1 && f <= 3 && Sf.edge_triangles[Sf.triangle_edges(h.triangle, f - 1)][1] < 0) continue;
+    if (f >= 4 && Sf.boundary_vertex[Sf.F(h.triangle, f - 4)]) continue;
+    const double dist = std::sqrt(best);
+    if (!(dist > 0 && dist < radius)) continue;
+    Eigen::Vector3d pseudo;
+    if (h.closest.feature == 0) {
+      pseudo = tnf.row(h.triangle).transpose();
+    } else if (h.closest.feature <= 3) {
+      pseudo.setZero();
+      for (int t : Sf.edge_triangles[Sf.triangle_edges(h.triangle, h.closest.feature - 1)])
+        if (t >= 0) pseudo += tnf.row(t).transpose();
+    } else {
+      pseudo = vnf.row(Sf.F(h.triangle, h.closest.feature - 4)).transpose();
+    }
+    if (!(vnv.row(i).dot(pseudo.transpose()) < -min_opposition * pseudo.norm())) continue;
+    h.vertex = i;
+    h.signed_distance = (p - h.closest.point).dot(pseudo) < 0 ? -dist : dist;
+    hits[gi] = h;
+  }
+  std::vector<VertexHit> out;
+  for (const VertexHit& h : hits)
+    if (h.vertex >= 0) out.push_back(h);
+  return out;
+}
+
+}  // namespace
+
+ContactSurface::ContactSurface(const common::QuadMesh& mesh) {
+  build_from_triangles(*this, common::triangulate(mesh));
+}
+
+ContactSurface::ContactSurface(const ShellModel& model) {
+  common::QuadMesh m;
+  m.V.resize(model.num_nodes(), 3);
+  for (int i = 0; i < model.num_nodes(); ++i) m.V.row(i) = model.reference_position(i).transpose();
+  m.Q = model.quads();
+  build_from_triangles(*this, common::triangulate(m));
+}
+
+double contact_gap(ContactKind kind, const std::array<Eigen::Vector3d, 4>& x, double sign,
+                   Eigen::Matrix<double, 12, 1>* G, Eigen::Matrix<double, 12, 12>* H) {
+  Vec12 g12;
+  const double g = gap_and_derivatives(kind, x.data(), sign, g12, H);
+  if (G) *G = g12;
+  return g;
+}
+
+MeshContact::MeshContact(std::string name, const ContactSurface& a, const ContactSurface& b,
+                         const ContactOptions& options)
+    : name_(std::move(name)), a_(a), b_(b), opts_(options) {
+  const auto bad = [&](const std::string& what) {
+    throw common::InputError("mesh contact " + name_ + ": " + what);
+  };
+  if (!(opts_.stiffness_N_m3 > 0) || !std::isfinite(opts_.stiffness_N_m3))
+    bad("stiffness must be > 0 N/m^3, found " + std::to_string(opts_.stiffness_N_m3));
+  if (!(opts_.damping_N_s_m3 >= 0) || !std::isfinite(opts_.damping_N_s_m3))
+    bad("damping must be >= 0 N s/m^3, found " + std::to_string(opts_.damping_N_s_m3));
+  if (!(opts_.max_depth_m > 0) || !std::isfinite(opts_.max_depth_m))
+    bad("max_depth must be > 0 m, found " + std::to_string(opts_.max_depth_m));
+  if (!(opts_.smoothing_m > 0) || !(opts_.smoothing_m < opts_.max_depth_m))
+    bad("smoothing must be in (0, max_depth), found " + std::to_string(opts_.smoothing_m) + " m");
+  if (!(opts_.min_opposition >= -1 && opts_.min_opposition < 1))
+    bad("min_opposition must be in [-1, 1), found " + std::to_string(opts_.min_opposition));
+  if (a_.F.rows() == 0 || b_.F.rows() == 0) bad("both surfaces need triangles");
+}
+
+std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const common::Points3& xb,
+                                              const common::Points3* va, const common::Points3* vb, bool want_hessian,
+                                              ContactCounts* counts) const {
+  check_positions(a_, xa, "a", name_);
+  check_positions(b_, xb, "b", name_);
+  const ContactSurface* S[2] = {&a_, &b_};
+  const common::Points3* X[2] = {&xa, &xb};
+  const common::Points3* V[2] = {va, vb};
+  common::Points3 tn[2], vn[2];
+  current_normals(a_, xa, tn[0], vn[0]);
+  current_normals(b_, xb, tn[1], vn[1]);
+  const double dmax = opts_.max_depth_m;
+  ContactCounts cnt;
+  std::vector<ContactPoint> out;
+  // Which vertices are in vertex-face contact, per surface (edge-edge exclusion).
+  std::vector<char> vf_active[2] = {std::vector<char>(a_.num_nodes, 0), std::vector<char>(b_.num_nodes, 0)};
+
+
+  // ---- vertex-face, both directions --------------------------------------
+  for (int pass = 0; pass < 2; ++pass) {
+    const int sv = pass, sf = 1 - pass;  // vertex side, face side
+    const ContactSurface& Sf = *S[sf];
+    for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf], dmax,
+                                          opts_.min_opposition, &cnt.candidate_vertex_face)) {
+      if (!(h.signed_distance < 0)) continue;  // in front: no contact
+      ContactPoint c;
+      const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
+      const int f = h.closest.feature;
+      if (f == 0) {
+        c.kind = ContactKind::kVertexFace;
+        c.node = {h.vertex, tri[0], tri[1], tri[2]};
+      } else if (f <= 3) {
+        c.kind = ContactKind::kVertexEdge;  // edge (k, k+1 mod 3)
+        c.node = {h.vertex, tri[f - 1], tri[f % 3], tri[(f + 1) % 3]};
+      } else {
+        c.kind = ContactKind::kVertexVertex;
+        c.node = {h.vertex, tri[f - 4], tri[(f - 3) % 3], tri[(f - 2) % 3]};
+      }
+      c.side = {sv, sf, sf, sf};
+      c.area = 0.5 * S[sv]->vertex_area(h.vertex);
+      vf_active[sv][h.vertex] = 1;
+      out.push_back(std::move(c));
+    }
+  }
+  // ---- edge-edge ------------------------------------------------------------
+  std::vector<ContactPoint> ee;
+  if (opts_.edge_edge) {
+    std::vector<common::Box3> ea(a_.edges.rows()), eb(b_.edges.rows());
+    for (int e = 0; e < a_.edges.rows(); ++e) ea[e] = edge_box(a_, xa, e, 0.5 * dmax);
+    for (int e = 0; e < b_.edges.rows(); ++e) eb[e] = edge_box(b_, xb, e, 0.5 * dmax);
+    const auto pairs = common::overlapping_boxes(ea, eb);
+    cnt.candidate_edge_edge += static_cast<long>(pairs.size());
+    auto edge_normal = [&](int side, int e) {
+      Eigen::Vector3d n = Eigen::Vector3d::Zero();
+      for (int t : S[side]->edge_triangles[e])
+        if (t >= 0) n += tn[side].row(t).transpose();
+      const double l = n.norm();
+      return l > 0 ? Eigen::Vector3d(n / l) : n;
+    };
+    std::vector<ContactPoint> cand(pairs.size());
+    std::vector<char> ok(pairs.size(), 0);
+#pragma omp parallel for schedule(dynamic, 256) if (pairs.size() > 1024)
+    for (long k = 0; k < static_cast<long>(pairs.size()); ++k) {
+      const int e1 = pairs[k].first, e2 = pairs[k].second;
+      const int a0 = a_.edges(e1, 0), a1 = a_.edges(e1, 1), b0 = b_.edges(e2, 0), b1 = b_.edges(e2, 1);
+      if (vf_active[0][a0] || vf_active[0][a1] || vf_active[1][b0] || vf_active[1][b1]) continue;
+      Eigen::Vector3d x[4] = {row(xa, a0), row(xa, a1), row(xb, b0), row(xb, b1)};
+      const Eigen::Vector3d da = x[1] - x[0], db = x[3] - x[2];
+      const Eigen::Vector3d m = da.cross(db);
+      // Nearly parallel edges have no well-defined crossing (sin < 0.05).
+      if (!(m.norm() > 0.05 * da.norm() * db.norm())) continue;
+      const Eigen::Vector3d nb = edge_normal(1, e2), na = edge_normal(0, e1);
+      const double sign = m.dot(nb) >= 0 ? 1.0 : -1.0;
+      Eigen::Vector3d n;
+      double w[4], s = 0, u = 0;
+      const double g = gap_kernel<double>(ContactKind::kEdgeEdge, x, sign, n, w, &s, &u);
+      if (s <= 0 || s >= 1 || u <= 0 || u >= 1) continue;
+      if (!(g < 0 && g > -dmax)) continue;
+      if (!(na.dot(n) < -opts_.min_opposition)) continue;
+      ContactPoint& c = cand[k];
+      c.kind = ContactKind::kEdgeEdge;
+      c.node = {a0, a1, b0, b1};
+      c.side = {0, 0, 1, 1};
+      c.area = std::min(a_.edge_area(e1), b_.edge_area(e2));
+      c.normal = n;  // orientation sign is re-derived from it below
+      ok[k] = 1;
+    }
+    for (size_t k = 0; k < pairs.size(); ++k)
+      if (ok[k]) out.push_back(std::move(cand[k]));
+  }
+  // ---- gap, derivatives, pressure -------------------------------------------
+  const double kc = opts_.stiffness_N_m3, cc = opts_.damping_N_s_m3;
+  std::vector<char> keep(out.size(), 0);
+#pragma omp parallel for schedule(static) if (out.size() > 512)
+  for (long k = 0; k < static_cast<long>(out.size()); ++k) {
+    ContactPoint& c = out[k];
+    Eigen::Vector3d x[4];
+    for (int j = 0; j < 4; ++j) x[j] = row(*X[c.side[j]], c.node[j]);
+    double sign = 1.0;
+    if (c.kind == ContactKind::kEdgeEdge) sign = c.normal.dot((x[1] - x[0]).cross(x[3] - x[2])) >= 0 ? 1.0 : -1.0;
+    Vec12 G;
+    c.gap = gap_and_derivatives(c.kind, x, sign, G, want_hessian ? &c.H : nullptr);
+    c.G = G;
+    Eigen::Vector3d n;
+    double w[4];
+    gap_kernel<double>(c.kind, x, sign, n, w);
+    c.normal = n;
+    c.point = c.kind == ContactKind::kEdgeEdge ? Eigen::Vector3d(-w[2] * x[2] - w[3] * x[3])
+                                               : Eigen::Vector3d(x[0] - c.gap * n);
+    c.gap_rate = 0;
+    for (int j = 0; j < 4; ++j) {
+      const common::Points3* vel = V[c.side[j]];
+      if (vel) c.gap_rate += G.segment<3>(3 * j).dot(row(*vel, c.node[j]));
+    }
+    // Penalty with a quadratic toe of width delta: p and dp/dg are
+    // continuous at g = 0, so the tangent does not jump when a contact
+    // switches on (no Newton cycling at the contact boundary).
+    const double delta = opts_.smoothing_m;
+    double p = 0, dp = 0;  // p(g) and -dp/dg
+    if (c.gap <= -delta) {
+      p = kc * (-c.gap - 0.5 * delta);
+      dp = kc;
+    } else {
+      p = 0.5 * kc * c.gap * c.gap / delta;
+      dp = -kc * c.gap / delta;
+    }
+    c.pressure = p - cc * c.gap_rate;
+    c.stiffness = dp;
+    keep[k] = c.pressure > 0;
+  }
+  std::vector<ContactPoint> active;
+  active.reserve(out.size());
+  for (size_t k = 0; k < out.size(); ++k) {
+    if (!keep[k]) continue;
+    ContactPoint& c = out[k];
+    if (c.kind == ContactKind::kEdgeEdge)
+      ++cnt.edge_edge;
+    else
+      ++cnt.vertex_face;
+    cnt.max_penetration_m = std::max(cnt.max_penetration_m, -c.gap);
+    active.push_back(std::move(c));
+  }
+  if (counts) *counts = cnt;
+  return active;
+}
+
+std::vector<std::pair<int, int>> MeshContact::coupling_candidates(const common::Points3& xa,
+                                                                  const common::Points3& xb, double margin) const {
+  check_positions(a_, xa, "a", name_);
+  check_positions(b_, xb, "b", name_);
+  const ContactSurface* S[2] = {&a_, &b_};
+  const common::Points3* X[2] = {&xa, &xb};
+  common::Points3 tn[2], vn[2];
+  current_normals(a_, xa, tn[0], vn[0]);
+  current_normals(b_, xb, tn[1], vn[1]);
+  // Every vertex within `margin` of penetrating (signed distance < margin)
+  // is coupled with the nodes of the triangles around its closest triangle
+  // (the triangles sharing a vertex with it), so that it can slide by about
+  // one element, or penetrate, before the pattern must be rebuilt.
+  std::vector<std::pair<int, int>> nodes;
+  for (int pass = 0; pass < 2; ++pass) {
+    const int sv = pass, sf = 1 - pass;
+    const ContactSurface& Sf = *S[sf];
+    for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf],
+                                          std::max(opts_.max_depth_m, margin), opts_.min_opposition, nullptr)) {
+      if (!(h.signed_distance < margin)) continue;
+      for (int k = 0; k < 3; ++k)
+        for (int t : Sf.vertex_triangles[Sf.F(h.triangle, k)])
+          for (int j = 0; j < 3; ++j) {
+            const int other = Sf.F(t, j);
+            nodes.push_back(pass == 0 ? std::make_pair(h.vertex, other) : std::make_pair(other, h.vertex));
+          }
+    }
+  }
+  if (opts_.edge_edge) {
+    // Edge pairs whose boxes (grown by margin) overlap near the other
+    // surface: their four nodes.
+    std::vector<common::Box3> ea(a_.edges.rows()), eb(b_.edges.rows());
+    for (int e = 0; e < a_.edges.rows(); ++e) ea[e] = edge_box(a_, xa, e, 0.5 * margin);
+    for (int e = 0; e < b_.edges.rows(); ++e) eb[e] = edge_box(b_, xb, e, 0.5 * margin);
+    for (const auto& [e1, e2] : common::overlapping_boxes(ea, eb))
+      for (int i = 0; i < 2; ++i)
+        for (int j = 0; j < 2; ++j) nodes.emplace_back(a_.edges(e1, i), b_.edges(e2, j));
+  }
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  return nodes;
+}
+
+}  // namespace arthrosim::cartilage

@@ -1,0 +1,162 @@
+#pragma once
+// Deformable mesh-to-mesh penalty contact between two shell surfaces (issue 6;
+// seed seeds/002_3ffcc11eb7a447d9.txt, "Contact Methods").
+//
+// Geometry. Each quad shell surface is seen as triangles, two per quad (split
+// along the 0-2 diagonal, common::triangulate), whose vertices are the shell
+// nodes (mid-surface positions r_i). Triangle normals (b - a) x (c - a) point
+// away from the bone, into the joint space (docs/prepared_model.md).
+//
+// Narrow phase, per candidate pair from the broad phase (common/broad_phase.h,
+// boxes rebuilt from the current positions at every evaluation):
+//  - vertex-face: vertex p of one surface against the faceted other surface:
+//    c, the closest point of that surface; p is behind it when (p - c) . m < 0
+//    with m the pseudo-normal of c's feature (face normal, sum of the two
+//    face normals at an edge, vertex normal at a corner), and the surfaces
+//    face each other when p's vertex normal opposes m. If c is inside a face,
+//    g = (p - x1) . n with n the face normal; if it is on an edge or corner
+//    (convex kinks between facets), g = -|p - c| with n = (c - p)/|c - p|.
+//    A closest point on the open boundary (boundary edge or corner) is no
+//    contact: the surface ends there. (A penetrating vertex that slides off
+//    the other surface's boundary therefore loses its force at once.) This is the signed distance to the faceted
+//    surface, continuous as p slides across facets (no force jumps). Active
+//    when 0 < -g < max_depth. Both directions are evaluated (two-pass, each
+//    with half the vertex's tributary area), so neither surface is
+//    privileged.
+//  - edge-edge: edges (a0, a1) and (b0, b1); n = +-(ea x eb)/|ea x eb| oriented
+//    along the second edge's surface normal, g = (a0 - b0) . n, the signed
+//    distance of the two lines; active when the closest points lie inside
+//    both edges, -max_depth < g < 0, and no endpoint of either edge is already
+//    in vertex-face contact: it catches edges crossing where no vertex
+//    penetrates (sharp features), and never double counts a smooth contact.
+//    Weight: the smaller of the two edges' tributary areas.
+// In all cases the gap is g = n . sum_k w_k x_k over the four nodes with
+// weights w (face: 1, -N1, -N2, -N3 with N the barycentric coordinates of the
+// projection; edge: 1, -(1 - u), -u, 0; corner: 1, -1, 0, 0; edge-edge:
+// 1 - s, s, -(1 - u), -u with s, u the closest-point parameters), and its
+// exact gradient is dg/dx_k = w_k n (the envelope property of the closest
+// point). The Hessian d2g/dx2 is obtained by forward
+// automatic differentiation of that gradient (Eigen's AutoDiffScalar).
+//
+// Penalty law (per active contact, area weight A):
+//   pressure  lambda = p(g) - c g_dot  (c: damping [N s/m^3], g_dot = dg/dx . v),
+//             only while lambda > 0, with
+//             p(g) = k (-g - delta/2) for g <= -delta, k g^2 / (2 delta) for -delta < g < 0
+//             (k: stiffness per unit area [N/m^3]; the quadratic toe of width
+//             delta makes p and p' continuous at g = 0: no tangent jump when a
+//             contact switches on, so Newton does not cycle)
+//   residual  F += -A lambda G   (F = f_int - f_ext convention of ShellModel)
+//   tangent   dF/dx = A (-p' G G^T + c G (H v)^T - lambda H),  dF/dv = A c G G^T
+// (G = dg/dx, H = d2g/dx2). With c = 0 the force derives from the potential
+// A int p dg and the tangent is symmetric. The force on node k is
+// A lambda w_k n: it pushes the penetrating vertex out along n and the
+// triangle nodes the other way, distributed by the triangle's shape functions.
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "common/mesh.h"
+
+namespace arthrosim::cartilage {
+
+class ShellModel;
+
+/// A shell surface seen as triangles for contact.
+struct ContactSurface {
+  /// From a shell model: its quads (split in two) and reference positions.
+  explicit ContactSurface(const ShellModel& model);
+  /// From a quad mesh (reference positions [m]).
+  explicit ContactSurface(const common::QuadMesh& mesh);
+
+  int num_nodes = 0;
+  common::Triangles F;                             ///< 2 per quad
+  Eigen::Matrix<int, Eigen::Dynamic, 2> edges;     ///< unique, sorted (a < b)
+  std::vector<std::array<int, 2>> edge_triangles;  ///< adjacent triangles (-1: none)
+  /// Edge k of triangle t joins F(t, k) and F(t, (k + 1) % 3).
+  Eigen::Matrix<int, Eigen::Dynamic, 3> triangle_edges;
+  std::vector<std::vector<int>> vertex_triangles;  ///< triangles around each node
+  std::vector<char> boundary_vertex;               ///< 1 on the open boundary
+  Eigen::VectorXd vertex_area;  ///< reference tributary area per node [m^2] (1/3 of adjacent triangles)
+  Eigen::VectorXd edge_area;    ///< reference tributary area per edge [m^2] (1/3 of adjacent triangles)
+};
+
+struct ContactOptions {
+  double stiffness_N_m3 = 7e9;   ///< k: penalty pressure per unit penetration [N/m^3], > 0
+  double damping_N_s_m3 = 0;     ///< c [N s/m^3], >= 0 (0: symmetric tangent)
+  double max_depth_m = 1e-3;     ///< deeper overlaps are not contacts (far side), > 0
+  /// Width delta of the quadratic toe of the penalty law [m], in (0, max_depth).
+  double smoothing_m = 1e-6;
+  /// Evaluate edge-edge pairs (for sharp features). Off by default: the
+  /// vertex test with edge and corner features already covers smooth
+  /// surfaces, and the edge-edge exclusion rule switches forces on and off
+  /// discontinuously, which can stall Newton (docs/contact.md).
+  bool edge_edge = false;
+  /// A vertex-face pair needs n_vertex . n_triangle < -min_opposition
+  /// (the surfaces face each other); in [-1, 1).
+  double min_opposition = 0.0;
+};
+
+/// Vertex contacts are classified by the feature of the other surface that
+/// is closest to the vertex: a face (x1..x3 the triangle), an edge (x1, x2;
+/// x3 unused) or a corner (x1). Edge-edge: x0, x1 and x2, x3 are the edges.
+enum class ContactKind { kVertexFace = 0, kEdgeEdge = 1, kVertexEdge = 2, kVertexVertex = 3 };
+
+/// One active contact. Nodes k = 0..3 belong to surface side[k] (0: the
+/// pair's surface a, 1: surface b).
+struct ContactPoint {
+  ContactKind kind = ContactKind::kVertexFace;
+  std::array<int, 4> node{};
+  std::array<int, 4> side{};
+  double gap = 0;        ///< g < 0 [m]
+  double gap_rate = 0;   ///< dg/dt [m/s] (0 without velocities)
+  double area = 0;       ///< weight A [m^2]
+  double pressure = 0;   ///< lambda > 0 [Pa]
+  double stiffness = 0;  ///< -d lambda/dg [Pa/m] (the penalty law's slope)
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();  ///< n (out of the face / second edge's surface)
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();   ///< contact point on the face / second edge [m]
+  Eigen::Matrix<double, 12, 1> G = Eigen::Matrix<double, 12, 1>::Zero();   ///< dg/dx
+  Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero(); ///< d2g/dx2 (if requested)
+};
+
+/// Counts of one evaluation.
+struct ContactCounts {
+  long candidate_vertex_face = 0, candidate_edge_edge = 0;
+  long vertex_face = 0, edge_edge = 0;  ///< active
+  double max_penetration_m = 0;         ///< max(-g) over active contacts
+};
+
+/// Contact between surface a and surface b.
+class MeshContact {
+ public:
+  MeshContact(std::string name, const ContactSurface& a, const ContactSurface& b, const ContactOptions& options);
+
+  const std::string& name() const { return name_; }
+  const ContactOptions& options() const { return opts_; }
+  const ContactSurface& surface(int side) const { return side == 0 ? a_ : b_; }
+
+  /// Active contacts for the node positions of both surfaces (rows = nodes,
+  /// [m]); va/vb: node velocities (nullptr: at rest). Deterministic order.
+  std::vector<ContactPoint> detect(const common::Points3& xa, const common::Points3& xb, const common::Points3* va,
+                                   const common::Points3* vb, bool want_hessian, ContactCounts* counts = nullptr) const;
+
+  /// Node pairs (node of a, node of b) that contacts could couple once the
+  /// surfaces have moved by up to about `margin` [m] (or slid by about one
+  /// element) from the current positions: for the tangent's sparsity
+  /// pattern. Sorted, unique.
+  std::vector<std::pair<int, int>> coupling_candidates(const common::Points3& xa, const common::Points3& xb,
+                                                       double margin) const;
+
+ private:
+  std::string name_;
+  ContactSurface a_, b_;
+  ContactOptions opts_;
+};
+
+/// The gap function and its exact gradient for four points (for tests):
+/// vertex-face (x0 = vertex, x1..x3 = triangle) or edge-edge (x0, x1 = first
+/// edge, x2, x3 = second edge; `sign` orients n). Returns g; G = dg/dx.
+double contact_gap(ContactKind kind, const std::array<Eigen::Vector3d, 4>& x, double sign,
+                   Eigen::Matrix<double, 12, 1>* G, Eigen::Matrix<double, 12, 12>* H);
+
+}  // namespace arthrosim::cartilage

@@ -1,0 +1,445 @@
+// Deformable mesh-to-mesh contact (cartilage/mesh_contact.h,
+// cartilage/coupled_system.h): gap derivatives and the Newton tangent against
+// finite differences, a rigid sphere pressed into a shell on its foundation
+// against the elastic-foundation closed form, two shells on foundations
+// sharing load as springs in series, edge-edge detection where no vertex
+// penetrates, and the uncoupled system being exactly its models.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include "cartilage/coupled_system.h"
+#include "cartilage/hht_integrator.h"
+#include "cartilage/mesh_contact.h"
+#include "cartilage/shell_model.h"
+#include "common/effects.h"
+#include "common/error.h"
+#include "shell_test_meshes.h"
+
+namespace arthrosim::cartilage {
+namespace {
+
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+
+/// The mesh mirrored in z (z -> z0 - z) with its orientation reversed, so that
+/// its normals point the other way (a surface facing down).
+common::QuadMesh flipped(common::QuadMesh m, double z0) {
+  for (int i = 0; i < m.V.rows(); ++i) m.V(i, 2) = z0 - m.V(i, 2);
+  for (int e = 0; e < m.Q.rows(); ++e) {
+    const Eigen::Vector4i q = m.Q.row(e);
+    m.Q.row(e) << q(0), q(3), q(2), q(1);
+  }
+  return m;
+}
+
+common::QuadMesh shifted(common::QuadMesh m, const Eigen::Vector3d& d) {
+  m.V.rowwise() += d.transpose();
+  return m;
+}
+
+std::unique_ptr<ShellModel> make_model(const common::QuadMesh& mesh, double E, double t) {
+  ShellMaterial mat;
+  mat.youngs_modulus_Pa = E;
+  mat.poisson_ratio = 0.3;
+  auto m = std::make_unique<ShellModel>(mesh, quad_mesh_vertex_normals(mesh),
+                                        Eigen::VectorXd::Constant(mesh.num_nodes(), t), mat);
+  m->add_internal_forces();
+  return m;
+}
+
+// ---------------------------------------------------------------------------
+// The gradient dg/dx = w_k n is exact and the AD Hessian matches finite
+// differences of it. Points are generic (no symmetry); step 1e-7 m on a
+// 1e-3 m geometry: central-difference truncation ~(1e-4)^2 and round-off
+// ~1e-16/1e-7 relative, so 1e-6 relative is a safe bound.
+TEST(MeshContact, GapGradientAndHessianMatchFiniteDifferences) {
+  const std::array<Eigen::Vector3d, 4> vf = {Eigen::Vector3d(0.3e-3, 0.25e-3, -0.1e-3),
+                                             Eigen::Vector3d(0.0, 0.0, 0.02e-3), Eigen::Vector3d(1.1e-3, 0.1e-3, 0.0),
+                                             Eigen::Vector3d(0.2e-3, 0.9e-3, 0.07e-3)};
+  const std::array<Eigen::Vector3d, 4> ee = {Eigen::Vector3d(-0.5e-3, 0.1e-3, 0.05e-3),
+                                             Eigen::Vector3d(0.6e-3, -0.05e-3, 0.0),
+                                             Eigen::Vector3d(0.05e-3, -0.7e-3, 0.11e-3),
+                                             Eigen::Vector3d(-0.1e-3, 0.8e-3, 0.09e-3)};
+  const char* names[4] = {"vertex-face", "edge-edge", "vertex-edge", "vertex-vertex"};
+  for (int kind = 0; kind < 4; ++kind) {
+    const ContactKind k = static_cast<ContactKind>(kind);
+    const auto& x = kind == 1 ? ee : vf;
+    Vec12 G;
+    Eigen::Matrix<double, 12, 12> H;
+    const double g = contact_gap(k, x, 1.0, &G, &H);
+    EXPECT_TRUE(std::isfinite(g));
+    const double h = 1e-7;
+    double errG = 0, errH = 0;
+    for (int j = 0; j < 12; ++j) {
+      auto xp = x, xm = x;
+      xp[j / 3](j % 3) += h;
+      xm[j / 3](j % 3) -= h;
+      Vec12 Gp, Gm;
+      const double gp = contact_gap(k, xp, 1.0, &Gp, nullptr);
+      const double gm = contact_gap(k, xm, 1.0, &Gm, nullptr);
+      errG = std::max(errG, std::abs((gp - gm) / (2 * h) - G(j)));
+      errH = std::max(errH, ((Gp - Gm) / (2 * h) - H.col(j)).cwiseAbs().maxCoeff());
+    }
+    std::printf("%s: |G - G_fd| %.2e (|G| %.2f), |H - H_fd| %.2e (|H| %.3e)\n", names[kind], errG, G.cwiseAbs().maxCoeff(), errH, H.cwiseAbs().maxCoeff());
+    EXPECT_LT(errG, 1e-6 * G.cwiseAbs().maxCoeff());
+    EXPECT_LT(errH, 1e-6 * H.cwiseAbs().maxCoeff());
+    EXPECT_LT((H - H.transpose()).cwiseAbs().maxCoeff(), 1e-9 * H.cwiseAbs().maxCoeff());
+  }
+}
+
+/// max |K - K_fd| / max |K| of the system's tangent (wrt = 0: dF/dq, 1: dF/dv).
+double system_fd_error(CoupledShellSystem& sys, const Eigen::VectorXd& q, const Eigen::VectorXd& v, int wrt,
+                       double* Kmax = nullptr) {
+  const int n = sys.num_dofs();
+  Eigen::SparseMatrix<double> K;
+  Eigen::VectorXd F;
+  EvalRequest r;
+  r.q = &q;
+  r.v = &v;
+  r.kq = wrt == 0 ? 1.0 : 0.0;
+  r.kv = wrt == 1 ? 1.0 : 0.0;
+  sys.evaluate(r, F, nullptr, &K);
+  const Eigen::MatrixXd Kd(K);
+  double err = 0;
+  for (int j = 0; j < n; ++j) {
+    const double h = (j % 6 < 3) ? 1e-10 : 1e-7;
+    Eigen::VectorXd qp = q, qm = q, vp = v, vm = v, Fp, Fm;
+    (wrt == 0 ? qp : vp)(j) += h;
+    (wrt == 0 ? qm : vm)(j) -= h;
+    EvalRequest a = r, b = r;
+    a.q = &qp;
+    a.v = &vp;
+    b.q = &qm;
+    b.v = &vm;
+    sys.evaluate(a, Fp, nullptr, nullptr);
+    sys.evaluate(b, Fm, nullptr, nullptr);
+    err = std::max(err, ((Fp - Fm) / (2 * h) - Kd.col(j)).cwiseAbs().maxCoeff());
+  }
+  const double kmax = Kd.cwiseAbs().maxCoeff();
+  if (Kmax) *Kmax = kmax;
+  return err / kmax;
+}
+
+// A curved (spherical) patch facing down pressed into a plate: many
+// vertex-face contacts in both passes with non-zero Hessian terms; the
+// contact stiffness dominates the soft shells' so the check sees it.
+// Tolerance 1e-5 of max|K|: positions step 1e-10 m against penetrations of
+// 3e-4 m keeps the active set fixed; truncation (h/L)^2 ~ 1e-14, round-off
+// ~ eps |F| / h ~ 1e-6 |K| at worst.
+TEST(MeshContact, NewtonTangentMatchesFiniteDifferences) {
+  for (int damped = 0; damped < 2; ++damped) {
+    const common::QuadMesh plate = shifted(testing::plate_mesh(5, 5, 6e-3, 6e-3, 0.15), {-3e-3, -3e-3, 0});
+    const common::QuadMesh cap = flipped(testing::spherical_patch(6, 5e-3, 6e-3), -0.3e-3);
+    auto A = make_model(plate, 1e6, 0.3e-3), B = make_model(cap, 1e6, 0.3e-3);
+    CoupledShellSystem sys({A.get(), B.get()}, {"plate", "cap"});
+    ContactOptions o;
+    o.stiffness_N_m3 = 5e10;
+    o.damping_N_s_m3 = damped ? 2e8 : 0.0;
+    sys.add_contact("plate-cap", 0, 1, o);
+    Eigen::VectorXd q(sys.num_dofs());
+    q.head(A->num_dofs()) = A->reference_state();
+    q.tail(B->num_dofs()) = B->reference_state();
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(sys.num_dofs());
+    for (int i = 0; i < v.size(); ++i) v(i) = 1e-3 * std::sin(0.7 * i);  // gap rates of both signs
+    const ContactPairReport rep = sys.contact_report(0, q, damped ? &v : nullptr);
+    std::printf("damped %d: %ld vertex-face, %ld edge-edge, max penetration %.3e m, force %.4f N\n", damped,
+                rep.counts.vertex_face, rep.counts.edge_edge, rep.counts.max_penetration_m, rep.total_force_a.z());
+    ASSERT_GT(rep.counts.vertex_face, 10);
+    double kmax = 0;
+    const double e = system_fd_error(sys, q, v, 0, &kmax);
+    std::printf("  dF/dq relative error %.2e (max |K| %.3e)\n", e, kmax);
+    EXPECT_LT(e, 1e-5);
+    EXPECT_EQ(sys.tangent_symmetric(), !damped);
+    if (damped) {
+      const double ev = system_fd_error(sys, q, v, 1);
+      std::printf("  dF/dv relative error %.2e\n", ev);
+      EXPECT_LT(ev, 1e-6);
+    }
+    // Equal and opposite: contact forces on both surfaces sum to zero (1e-12 N
+    // of round-off on forces of about 1 N).
+    EXPECT_LT((rep.total_force_a + rep.total_force_b).norm(), 1e-12 + 1e-10 * rep.total_force_a.norm());
+  }
+}
+
+// Two tents whose ridges cross: the ridges' edges interpenetrate by delta but
+// every vertex is either outside the other surface or deeper than
+// max_depth, so only the edge-edge test can see the contact. Its gap is the
+// line distance -delta with the normal of the lower (second) surface.
+TEST(MeshContact, EdgeEdgeCatchesCrossingRidges) {
+  const double L = 4e-3, h = 4e-3, delta = 0.2e-3;
+  common::QuadMesh a;  // ridge along x at z = h, sides down to z = 0 at y = -L, +L; normals up
+  a.V.resize(6, 3);
+  a.V << -L, -L, 0, L, -L, 0, L, 0, h, -L, 0, h, L, L, 0, -L, L, 0;
+  a.Q.resize(2, 4);
+  a.Q << 0, 1, 2, 3, 3, 2, 4, 5;
+  common::QuadMesh b;  // ridge along y at z = h - delta, sides up to 2h - delta at x = -L, +L; normals down
+  b.V.resize(6, 3);
+  const double z0 = h - delta, z1 = 2 * h - delta;
+  b.V << -L, -L, z1, -L, L, z1, 0, L, z0, 0, -L, z0, L, L, z1, L, -L, z1;
+  b.Q.resize(2, 4);
+  b.Q << 0, 1, 2, 3, 3, 2, 4, 5;
+  ContactOptions o;
+  o.stiffness_N_m3 = 1e10;
+  o.max_depth_m = 1e-3;
+  o.edge_edge = true;
+  MeshContact mc("ridges", ContactSurface(a), ContactSurface(b), o);
+  ContactCounts counts;
+  const auto active = mc.detect(a.V, b.V, nullptr, nullptr, true, &counts);
+  std::printf("ridges: %ld vertex-face, %ld edge-edge\n", counts.vertex_face, counts.edge_edge);
+  EXPECT_EQ(counts.vertex_face, 0);
+  ASSERT_GE(counts.edge_edge, 1);
+  bool ridge = false;
+  for (const ContactPoint& c : active) {
+    EXPECT_EQ(c.kind, ContactKind::kEdgeEdge);
+    EXPECT_LT(c.gap, 0.0);
+    EXPECT_GT(c.gap, -o.max_depth_m);
+    if (std::abs(c.gap + delta) < 1e-12) {
+      ridge = true;
+      EXPECT_NEAR(c.normal.z(), -1.0, 1e-12);
+      EXPECT_NEAR(c.point.norm(), std::hypot(0.0, z0), 1e-9);  // on the second ridge, at (0, 0, h - delta)
+    }
+  }
+  EXPECT_TRUE(ridge);
+  // With edge-edge off the same configuration has no contact at all.
+  ContactOptions off = o;
+  off.edge_edge = false;
+  MeshContact mc_off("ridges", ContactSurface(a), ContactSurface(b), off);
+  EXPECT_TRUE(mc_off.detect(a.V, b.V, nullptr, nullptr, false).empty());
+  // Tangent with the edge-edge contact against finite differences.
+  auto A = make_model(a, 1e6, 0.3e-3), B = make_model(b, 1e6, 0.3e-3);
+  CoupledShellSystem sys({A.get(), B.get()}, {"a", "b"});
+  sys.add_contact("ridges", 0, 1, o);
+  Eigen::VectorXd q(sys.num_dofs());
+  q << A->reference_state(), B->reference_state();
+  const double e = system_fd_error(sys, q, Eigen::VectorXd::Zero(sys.num_dofs()), 0);
+  std::printf("edge-edge tangent relative error %.2e\n", e);
+  EXPECT_LT(e, 1e-5);
+}
+
+// A system without contact is exactly its models side by side.
+TEST(MeshContact, UncoupledSystemIsItsModels) {
+  const common::QuadMesh m1 = testing::spherical_patch(3, 0.01, 0.02);
+  const common::QuadMesh m2 = shifted(testing::plate_mesh(2, 3, 0.01, 0.01), {0, 0, 0.05});
+  auto A = make_model(m1, 400e6, 1e-3), B = make_model(m2, 400e6, 1e-3);
+  A->add_foundation_springs(7e8);
+  B->add_pressure("pressure", 0.0, [](double) { return 1e5; });
+  CoupledShellSystem sys({A.get(), B.get()}, {"a", "b"});
+  Eigen::VectorXd q(sys.num_dofs());
+  q << A->reference_state(), B->reference_state();
+  for (int i = 0; i < q.size(); ++i) q(i) += 1e-5 * std::cos(1.3 * i);
+  EvalRequest r;
+  r.q = &q;
+  Eigen::VectorXd F;
+  Eigen::SparseMatrix<double> K;
+  sys.evaluate(r, F, nullptr, &K);
+  Eigen::VectorXd qa = sys.segment(0, q), qb = sys.segment(1, q), Fa, Fb;
+  Eigen::SparseMatrix<double> Ka, Kb;
+  EvalRequest ra = r, rb = r;
+  ra.q = &qa;
+  rb.q = &qb;
+  A->evaluate(ra, Fa, nullptr, &Ka);
+  B->evaluate(rb, Fb, nullptr, &Kb);
+  EXPECT_EQ(F.head(Fa.size()), Fa);
+  EXPECT_EQ(F.tail(Fb.size()), Fb);
+  const Eigen::MatrixXd Kd(K);
+  EXPECT_EQ(Kd.topLeftCorner(Fa.size(), Fa.size()), Eigen::MatrixXd(Ka));
+  EXPECT_EQ(Kd.bottomRightCorner(Fb.size(), Fb.size()), Eigen::MatrixXd(Kb));
+  EXPECT_EQ(Kd.topRightCorner(Fa.size(), Fb.size()).cwiseAbs().maxCoeff(), 0.0);
+}
+
+/// In-plane position coordinates of every node fixed (the foundation acts
+/// along the normal only, so in-plane rigid motions would be free).
+void fix_in_plane(ShellModel& m) {
+  std::vector<int> all(m.num_nodes());
+  for (int i = 0; i < m.num_nodes(); ++i) all[i] = i;
+  m.fix_nodes("in_plane", all, {true, true, false, false, false, false});
+}
+
+/// Solves the quasi-static contact problem in `steps` load steps to t = 1.
+void solve_quasi_static(CoupledShellSystem& sys, int steps, Eigen::VectorXd& q, IntegratorStatistics* stats = nullptr) {
+  IntegratorOptions opt;
+  opt.quasi_static = true;
+  opt.dt_s = 1.0 / steps;
+  opt.max_newton_iterations = 25;
+  opt.line_search_halvings = 8;
+  opt.residual_rtol = 1e-9;
+  opt.residual_atol_N = 1e-8;
+  HhtIntegrator hht(sys, opt);
+  hht.initialize(0.0, q);
+  try {
+    hht.advance_to(1.0);
+  } catch (const std::exception& e) {
+    for (const auto& r : hht.statistics().rejections) std::printf("  rejected: %s\n", r.c_str());
+    throw;
+  }
+  q = hht.q();
+  if (stats) *stats = hht.statistics();
+}
+
+// Rigid sphere (radius R, every node prescribed, moving down by d over the
+// load steps) pressed into a shell on a foundation of modulus k, the shell
+// reduced to its normal displacements on a negligible membrane (see below),
+// so that the surface follows the sphere and the pressure is the
+// foundation's in series with the penalty:
+//   F = k_eff V_cap,  k_eff = 1/(1/k + 1/k_c),  V_cap = pi d^2 (3R - d)/3.
+// Error sources are the faceted sphere, the nodal quadrature of the pressure
+// and the residual bending; they fall with refinement (checked), and the
+// finest mesh must be within 2 %.
+TEST(MeshContact, RigidSphereOnFoundationMatchesClosedForm) {
+  const double R = 12e-3, d = 0.25e-3, k = 7e8, kc = 7e10, W = 12e-3;
+  const double keff = 1.0 / (1.0 / k + 1.0 / kc);
+  const double F_exact = keff * M_PI * d * d * (3 * R - d) / 3.0;
+  double prev_err = 1e30;
+  const int sizes[3] = {12, 24, 40};
+  for (int level = 0; level < 3; ++level) {
+    const int n = sizes[level];
+    const common::QuadMesh plate = shifted(testing::plate_mesh(n, n, W, W), {-W / 2, -W / 2, 0});
+    // Sphere bottom starts 0.02 mm above the plate and ends d below it.
+    const double lift = 0.02e-3;
+    const common::QuadMesh sphere = flipped(testing::spherical_patch(n, 9e-3, R), lift);
+    auto P = make_model(plate, 1e3, 0.2e-3), S = make_model(sphere, 1e6, 0.2e-3);
+    P->add_foundation_springs(k, BoneMotion::fixed(), /*compressive_only=*/false);
+    // Only the normal position is free: a bed of foundation springs (acting
+    // both ways, so that a Newton iterate overshooting upwards still meets
+    // the spring) under a membrane so soft (E = 1 kPa) that its shear
+    // coupling length sqrt(G t / k) = 10 um is negligible -- the
+    // elastic-foundation model.
+    std::vector<int> all(P->num_nodes());
+    for (int i = 0; i < P->num_nodes(); ++i) all[i] = i;
+    P->fix_nodes("bed_of_springs", all, {true, true, false, true, true, true});
+    NodeConstraint c;
+    c.name = "rigid_motion";
+    for (int i = 0; i < S->num_nodes(); ++i) c.nodes.push_back(i);
+    c.mask.fill(true);
+    const Eigen::VectorXd s0 = S->reference_state();
+    c.value = [s0, lift, d](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+      q6 = s0.segment<6>(6 * node);
+      q6(2) -= t * (lift + d);
+    };
+    S->add_constraint(std::move(c));
+    CoupledShellSystem sys({P.get(), S.get()}, {"plate", "sphere"});
+    ContactOptions o;
+    o.stiffness_N_m3 = kc;
+    sys.add_contact("plate-sphere", 0, 1, o);
+    Eigen::VectorXd q(sys.num_dofs());
+    q << P->reference_state(), S->reference_state();
+    IntegratorStatistics st;
+    solve_quasi_static(sys, 4, q, &st);
+    const ContactPairReport rep = sys.contact_report(0, q);
+    const double F = -rep.total_force_a.z();  // the sphere pushes the plate down
+    const double err = std::abs(F / F_exact - 1);
+    std::printf("sphere n=%d: F = %.5f N, closed form %.5f N, error %.3e; %ld vf, %ld ee; max pen %.3e m; "
+                "newton %ld, pattern changes %ld, %s, %.2f s (assembly %.2f, factorisation %.2f, solve %.2f)\n",
+                n, F, F_exact, err, rep.counts.vertex_face, rep.counts.edge_edge, rep.counts.max_penetration_m,
+                st.newton_iterations, st.pattern_changes, st.linear_solver.c_str(), st.total_s, st.assembly_s,
+                st.factorization_s, st.solve_s);
+    EXPECT_LT(err, prev_err);
+    prev_err = err;
+    if (level == 2) EXPECT_LT(err, 0.02);
+    // The penetration is about the penalty's share of the overlap,
+    // d k / (k + k_c), plus half the toe width; node-to-surface forces vary
+    // from node to node around p A_i, so allow a factor 2.
+    if (level == 2) EXPECT_LT(rep.counts.max_penetration_m, 2 * (d * k / (k + kc) + 0.5 * o.smoothing_m));
+  }
+}
+
+// Two flat shells on foundations k1 (bone at rest) and k2 (bone moving down
+// by d), non-matching meshes, pressed together: the uniform interior state
+// is springs in series, p = (d - s0)/(1/k1 + 1/k2 + 1/k_c), with deflections
+// p/k1 and p/k2. Checked near the centre, more than 10 bending lengths
+// (D/k)^(1/4) = 0.63 mm from the top plate's edge, so edge effects are far
+// below the 1 % tolerance (which covers the Newton tolerance and round-off
+// many times over).
+TEST(MeshContact, TwoShellsShareLoadAsSpringsInSeries) {
+  const double k1 = 7e8, k2 = 2.1e9, kc = 7e10, d = 0.3e-3, s0 = 0.05e-3;
+  const common::QuadMesh lower = shifted(testing::plate_mesh(14, 14, 20e-3, 20e-3), {-10e-3, -10e-3, 0});
+  const common::QuadMesh upper =
+      flipped(shifted(testing::plate_mesh(11, 11, 14e-3, 14e-3, 0.1), {-7.3e-3, -6.9e-3, 0}), s0);
+  auto A = make_model(lower, 10e6, 0.5e-3), B = make_model(upper, 10e6, 0.5e-3);
+  A->add_foundation_springs(k1);
+  BoneMotion down;
+  down.pose = [d](double t) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.translation() = Eigen::Vector3d(0, 0, -d * t);
+    return X;
+  };
+  down.spatial_velocity = [d](double) {
+    Eigen::Matrix<double, 6, 1> V = Eigen::Matrix<double, 6, 1>::Zero();
+    V(5) = -d;
+    return V;
+  };
+  B->add_foundation_springs(k2, down);
+  fix_in_plane(*A);
+  fix_in_plane(*B);
+  CoupledShellSystem sys({A.get(), B.get()}, {"lower", "upper"});
+  ContactOptions o;
+  o.stiffness_N_m3 = kc;
+  sys.add_contact("lower-upper", 0, 1, o);
+  Eigen::VectorXd q(sys.num_dofs());
+  q << A->reference_state(), B->reference_state();
+  solve_quasi_static(sys, 3, q);
+  // The penalty's quadratic toe adds delta/2 to the penetration.
+  const double p = (d - s0 - 0.5 * o.smoothing_m) / (1 / k1 + 1 / k2 + 1 / kc);
+  // Area-weighted mean deflections of the nodes within 3 mm of the centre: with
+  // non-matching meshes the node-to-surface forces fluctuate from node to
+  // node around p A_i (the barycentric spreading of the other mesh's
+  // vertices), but their local mean is p (force balance).
+  auto mean_deflection = [&](int m, double bone_dz, double sign) {
+    const ShellModel& M = sys.model(m);
+    const Eigen::VectorXd qm = sys.segment(m, q);
+    double sum = 0, area = 0;
+    for (int i = 0; i < M.num_nodes(); ++i) {
+      if (M.reference_position(i).head<2>().norm() > 3e-3) continue;
+      sum += M.nodal_areas()(i) * sign * (qm(6 * i + 2) - (M.reference_position(i).z() + bone_dz));
+      area += M.nodal_areas()(i);
+    }
+    return sum / area;
+  };
+  const double wa = mean_deflection(0, 0.0, -1.0);  // lower surface pushed down
+  const double wb = mean_deflection(1, -d, 1.0);    // upper surface pushed up relative to its bone
+  std::printf("series: w1 %.5e (exact %.5e), w2 %.5e (exact %.5e) m\n", wa, p / k1, wb, p / k2);
+  EXPECT_NEAR(wa, p / k1, 0.01 * p / k1);
+  EXPECT_NEAR(wb, p / k2, 0.01 * p / k2);
+}
+
+// Same contact, one and two threads: bit-identical contact forces.
+TEST(MeshContact, DeterministicAcrossThreadCounts) {
+  const common::QuadMesh plate = shifted(testing::plate_mesh(30, 30, 12e-3, 12e-3, 0.2), {-6e-3, -6e-3, 0});
+  const common::QuadMesh cap = flipped(testing::spherical_patch(30, 10e-3, 10e-3), -0.2e-3);
+  ContactOptions o;
+  MeshContact mc("c", ContactSurface(plate), ContactSurface(cap), o);
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto r1 = mc.detect(plate.V, cap.V, nullptr, nullptr, true);
+  omp_set_num_threads(2);
+  const auto r2 = mc.detect(plate.V, cap.V, nullptr, nullptr, true);
+  omp_set_num_threads(saved);
+  ASSERT_EQ(r1.size(), r2.size());
+  ASSERT_GT(r1.size(), 100u);
+  for (size_t k = 0; k < r1.size(); ++k) {
+    EXPECT_EQ(r1[k].node, r2[k].node);
+    EXPECT_EQ(r1[k].gap, r2[k].gap);
+    EXPECT_EQ(r1[k].G, r2[k].G);
+    EXPECT_EQ(r1[k].H, r2[k].H);
+  }
+}
+
+TEST(MeshContact, RejectsBadOptions) {
+  const common::QuadMesh plate = testing::plate_mesh(2, 2, 1e-3, 1e-3);
+  ContactOptions o;
+  o.stiffness_N_m3 = -1;
+  EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
+  o = ContactOptions();
+  o.max_depth_m = 0;
+  EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
+  o = ContactOptions();
+  o.damping_N_s_m3 = std::nan("");
+  EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
+}
+
+}  // namespace
+}  // namespace arthrosim::cartilage
