@@ -322,6 +322,15 @@ void CoupledShellSystem::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd&
   }
 }
 
+void CoupledShellSystem::predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const {
+  q1.resize(n_);
+  for (int m = 0; m < num_models(); ++m) {
+    Eigen::VectorXd qm;
+    models_[m]->predict(t0, t1, segment(m, q0), qm);
+    q1.segment(offsets_[m], qm.size()) = qm;
+  }
+}
+
 std::string CoupledShellSystem::describe_dof(int i) const {
   const int m = model_of(i);
   return "surface " + names_[m] + ", " + models_[m]->describe_dof(i - offsets_[m]);

@@ -94,6 +94,7 @@ class CoupledShellSystem : public TimeIntegrable {
   const std::vector<char>& constrained() const override { return constrained_; }
   void apply_constraints(double t, Eigen::VectorXd& q) const override;
   void solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) override;
+  void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const override;
   const Eigen::VectorXd& increment_weights() const override { return weights_; }
   std::string describe_dof(int i) const override;
 

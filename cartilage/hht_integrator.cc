@@ -151,7 +151,10 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
   const auto& c = sys_.constrained();
   const double t1 = t_ + h;
   Eigen::VectorXd q = q_, v = v_, a = a_, F, Ma, G, dq;
-  if (opts_.quasi_static && opts_.extrapolate_predictor && h_prev_ > 0) q += (h / h_prev_) * dq_prev_;
+  if (opts_.predictor == IntegratorOptions::Predictor::kSystem)
+    sys_.predict(t_, t1, q_, q);
+  else if (opts_.quasi_static && opts_.extrapolate_predictor && h_prev_ > 0)
+    q += (h / h_prev_) * dq_prev_;
   sys_.apply_constraints(t1, q);
   const double ka = 1.0 / (beta_ * h * h), kv = gamma_ / (beta_ * h);
   // Newmark relations: a and v of the iterate q.

@@ -65,6 +65,11 @@ struct IntegratorOptions {
   double roundoff_increment_rel = 1e-11;  ///< see "round-off stagnation"
   double roundoff_residual_drop = 1e-3;   ///< required ||G|| / ||G^(0)||
   bool extrapolate_predictor = true;      ///< quasi-static secant predictor
+  /// Newton start of a step: kPrevious = q_n (quasi-static: with the secant
+  /// extrapolation above); kSystem = TimeIntegrable::predict (e.g. the
+  /// surfaces carried by their bones' imposed motion).
+  enum class Predictor { kPrevious, kSystem };
+  Predictor predictor = Predictor::kPrevious;
   /// Modified Newton: keep the last factorisation across iterations and steps
   /// (same step size) while the residual contracts by refactor_ratio per
   /// iteration; otherwise re-assemble and refactorise. Off by default

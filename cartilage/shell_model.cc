@@ -137,10 +137,13 @@ class FoundationSpringsTerm final : public ShellTerm {
 
 class FoundationDampingTerm final : public ShellTerm {
  public:
-  FoundationDampingTerm(const ShellModel& model, double c, BoneMotion bone, bool compressive_only)
-      : ShellTerm("foundation_damping"), geo_(model, std::move(bone)), c_(c), compressive_only_(compressive_only) {
+  FoundationDampingTerm(const ShellModel& model, double c, BoneMotion bone, bool compressive_only, double gate)
+      : ShellTerm("foundation_damping"), geo_(model, std::move(bone)), c_(c), compressive_only_(compressive_only),
+        gate_(gate) {
     if (!(c >= 0) || !std::isfinite(c))
       throw common::InputError("foundation_damping: coefficient c must be >= 0 N s/m^3, found " + std::to_string(c));
+    if (compressive_only && !(gate > 0))
+      throw common::InputError("foundation_damping: gate width must be > 0 m, found " + std::to_string(gate));
   }
   // The d n/dt term couples positions and velocities asymmetrically when the
   // bone rotates.
@@ -152,14 +155,28 @@ class FoundationDampingTerm final : public ShellTerm {
       Eigen::Vector3d p, n, pd, nd;
       geo_.at(ctx.t, X, V, static_cast<int>(i), p, n, pd, nd);
       const Eigen::Vector3d r = ctx.q.segment<3>(6 * i);
-      if (compressive_only_ && n.dot(p - r) < 0) continue;
+      // Compressive-only: the damper engages with the compression delta
+      // through the smoothstep gate H(delta/gate) (0 at delta <= 0, 1 from
+      // delta >= gate). A sharp gate would make the force c A delta_dot
+      // jump where delta changes sign -- at every node resting on its
+      // foundation -- and Newton would not converge there.
+      double H = 1, dH = 0;
+      if (compressive_only_) {
+        const double s = n.dot(p - r) / gate_;
+        if (s <= 0) continue;
+        if (s < 1) {
+          H = s * s * (3 - 2 * s);
+          dH = 6 * s * (1 - s) / gate_;
+        }
+      }
       const Eigen::Vector3d v = ctx.v.segment<3>(6 * i);
       const double delta_dot = nd.dot(p - r) + n.dot(pd - v);
       const double cA = c_ * geo_.area(i);
-      F.segment<3>(6 * i) -= cA * delta_dot * n;
+      F.segment<3>(6 * i) -= cA * delta_dot * H * n;
       if (K) {
-        Eigen::Matrix3d B = ctx.kv * cA * n * n.transpose();
-        if (!geo_.bone.at_rest) B += ctx.kq * cA * n * nd.transpose();
+        // d/dv: c A H n n^T; d/dr: c A (H n nd^T + delta_dot H' n n^T).
+        Eigen::Matrix3d B = (ctx.kv * cA * H + ctx.kq * cA * delta_dot * dH) * n * n.transpose();
+        if (!geo_.bone.at_rest) B += ctx.kq * cA * H * n * nd.transpose();
         K->add_block3(i, 0, i, 0, B);
       }
     }
@@ -169,6 +186,7 @@ class FoundationDampingTerm final : public ShellTerm {
   FoundationGeometry geo_;
   double c_;
   bool compressive_only_;
+  double gate_;
 };
 
 // ---------------------------------------------------------------------------
@@ -469,8 +487,8 @@ ShellTerm& ShellModel::add_foundation_springs(const Eigen::VectorXd& k_per_node,
                        num_nodes_);
 }
 
-ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only) {
-  return register_term(std::make_unique<FoundationDampingTerm>(*this, c, std::move(bone), compressive_only),
+ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only, double gate_m) {
+  return register_term(std::make_unique<FoundationDampingTerm>(*this, c, std::move(bone), compressive_only, gate_m),
                        num_nodes_);
 }
 
@@ -604,6 +622,16 @@ void ShellModel::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::Vec
   }
   if (K && !Eigen::Map<const Eigen::VectorXd>(K->valuePtr(), K->nonZeros()).allFinite())
     throw common::NumericalError("shell model: non-finite tangent entry at t = " + std::to_string(req.t) + " s");
+}
+
+void ShellModel::predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const {
+  q1 = q0;
+  if (!has_predictor_) return;
+  const Eigen::Isometry3d T = predictor_.pose(t1) * predictor_.pose(t0).inverse();
+  for (int i = 0; i < num_nodes_; ++i) {
+    q1.segment<3>(6 * i) = T * q0.segment<3>(6 * i);
+    q1.segment<3>(6 * i + 3) = T.linear() * q0.segment<3>(6 * i + 3);
+  }
 }
 
 void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {

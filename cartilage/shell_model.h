@@ -146,11 +146,13 @@ class ShellModel : public TimeIntegrable {
   /// local cartilage thickness h_i, the elastic-foundation layer modulus).
   ShellTerm& add_foundation_springs(const Eigen::VectorXd& k_per_node_N_m3, BoneMotion bone,
                                     bool compressive_only = true);
-  /// Matching dampers: force c A_i d(delta_i)/dt n_i(t), active while
-  /// delta_i >= 0 when compressive_only (the seed's spring-dampers are
-  /// compressive elements). c_N_s_m3 [N s/m^3].
+  /// Matching dampers: force c A_i d(delta_i)/dt n_i(t). When
+  /// compressive_only (the seed's spring-dampers are compressive elements)
+  /// it is gated by the compression: H(delta_i / gate_m) with H the
+  /// smoothstep (0 for delta <= 0, 1 for delta >= gate_m), so that the force
+  /// stays continuous where delta changes sign. c_N_s_m3 [N s/m^3].
   ShellTerm& add_foundation_damping(double c_N_s_m3, BoneMotion bone = BoneMotion::fixed(),
-                                    bool compressive_only = true);
+                                    bool compressive_only = true, double gate_m = 1e-6);
   /// Pressure p(t) [Pa] on the face zeta = face_zeta (-1 inner, 0 mid, +1
   /// outer) as a follower load: traction p n on the deformed face, n the unit
   /// normal on the director side (p > 0 pushes the face along +n). Its
@@ -180,6 +182,13 @@ class ShellModel : public TimeIntegrable {
   void add_periphery_fixed(BoneMotion bone = BoneMotion::fixed());
   /// General prescribed motion.
   void add_constraint(NodeConstraint c);
+
+  /// Step predictor (TimeIntegrable::predict): the surface carried rigidly by
+  /// `bone` from t0 to t1 (positions r -> T r, directors d -> R d with
+  /// T = X_WB(t1) X_WB(t0)^-1), so that Newton starts from the bone's motion
+  /// and only has to find the deformation change.
+  void set_motion_predictor(BoneMotion bone) { predictor_ = std::move(bone); has_predictor_ = true; }
+  void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const override;
 
   /// Records every later-built term whose name is in the scene vocabulary
   /// (common/effects.h: foundation_springs, foundation_damping,
@@ -239,6 +248,8 @@ class ShellModel : public TimeIntegrable {
   bool has_inertia_ = false;
   std::string part_;
   common::EffectLedger* ledger_ = nullptr;
+  BoneMotion predictor_;
+  bool has_predictor_ = false;
   std::unique_ptr<SparseDirectSolver> mass_solver_;
   ShellModelStatistics stats_;
 };

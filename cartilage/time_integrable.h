@@ -53,6 +53,9 @@ class TimeIntegrable {
   /// Per-coordinate weight turning an increment into a length [m] for the
   /// convergence test (1 for positions, h/2 for transverse gradients).
   virtual const Eigen::VectorXd& increment_weights() const = 0;
+  /// Predicts q at t1 from the converged q0 at t0 (the Newton start of a
+  /// step, IntegratorOptions::predictor = kSystem). Default: q1 = q0.
+  virtual void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const { q1 = q0; }
   /// Human-readable name of coordinate i (for messages), e.g. "node 12 r_z".
   virtual std::string describe_dof(int i) const = 0;
 };

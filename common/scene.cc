@@ -163,6 +163,9 @@ const std::vector<OptionSpec>& schema_table() {
        "nu of the elastic-foundation layer used by foundation_from_thickness (bundled knee: 0.45)"},
       {"surface", "max_newton_iterations", T::kNumber, U::kNone, "15", false, 1, 1000, "", true,
        "Newton iterations per step attempt before the step is halved"},
+      {"surface", "newton_tolerance", T::kNumber, U::kNone, "1e-8", false, 1e-14, 1e-2, "", true,
+       "relative tolerance of a step's Newton iteration on the residual and on the increment "
+       "(docs/shell_element.md)"},
       // --- one scenario --------------------------------------------------------
       {"scenario", "description", T::kText, U::kNone, "", false, 0, 0, "", false,
        "free text for reports"},

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -219,8 +220,10 @@ struct SurfaceRun {
 };
 
 /// Seating ramp in front of imposed kinematics: for t < T the bone sits at
-/// its first pose moved by -(1 - t/T) offset_B (bone frame); afterwards it
-/// follows `base` delayed by T. A bone without offset is only delayed.
+/// its first pose moved by -(1 - S(t/T)) offset_B (bone frame), S the
+/// smoothstep 3 s^2 - 2 s^3 (zero velocity at both ends: no impulsive start
+/// of the shells); afterwards it follows `base` delayed by T. A bone without
+/// offset is only delayed.
 cartilage::BoneMotion seated(const cartilage::BoneMotion& base, double T, const Eigen::Vector3d& offset_B) {
   if (!(T > 0)) return base;
   cartilage::BoneMotion m;
@@ -228,14 +231,16 @@ cartilage::BoneMotion seated(const cartilage::BoneMotion& base, double T, const 
   const Eigen::Isometry3d X0 = base.pose(0.0);
   m.pose = [base, T, offset_B, X0](double t) {
     if (t >= T) return base.pose(t - T);
+    const double s = std::max(t, 0.0) / T;
     Eigen::Isometry3d X = X0;
-    X.translation() += X0.linear() * (-(1 - t / T) * offset_B);
+    X.translation() += X0.linear() * (-(1 - s * s * (3 - 2 * s)) * offset_B);
     return X;
   };
   m.spatial_velocity = [base, T, offset_B, X0](double t) {
     if (t >= T) return base.spatial_velocity(t - T);
+    const double s = std::max(t, 0.0) / T;
     Eigen::Matrix<double, 6, 1> V = Eigen::Matrix<double, 6, 1>::Zero();
-    V.tail<3>() = X0.linear() * offset_B / T;
+    V.tail<3>() = X0.linear() * offset_B * (6 * s * (1 - s) / T);
     return V;
   };
   return m;
@@ -447,6 +452,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           options.prepared + ": dataset /surfaces/" + name + "/quads/thickness");
     }
     r.model = cartilage::build_surface_model(r.input, p, sc->effects, r.bone, &ledger);
+    if (moving) r.model->set_motion_predictor(r.bone);
     r.basis = cartilage::node_strain_basis(*r.model);
     r.summary.name = name;
     r.summary.nodes = r.model->num_nodes();
@@ -637,12 +643,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   };
 
   // ---- integrate ----------------------------------------------------------
-  if (contact) {
-    iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
-    iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
-  } else {
-    iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
-  }
+  if (contact) iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
+  iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
+  iopt.residual_rtol = o.si("newton_tolerance");
+  iopt.increment_rtol = o.si("newton_tolerance");
+  // Imposed kinematics: each step starts from the surfaces carried by their
+  // bones (rigid predictor), so Newton only finds the deformation change.
+  if (moving) iopt.predictor = cartilage::IntegratorOptions::Predictor::kSystem;
   Eigen::VectorXd q0(system.num_dofs());
   for (int k = 0; k < system.num_models(); ++k)
     q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();
@@ -688,6 +695,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         const cartilage::IntegratorStatistics& s = integrator.statistics();
         const cartilage::StepRecord& rec = s.log.back();
         const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
+        if (std::getenv("ARTHROSIM_DEBUG_STEPS")) {  // TEMP
+          std::fprintf(stderr, "step t=%.4f dt=%.1e wall %.2f ls %ld pat %ld:", t_next, rec.dt, wall, s.line_search_reductions, s.pattern_changes);
+          for (double x : rec.residual_norms) std::fprintf(stderr, " %.1e", x);
+          std::fprintf(stderr, " | inc");
+          for (double x : rec.increment_norms) std::fprintf(stderr, " %.1e", x);
+          std::fprintf(stderr, "\n");
+        }
         res.final_residual_N = rl;
         res.residual_tolerance_N = std::max(iopt.residual_rtol * r0, iopt.residual_atol_N);
         const double max_def = max_abs_deflection(integrator.q(), t_next);
@@ -730,6 +744,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
                                std::to_string(penetration_warnings) + ")");
           }
         }
+        for (long j = last_rejections; j < s.rejected_steps && j < static_cast<long>(s.rejections.size()); ++j)
+          common::log_warn("surface " + sc->name + ": step rejected and halved (" + std::to_string(j + 1) +
+                           " so far): " + s.rejections[j]);
         last_iterations = s.newton_iterations;
         last_rejections = s.rejected_steps;
         t = t_next;

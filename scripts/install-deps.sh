@@ -6,7 +6,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   coinor-libipopt-dev libeigen3-dev liburdfdom-dev libtinyxml2-dev libcgal-dev
-  libsuitesparse-dev libhdf5-dev libyaml-cpp-dev libcli11-dev
+  libsuitesparse-dev libopenblas-dev libhdf5-dev libyaml-cpp-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   hdf5-tools python3 python3-numpy python3-h5py
 )
