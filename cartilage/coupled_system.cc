@@ -147,9 +147,9 @@ bool CoupledShellSystem::has_inertia() const {
 bool CoupledShellSystem::tangent_symmetric() const {
   for (const ShellModel* m : models_)
     if (!m->tangent_symmetric()) return false;
-  for (const Pair& p : contacts_)
-    if (p.contact->options().damping_N_s_m3 != 0) return false;
-  return true;
+  // Contact near an open boundary (the fade, mesh_contact.h) or with damping
+  // has a non-symmetric tangent.
+  return contacts_.empty();
 }
 
 void CoupledShellSystem::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
@@ -244,7 +244,7 @@ void CoupledShellSystem::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Ei
           dof[3 * i + d] = om[c.side[i]] + 6 * c.node[i] + d;
           if (req.v) v12(3 * i + d) = (*req.v)(dof[3 * i + d]);
         }
-      const double A = c.area;
+      const double A = c.area * c.fade;
       for (int i = 0; i < 12; ++i) F(dof[i]) -= A * c.pressure * c.G(i);
       if (!want_K) continue;
       Eigen::Matrix<double, 12, 12> T = kq * A * (c.stiffness * c.G * c.G.transpose() - c.pressure * c.H);
@@ -252,6 +252,7 @@ void CoupledShellSystem::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Ei
         T += kq * A * cc * c.G * (c.H * v12).transpose();
         T += kv * A * cc * c.G * c.G.transpose();
       }
+      if (c.fade_edge >= 0) T -= kq * c.area * c.pressure * c.G * c.fade_grad.transpose();
       double* vals = K->valuePtr();
       for (int j = 0; j < 12; ++j)
         for (int i = 0; i < 12; ++i) {
@@ -285,8 +286,8 @@ ContactPairReport CoupledShellSystem::contact_report(int k, const Eigen::VectorX
   r.force_b = common::Points3::Zero(models_[p.b]->num_nodes(), 3);
   for (const ContactPoint& c : active) {
     for (int i = 0; i < 4; ++i)
-      out[c.side[i]]->row(c.node[i]) += (c.area * c.pressure * c.G.segment<3>(3 * i)).transpose();
-    r.contact_area_m2 += c.area;
+      out[c.side[i]]->row(c.node[i]) += (c.area * c.fade * c.pressure * c.G.segment<3>(3 * i)).transpose();
+    r.contact_area_m2 += c.area * c.fade;
   }
   r.total_force_a = r.force_a.colwise().sum().transpose();
   r.total_force_b = r.force_b.colwise().sum().transpose();

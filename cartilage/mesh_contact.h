@@ -16,9 +16,13 @@
 //    face each other when p's vertex normal opposes m. If c is inside a face,
 //    g = (p - x1) . n with n the face normal; if it is on an edge or corner
 //    (convex kinks between facets), g = -|p - c| with n = (c - p)/|c - p|.
-//    A closest point on the open boundary (boundary edge or corner) is no
-//    contact: the surface ends there. (A penetrating vertex that slides off
-//    the other surface's boundary therefore loses its force at once.) This is the signed distance to the faceted
+//    A closest point on the open boundary (boundary edge or corner) means p
+//    has slid beyond the edge of the other surface: the face contact of
+//    that boundary triangle (plane gap) is kept with its weight faded
+//    linearly to zero over one triangle size b = sqrt(2 A_T) beyond the
+//    edge, so the force does not jump when a penetrating vertex slides off a
+//    surface's rim (the fade's gradient is in the tangent, which is then not
+//    symmetric). This is the signed distance to the faceted
 //    surface, continuous as p slides across facets (no force jumps). Active
 //    when 0 < -g < max_depth. Both directions are evaluated (two-pass, each
 //    with half the vertex's tributary area), so neither surface is
@@ -45,8 +49,10 @@
 //             (k: stiffness per unit area [N/m^3]; the quadratic toe of width
 //             delta makes p and p' continuous at g = 0: no tangent jump when a
 //             contact switches on, so Newton does not cycle)
-//   residual  F += -A lambda G   (F = f_int - f_ext convention of ShellModel)
-//   tangent   dF/dx = A (-p' G G^T + c G (H v)^T - lambda H),  dF/dv = A c G G^T
+//   residual  F += -A phi lambda G   (F = f_int - f_ext convention of ShellModel;
+//             phi the boundary fade, 1 away from open boundaries)
+//   tangent   dF/dx = A (phi (-p' G G^T + c G (H v)^T - lambda H) - lambda G grad phi^T),
+//             dF/dv = A phi c G G^T
 // (G = dg/dx, H = d2g/dx2). With c = 0 the force derives from the potential
 // A int p dg and the tangent is symmetric. The force on node k is
 // A lambda w_k n: it pushes the penetrating vertex out along n and the
@@ -77,6 +83,7 @@ struct ContactSurface {
   Eigen::Matrix<int, Eigen::Dynamic, 3> triangle_edges;
   std::vector<std::vector<int>> vertex_triangles;  ///< triangles around each node
   std::vector<char> boundary_vertex;               ///< 1 on the open boundary
+  Eigen::VectorXd triangle_area;  ///< reference area per triangle [m^2]
   Eigen::VectorXd vertex_area;  ///< reference tributary area per node [m^2] (1/3 of adjacent triangles)
   Eigen::VectorXd edge_area;    ///< reference tributary area per edge [m^2] (1/3 of adjacent triangles)
 };
@@ -117,6 +124,12 @@ struct ContactPoint {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();   ///< contact point on the face / second edge [m]
   Eigen::Matrix<double, 12, 1> G = Eigen::Matrix<double, 12, 1>::Zero();   ///< dg/dx
   Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero(); ///< d2g/dx2 (if requested)
+  /// Beyond the other surface's open boundary (fade_edge >= 0: edge k of the
+  /// triangle x1..x3): the face contact is weighted by fade = 1 - s/b, s the
+  /// in-plane distance beyond the edge, b = fade_width; fade_grad = d fade/dx.
+  int fade_edge = -1;
+  double fade = 1, fade_width = 0;
+  Eigen::Matrix<double, 12, 1> fade_grad = Eigen::Matrix<double, 12, 1>::Zero();
 };
 
 /// Counts of one evaluation.

@@ -18,9 +18,11 @@ int main(int argc, char** argv) {
       "arthrosim-surface: deformable cartilage surfaces as 4-node ANCF shells (seed 002) on their bones.\n"
       "Builds, per cartilage surface the scenario lists, a shell model with exactly the scenario's effects\n"
       "(foundation_springs, foundation_damping, osmotic_pressure, periphery_fixed, imposed_kinematics from\n"
-      "--kinematics, inertia; mesh_contact is not simulated by this build and stops the run), integrates it\n"
-      "(HHT, quasi-static without inertia, or a direct steady-state solve with steady_state: true) and\n"
-      "writes displacement, deflection and strains per output frame (HDF5 + XDMF for ParaView).\n"
+      "--kinematics, inertia), couples the surfaces of `contact_pairs` by deformable mesh contact when the\n"
+      "scenario lists mesh_contact, integrates them as one system (HHT, quasi-static without inertia, or a\n"
+      "direct steady-state solve with steady_state: true) and writes displacement, deflection, strains and\n"
+      "contact pressure per output frame, the tibiofemoral contact force and the penetration/deflection\n"
+      "ratio per step (HDF5 + XDMF for ParaView).\n"
       "Material/effect options and their seed defaults: docs/scenes.md; output: docs/surface_output.md."};
   pipelines::SurfaceStageOptions o;
   bool verbose = false, quiet = false;
@@ -39,7 +41,9 @@ int main(int argc, char** argv) {
       "      --out surface_osmotic.h5      # steady osmotic swelling of the femoral cartilage\n"
       "  paraview surface_osmotic.xdmf    # deflection, e1, e1_dir per frame\n"
       "  arthrosim-surface --scene data/scenes/cantilever_plate.yaml --out cantilever.h5\n"
-      "      # generic quad mesh (scene key mesh): cantilever plate vs beam theory\n");
+      "      # generic quad mesh (scene key mesh): cantilever plate vs beam theory\n"
+      "  arthrosim run data/scenes/gait.yaml --out out/gait\n"
+      "      # walking: prepare, COMAK, then this stage with mesh contact on the stage-1 kinematics\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-surface");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -54,9 +58,15 @@ int main(int argc, char** argv) {
                   "(tolerance %.3g N)\n",
                   s.name.c_str(), s.nodes, s.elements, s.max_deflection_m * 1e3, s.e1_min, s.e1_max,
                   s.final_residual_N, s.residual_tolerance_N);
-    std::printf("timings: wall %.2f s, assembly %.2f s, factorization %.2f s (%.3f s each), solve %.2f s\n", r.wall_s,
-                r.assembly_s, r.factorization_s, r.factorizations > 0 ? r.factorization_s / r.factorizations : 0.0,
-                r.solve_s);
+    std::printf("timings: wall %.2f s, assembly %.2f s (of which contact %.2f s), factorization %.2f s (%.3f s each), "
+                "solve %.2f s\n",
+                r.wall_s, r.assembly_s, r.contact_s, r.factorization_s,
+                r.factorizations > 0 ? r.factorization_s / r.factorizations : 0.0, r.solve_s);
+    if (r.contact_steps > 0)
+      std::printf("contact: %ld steps in contact, %.1f active contacts per such step, max interpenetration %.4g mm, "
+                  "%ld steps broke the accuracy rule (worst penetration/deflection %.3g), %ld pattern changes\n",
+                  r.contact_steps, static_cast<double>(r.active_contacts_sum) / r.contact_steps,
+                  r.max_penetration_m * 1e3, r.penetration_warnings, r.worst_penetration_ratio, r.pattern_changes);
     std::printf("wrote %s\n", o.out.c_str());
   } catch (const std::exception& e) {
     std::cerr << "arthrosim-surface: error: " << e.what() << "\n";
