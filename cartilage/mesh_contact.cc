@@ -76,22 +76,6 @@ T gap_kernel(ContactKind kind, const V3<T>* x, double sign, V3<T>& n, T* w, T* p
   return r.dot(n);
 }
 
-// In-plane distance of x0 beyond edge k (x[1 + k] -> x[1 + (k + 1) % 3]) of
-// the triangle x1, x2, x3: (x0 - e0) . m with m the unit in-plane normal of
-// the edge pointing away from the third vertex (> 0 outside).
-template <class T>
-T beyond_edge(const V3<T>* x, int k) {
-  using std::sqrt;
-  const V3<T>& e0 = x[1 + k];
-  const V3<T>& e1 = x[1 + (k + 1) % 3];
-  const V3<T>& e2 = x[1 + (k + 2) % 3];
-  const V3<T> nrm = (x[2] - x[1]).cross(x[3] - x[1]);
-  V3<T> m = (e1 - e0).cross(nrm);
-  m = m / sqrt(m.squaredNorm());
-  if ((e2 - e0).dot(m) > T(0.0)) m = -m;
-  return (x[0] - e0).dot(m);
-}
-
 // Closest point of p on triangle (a, b, c) (Ericson, Real-Time Collision
 // Detection, 5.1.5): barycentric weights and the feature it lies on
 // (0 face, 1..3 edge ab/bc/ca, 4..6 vertex a/b/c).
@@ -241,7 +225,7 @@ struct VertexHit {
   int vertex = -1, triangle = -1;
   TriangleClosest closest{};
   double signed_distance = 0;
-  int fade_edge = -1;  // >= 0: beyond this open-boundary edge k of the triangle (faded face contact)
+  int fade_edge = -1;  // 1: the closest point is on the open boundary (rim contact, faded)
 };
 std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Points3& Xv, const common::Points3& vnv,
                                    const ContactSurface& Sf, const common::Points3& Xf, const common::Points3& tnf,
@@ -282,33 +266,20 @@ std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Point
     // boundary, nearly in the surface's plane, would flip between "in front"
     // and "behind" with a gap as large as its distance to the boundary).
     const int f = h.closest.feature;
-    auto open_edge = [&](int k) { return Sf.edge_triangles[Sf.triangle_edges(h.triangle, k)][1] < 0; };
-    int fade_edge = -1;
-    if (f >= 1 && f <= 3 && open_edge(f - 1)) fade_edge = f - 1;
-    if (f >= 4 && Sf.boundary_vertex[Sf.F(h.triangle, f - 4)]) {
-      // A boundary corner: the open edge of this triangle through it that the
-      // vertex is furthest beyond (none: the corner is not on this
-      // triangle's boundary, no contact).
-      double best_s = -std::numeric_limits<double>::infinity();
-      for (int k : {f - 4, (f - 4 + 2) % 3}) {
-        if (!open_edge(k)) continue;
-        Eigen::Vector3d x[4] = {p, row(Xf, Sf.F(h.triangle, 0)), row(Xf, Sf.F(h.triangle, 1)),
-                                row(Xf, Sf.F(h.triangle, 2))};
-        const double sk = beyond_edge<double>(x, k);
-        if (sk > best_s) best_s = sk, fade_edge = k;
-      }
-      if (fade_edge < 0) continue;
-    }
-    if (fade_edge >= 0) {
-      // Beyond the open boundary: the face contact of this triangle, faded
-      // out over one triangle size (mesh_contact.h), continuous at the edge.
-      const Eigen::Vector3d x1 = row(Xf, Sf.F(h.triangle, 0));
+    const bool on_boundary = (f >= 1 && f <= 3 && Sf.edge_triangles[Sf.triangle_edges(h.triangle, f - 1)][1] < 0) ||
+                             (f >= 4 && Sf.boundary_vertex[Sf.F(h.triangle, f - 4)]);
+    if (on_boundary) {
+      // Beyond the open boundary (the other surface's rim): the distance to
+      // the rim edge or corner, behind the plane of this boundary triangle;
+      // detect() weights it by how squarely p lies behind the rim
+      // (mesh_contact.h), so nothing jumps when p slides off the rim.
+      const double dist = std::sqrt(best);
+      if (!(dist > 0 && dist < radius)) continue;
       const Eigen::Vector3d n = tnf.row(h.triangle).transpose();
       if (!(vnv.row(i).dot(n.transpose()) < -min_opposition)) continue;
       h.vertex = i;
-      h.fade_edge = fade_edge;
-      h.signed_distance = (p - x1).dot(n);
-      if (!(std::abs(h.signed_distance) < radius)) continue;
+      h.fade_edge = 1;
+      h.signed_distance = (p - h.closest.point).dot(n) < 0 ? -dist : dist;
       hits[gi] = h;
       continue;
     }
@@ -404,12 +375,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       ContactPoint c;
       const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
       const int f = h.closest.feature;
-      if (h.fade_edge >= 0) {
-        c.kind = ContactKind::kVertexFace;
-        c.node = {h.vertex, tri[0], tri[1], tri[2]};
-        c.fade_edge = h.fade_edge;
-        c.fade_width = std::sqrt(2 * Sf.triangle_area(h.triangle));
-      } else if (f == 0) {
+      if (f == 0) {
         c.kind = ContactKind::kVertexFace;
         c.node = {h.vertex, tri[0], tri[1], tri[2]};
       } else if (f <= 3) {
@@ -419,6 +385,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
         c.kind = ContactKind::kVertexVertex;
         c.node = {h.vertex, tri[f - 4], tri[(f - 3) % 3], tri[(f - 2) % 3]};
       }
+      c.fade_edge = h.fade_edge;
       c.side = {sv, sf, sf, sf};
       c.area = 0.5 * S[sv]->vertex_area(h.vertex);
       vf_active[sv][h.vertex] = 1;
@@ -511,16 +478,24 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     c.stiffness = dp;
     keep[k] = c.pressure > 0;
     if (c.fade_edge >= 0) {
-      // phi = 1 - s/b over the fade band 0 <= s < b beyond the open edge;
-      // grad phi = -grad s / b (forward AD).
+      // Rim contact: phi = clamp(n . n_T / cos 45 deg, 0, 1), n = (c - p)/|c - p|
+      // the contact normal, n_T the boundary triangle's normal (x1, x2, x3
+      // are its nodes in cyclic order): 1 when p lies squarely behind the
+      // rim, down to 0 when p is beside it in the surface's plane. Its
+      // gradient comes from forward AD.
       V3<Ad> xa[4];
       for (int j = 0; j < 4; ++j)
         for (int d = 0; d < 3; ++d) xa[j](d) = Ad(x[j](d), 12, 3 * j + d);
-      const Ad sd = beyond_edge<Ad>(xa, c.fade_edge);
-      const double sv = sd.value();
-      c.fade = 1 - std::max(sv, 0.0) / c.fade_width;
-      c.fade_grad = sv > 0 ? Eigen::Matrix<double, 12, 1>(-sd.derivatives() / c.fade_width)
-                           : Eigen::Matrix<double, 12, 1>::Zero();
+      V3<Ad> na;
+      Ad wa[4];
+      gap_kernel<Ad>(c.kind, xa, 1.0, na, wa);
+      V3<Ad> nt = (xa[2] - xa[1]).cross(xa[3] - xa[1]);
+      nt = nt / sqrt(nt.squaredNorm());
+      const double cos0 = std::sqrt(0.5);
+      const Ad cosang = na.dot(nt) / cos0;
+      c.fade = std::clamp(cosang.value(), 0.0, 1.0);
+      c.fade_grad = (cosang.value() > 0 && cosang.value() < 1) ? Eigen::Matrix<double, 12, 1>(cosang.derivatives())
+                                                               : Eigen::Matrix<double, 12, 1>::Zero();
       if (!(c.fade > 0)) keep[k] = 0;
     }
   }

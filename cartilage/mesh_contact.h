@@ -16,13 +16,15 @@
 //    face each other when p's vertex normal opposes m. If c is inside a face,
 //    g = (p - x1) . n with n the face normal; if it is on an edge or corner
 //    (convex kinks between facets), g = -|p - c| with n = (c - p)/|c - p|.
-//    A closest point on the open boundary (boundary edge or corner) means p
-//    has slid beyond the edge of the other surface: the face contact of
-//    that boundary triangle (plane gap) is kept with its weight faded
-//    linearly to zero over one triangle size b = sqrt(2 A_T) beyond the
-//    edge, so the force does not jump when a penetrating vertex slides off a
-//    surface's rim (the fade's gradient is in the tangent, which is then not
-//    symmetric). This is the signed distance to the faceted
+//    A closest point on the open boundary (the other surface's rim, an edge
+//    or corner used by one triangle side only) means p has slid beyond the
+//    edge of that surface: the edge/corner gap g = -|p - c| is kept while p
+//    is behind the boundary triangle's plane, weighted by
+//    phi = clamp(n . n_T / cos 45 deg, 0, 1) (n_T that triangle's normal):
+//    full weight when p lies squarely behind the rim, fading to zero as it
+//    comes beside it, so the force does not jump when a penetrating vertex
+//    slides off a rim (the fade's gradient is in the tangent, which is then
+//    not symmetric). This is the signed distance to the faceted
 //    surface, continuous as p slides across facets (no force jumps). Active
 //    when 0 < -g < max_depth. Both directions are evaluated (two-pass, each
 //    with half the vertex's tributary area), so neither surface is
@@ -124,11 +126,10 @@ struct ContactPoint {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();   ///< contact point on the face / second edge [m]
   Eigen::Matrix<double, 12, 1> G = Eigen::Matrix<double, 12, 1>::Zero();   ///< dg/dx
   Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero(); ///< d2g/dx2 (if requested)
-  /// Beyond the other surface's open boundary (fade_edge >= 0: edge k of the
-  /// triangle x1..x3): the face contact is weighted by fade = 1 - s/b, s the
-  /// in-plane distance beyond the edge, b = fade_width; fade_grad = d fade/dx.
+  /// Rim contact (fade_edge >= 0: the closest point is on the other
+  /// surface's open boundary): weight fade in [0, 1] and fade_grad = d fade/dx.
   int fade_edge = -1;
-  double fade = 1, fade_width = 0;
+  double fade = 1;
   Eigen::Matrix<double, 12, 1> fade_grad = Eigen::Matrix<double, 12, 1>::Zero();
 };
 

@@ -166,6 +166,11 @@ const std::vector<OptionSpec>& schema_table() {
       {"surface", "newton_tolerance", T::kNumber, U::kNone, "1e-8", false, 1e-14, 1e-2, "", true,
        "relative tolerance of a step's Newton iteration on the residual and on the increment "
        "(docs/shell_element.md)"},
+      {"surface", "newton_residual_floor_n", T::kNumber, U::kNone, "1e-10", false, 0, 1e6, "", true,
+       "absolute residual [N] below which a step's residual test passes whatever its first "
+       "residual (contact: force jumps at facet kinks leave residuals of order 0.01 N)"},
+      {"surface", "newton_increment_floor_mm", T::kNumber, U::kMillimetre, "1e-11", false, 0, 1, "", true,
+       "absolute Newton increment below which a step's increment test passes"},
       // --- one scenario --------------------------------------------------------
       {"scenario", "description", T::kText, U::kNone, "", false, 0, 0, "", false,
        "free text for reports"},

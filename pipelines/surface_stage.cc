@@ -647,6 +647,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
   iopt.residual_rtol = o.si("newton_tolerance");
   iopt.increment_rtol = o.si("newton_tolerance");
+  iopt.residual_atol_N = o.si("newton_residual_floor_n");
+  iopt.increment_atol_m = o.si("newton_increment_floor_mm");
   // Imposed kinematics: each step starts from the surfaces carried by their
   // bones (rigid predictor), so Newton only finds the deformation change.
   if (moving) iopt.predictor = cartilage::IntegratorOptions::Predictor::kSystem;
