@@ -25,17 +25,6 @@ namespace {
 
 using Vec12 = Eigen::Matrix<double, 12, 1>;
 
-/// The mesh mirrored in z (z -> z0 - z) with its orientation reversed, so that
-/// its normals point the other way (a surface facing down).
-common::QuadMesh flipped(common::QuadMesh m, double z0) {
-  for (int i = 0; i < m.V.rows(); ++i) m.V(i, 2) = z0 - m.V(i, 2);
-  for (int e = 0; e < m.Q.rows(); ++e) {
-    const Eigen::Vector4i q = m.Q.row(e);
-    m.Q.row(e) << q(0), q(3), q(2), q(1);
-  }
-  return m;
-}
-
 common::QuadMesh shifted(common::QuadMesh m, const Eigen::Vector3d& d) {
   m.V.rowwise() += d.transpose();
   return m;
@@ -133,7 +122,7 @@ double system_fd_error(CoupledShellSystem& sys, const Eigen::VectorXd& q, const 
 TEST(MeshContact, NewtonTangentMatchesFiniteDifferences) {
   for (int damped = 0; damped < 2; ++damped) {
     const common::QuadMesh plate = shifted(testing::plate_mesh(5, 5, 6e-3, 6e-3, 0.15), {-3e-3, -3e-3, 0});
-    const common::QuadMesh cap = flipped(testing::spherical_patch(6, 5e-3, 6e-3), -0.3e-3);
+    const common::QuadMesh cap = testing::flipped(testing::spherical_patch(6, 5e-3, 6e-3), -0.3e-3);
     auto A = make_model(plate, 1e6, 0.3e-3), B = make_model(cap, 1e6, 0.3e-3);
     CoupledShellSystem sys({A.get(), B.get()}, {"plate", "cap"});
     ContactOptions o;
@@ -172,7 +161,7 @@ TEST(MeshContact, NewtonTangentMatchesFiniteDifferences) {
 // checked against finite differences (tolerance as above).
 TEST(MeshContact, BoundaryFadeTangentMatchesFiniteDifferences) {
   const common::QuadMesh plate = shifted(testing::plate_mesh(8, 8, 5e-3, 5e-3, 0.15), {-2.5e-3, -2.5e-3, 0});
-  const common::QuadMesh cap = flipped(testing::spherical_patch(5, 3e-3, 6e-3), -0.3e-3);
+  const common::QuadMesh cap = testing::flipped(testing::spherical_patch(5, 3e-3, 6e-3), -0.3e-3);
   ContactOptions o;
   o.stiffness_N_m3 = 5e10;
   MeshContact mc("plate-cap", ContactSurface(plate), ContactSurface(cap), o);
@@ -331,7 +320,7 @@ TEST(MeshContact, RigidSphereOnFoundationMatchesClosedForm) {
     const common::QuadMesh plate = shifted(testing::plate_mesh(n, n, W, W), {-W / 2, -W / 2, 0});
     // Sphere bottom starts 0.02 mm above the plate and ends d below it.
     const double lift = 0.02e-3;
-    const common::QuadMesh sphere = flipped(testing::spherical_patch(n, 9e-3, R), lift);
+    const common::QuadMesh sphere = testing::flipped(testing::spherical_patch(n, 9e-3, R), lift);
     auto P = make_model(plate, 1e3, 0.2e-3), S = make_model(sphere, 1e6, 0.2e-3);
     P->add_foundation_springs(k, BoneMotion::fixed(), /*compressive_only=*/false);
     // Only the normal position is free: a bed of foundation springs (acting
@@ -389,7 +378,7 @@ TEST(MeshContact, TwoShellsShareLoadAsSpringsInSeries) {
   const double k1 = 7e8, k2 = 2.1e9, kc = 7e10, d = 0.3e-3, s0 = 0.05e-3;
   const common::QuadMesh lower = shifted(testing::plate_mesh(14, 14, 20e-3, 20e-3), {-10e-3, -10e-3, 0});
   const common::QuadMesh upper =
-      flipped(shifted(testing::plate_mesh(11, 11, 14e-3, 14e-3, 0.1), {-7.3e-3, -6.9e-3, 0}), s0);
+      testing::flipped(shifted(testing::plate_mesh(11, 11, 14e-3, 14e-3, 0.1), {-7.3e-3, -6.9e-3, 0}), s0);
   auto A = make_model(lower, 10e6, 0.5e-3), B = make_model(upper, 10e6, 0.5e-3);
   A->add_foundation_springs(k1);
   BoneMotion down;
@@ -440,7 +429,7 @@ TEST(MeshContact, TwoShellsShareLoadAsSpringsInSeries) {
 // Same contact, one and two threads: bit-identical contact forces.
 TEST(MeshContact, DeterministicAcrossThreadCounts) {
   const common::QuadMesh plate = shifted(testing::plate_mesh(30, 30, 12e-3, 12e-3, 0.2), {-6e-3, -6e-3, 0});
-  const common::QuadMesh cap = flipped(testing::spherical_patch(30, 10e-3, 10e-3), -0.2e-3);
+  const common::QuadMesh cap = testing::flipped(testing::spherical_patch(30, 10e-3, 10e-3), -0.2e-3);
   ContactOptions o;
   MeshContact mc("c", ContactSurface(plate), ContactSurface(cap), o);
   const int saved = omp_get_max_threads();

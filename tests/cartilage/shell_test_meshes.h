@@ -87,4 +87,16 @@ inline common::QuadMesh sphere_octant(int n, double R) {
   return m;
 }
 
+
+/// The mesh mirrored in z (z -> z0 - z) with its orientation reversed, so that
+/// its normals point the other way (a surface facing down onto another).
+inline common::QuadMesh flipped(common::QuadMesh m, double z0) {
+  for (int i = 0; i < m.V.rows(); ++i) m.V(i, 2) = z0 - m.V(i, 2);
+  for (int e = 0; e < m.Q.rows(); ++e) {
+    const Eigen::Vector4i q = m.Q.row(e);
+    m.Q.row(e) << q(0), q(3), q(2), q(1);
+  }
+  return m;
+}
+
 }  // namespace arthrosim::cartilage::testing

@@ -16,14 +16,6 @@
 namespace arthrosim::cartilage {
 namespace {
 
-common::QuadMesh flipped(common::QuadMesh m, double z0) {
-  for (int i = 0; i < m.V.rows(); ++i) m.V(i, 2) = z0 - m.V(i, 2);
-  for (int e = 0; e < m.Q.rows(); ++e) {
-    const Eigen::Vector4i q = m.Q.row(e);
-    m.Q.row(e) << q(0), q(3), q(2), q(1);
-  }
-  return m;
-}
 
 common::QuadMesh placed(common::QuadMesh m, const Eigen::Isometry3d& X) {
   for (int i = 0; i < m.V.rows(); ++i) m.V.row(i) = (X * Eigen::Vector3d(m.V.row(i).transpose())).transpose();
@@ -47,7 +39,7 @@ SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
   lower.V.rowwise() += Eigen::RowVector3d(-10e-3, -10e-3, 0);
   common::QuadMesh upper = testing::plate_mesh(11, 11, 14e-3, 14e-3, 0.1);
   upper.V.rowwise() += Eigen::RowVector3d(-7.3e-3, -6.9e-3, 0);
-  upper = flipped(upper, s0);
+  upper = testing::flipped(upper, s0);
   lower = placed(lower, X);
   upper = placed(upper, X);
   ShellMaterial mat;
