@@ -50,7 +50,9 @@ double seconds_since(Clock::time_point t0) { return std::chrono::duration<double
 std::vector<report::Series> contact_series(const common::H5File& f, const std::string& group, const std::string& prefix) {
   std::vector<report::Series> out;
   if (!f.is_group(group) || !f.exists("/time")) return out;
-  const Eigen::VectorXd t = f.read_vector("/time");
+  // A surface output with imposed kinematics starts with a seating ramp:
+  // /trial_time puts its frames on the kinematics file's clock (stage 1).
+  const Eigen::VectorXd t = f.read_vector(f.exists("/trial_time") ? "/trial_time" : "/time");
   std::function<void(const std::string&)> walk = [&](const std::string& g) {
     for (const auto& name : f.list(g)) {
       const std::string p = g + "/" + name;
