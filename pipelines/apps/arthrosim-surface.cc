@@ -42,8 +42,8 @@ int main(int argc, char** argv) {
       "  paraview surface_osmotic.xdmf    # deflection, e1, e1_dir per frame\n"
       "  arthrosim-surface --scene data/scenes/cantilever_plate.yaml --out cantilever.h5\n"
       "      # generic quad mesh (scene key mesh): cantilever plate vs beam theory\n"
-      "  arthrosim run data/scenes/gait.yaml --out out/gait\n"
-      "      # walking: prepare, COMAK, then this stage with mesh contact on the stage-1 kinematics\n");
+      "  arthrosim run data/scenes/gait.yaml --out out/gait [--dry-run]\n"
+      "      # walking (experimental, long): prepare, COMAK, then this stage with mesh contact\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-surface");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
