@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 #include <sstream>
@@ -509,6 +510,55 @@ Model load_model(const std::string& urdf_path) {
 
 namespace arthrosim::musculoskeletal {
 
+namespace {
+
+// Distance [m] between the centroid of the model's own mesh of s (taken back
+// to the file frame) and that of `mesh` (file frame): a replacement mesh
+// must lie where the model's does.
+double centroid_offset(const ContactSurface& s, const common::TriangleMesh& mesh) {
+  const Vec3 c_model = s.X_BM.inverse() * Vec3(s.mesh.V.colwise().mean().transpose());
+  return (c_model - Vec3(mesh.V.colwise().mean().transpose())).norm();
+}
+
+// A copy of s with `mesh` (file frame) placed by s.X_BM, the triangle
+// thickness the mean of its vertices' values, and mesh_file = label.
+ContactSurface with_mesh(const ContactSurface& s, common::TriangleMesh mesh, const Eigen::VectorXd& vertex_thickness,
+                         std::string label) {
+  ContactSurface r = s;
+  r.mesh_file = std::move(label);
+  r.thickness.resize(mesh.num_triangles());
+  for (int t = 0; t < mesh.num_triangles(); ++t)
+    r.thickness[t] =
+        (vertex_thickness[mesh.F(t, 0)] + vertex_thickness[mesh.F(t, 1)] + vertex_thickness[mesh.F(t, 2)]) / 3.0;
+  for (int i = 0; i < mesh.num_vertices(); ++i) mesh.V.row(i) = (s.X_BM * Vec3(mesh.V.row(i).transpose())).transpose();
+  r.mesh = std::move(mesh);
+  return r;
+}
+
+// Rebuilds every contact pair with its surfaces replaced by make(surface,
+// pair name), each model surface made once (shared by the pairs that use
+// it), and reports each replacement with the new mesh's origin.
+PreparedSurfacesReport replace_contact_surfaces(
+    Model& model, const std::function<ContactSurface(const ContactSurface&, const std::string&)>& make) {
+  PreparedSurfacesReport report;
+  std::map<std::string, ContactSurface> replaced;  // by model surface name
+  auto replace = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
+    if (auto it = replaced.find(s.name); it != replaced.end()) return it->second;
+    ContactSurface r = make(s, pair);
+    report.lines.push_back(s.name + ": " + std::to_string(s.mesh.num_triangles()) + " -> " +
+                           std::to_string(r.mesh.num_triangles()) + " triangles (" + r.mesh_file + ")");
+    replaced.emplace(s.name, r);
+    return r;
+  };
+  std::vector<ContactPair> pairs;
+  for (const ContactPair& c : model.contacts)
+    pairs.emplace_back(c.name(), replace(c.casting(), c.name()), replace(c.target(), c.name()), c.material());
+  model.contacts = std::move(pairs);
+  return report;
+}
+
+}  // namespace
+
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
   common::H5File f(prepared_path, common::H5File::Mode::kRead);
   const std::vector<std::string> names = f.read_strings("/surfaces/names");
@@ -518,10 +568,7 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
     by_file[std::filesystem::path(f.attribute_string("/surfaces/" + n, "source_file"))
                 .filename()
                 .string()] = n;
-  PreparedSurfacesReport report;
-  std::map<std::string, ContactSurface> replaced;  // by model surface name
-  auto replace = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
-    if (auto it = replaced.find(s.name); it != replaced.end()) return it->second;
+  auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
     if (s.mesh_file.empty() || it == by_file.end()) {
@@ -543,43 +590,21 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
     // Same place as the model's own mesh (in the file frame): the centroids
     // of the two surfaces must agree to within 2 mm, else the prepared file
     // belongs to another geometry.
-    const Vec3 c_model = s.X_BM.inverse() * Vec3(s.mesh.V.colwise().mean().transpose());
-    const Vec3 c_prep = mesh.V.colwise().mean().transpose();
-    if ((c_model - c_prep).norm() > 2e-3) {
+    const double offset = centroid_offset(s, mesh);
+    if (offset > 2e-3) {
       std::ostringstream m;
-      m << g << ": the prepared surface's centroid lies " << (c_model - c_prep).norm() * 1e3
-        << " mm from that of the model's '" << s.name << "' (" << s.mesh_file
-        << "); expected <= 2 mm (prepared from another geometry?)";
+      m << g << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
+        << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";
       throw InputError(prepared_path, 0, m.str());
     }
-    ContactSurface r = s;
-    r.mesh_file = prepared_path + ":" + g;
-    r.thickness.resize(mesh.num_triangles());
-    for (int t = 0; t < mesh.num_triangles(); ++t)
-      r.thickness[t] = (tv[mesh.F(t, 0)] + tv[mesh.F(t, 1)] + tv[mesh.F(t, 2)]) / 3.0;
-    for (int i = 0; i < mesh.num_vertices(); ++i)
-      mesh.V.row(i) = (s.X_BM * Vec3(mesh.V.row(i).transpose())).transpose();
-    r.mesh = std::move(mesh);
-    report.lines.push_back(s.name + ": " + std::to_string(s.mesh.num_triangles()) + " -> " +
-                           std::to_string(r.mesh.num_triangles()) + " triangles (prepared '" +
-                           it->second + "')");
-    replaced.emplace(s.name, r);
-    return r;
+    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + g);
   };
-  std::vector<ContactPair> pairs;
-  for (const ContactPair& c : model.contacts)
-    pairs.emplace_back(c.name(), replace(c.casting(), c.name()), replace(c.target(), c.name()),
-                       c.material());
-  model.contacts = std::move(pairs);
-  return report;
+  return replace_contact_surfaces(model, make);
 }
 
 PreparedSurfacesReport use_contact_meshes(Model& model, const std::map<std::string, SurfaceMesh>& by_file,
                                           const std::string& source) {
-  PreparedSurfacesReport report;
-  std::map<std::string, ContactSurface> replaced;
-  auto replace = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
-    if (auto it = replaced.find(s.name); it != replaced.end()) return it->second;
+  auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
     if (s.mesh_file.empty() || it == by_file.end())
@@ -587,32 +612,13 @@ PreparedSurfacesReport use_contact_meshes(Model& model, const std::map<std::stri
     const SurfaceMesh& in = it->second;
     if (in.vertex_thickness.size() != in.mesh.num_vertices() || in.mesh.num_triangles() == 0)
       throw InputError(source, 0, file + ": expected triangles and one thickness per vertex");
-    const Vec3 c_model = s.X_BM.inverse() * Vec3(s.mesh.V.colwise().mean().transpose());
-    const Vec3 c_new = in.mesh.V.colwise().mean().transpose();
-    if ((c_model - c_new).norm() > 2e-3)
-      throw InputError(source, 0, file + ": the mesh's centroid lies " +
-                                      std::to_string((c_model - c_new).norm() * 1e3) +
+    const double offset = centroid_offset(s, in.mesh);
+    if (offset > 2e-3)
+      throw InputError(source, 0, file + ": the mesh's centroid lies " + std::to_string(offset * 1e3) +
                                       " mm from the model's; expected <= 2 mm");
-    ContactSurface r = s;
-    r.mesh_file = source + ":" + file;
-    const auto& F = in.mesh.F;
-    const auto& tv = in.vertex_thickness;
-    r.thickness.resize(F.rows());
-    for (int t = 0; t < F.rows(); ++t) r.thickness[t] = (tv[F(t, 0)] + tv[F(t, 1)] + tv[F(t, 2)]) / 3.0;
-    r.mesh = in.mesh;
-    for (int i = 0; i < r.mesh.num_vertices(); ++i)
-      r.mesh.V.row(i) = (s.X_BM * Vec3(r.mesh.V.row(i).transpose())).transpose();
-    report.lines.push_back(s.name + ": " + std::to_string(s.mesh.num_triangles()) + " -> " +
-                           std::to_string(r.mesh.num_triangles()) + " triangles (" + source + ")");
-    replaced.emplace(s.name, r);
-    return r;
+    return with_mesh(s, in.mesh, in.vertex_thickness, source + ":" + file);
   };
-  std::vector<ContactPair> pairs;
-  for (const ContactPair& c : model.contacts)
-    pairs.emplace_back(c.name(), replace(c.casting(), c.name()), replace(c.target(), c.name()),
-                       c.material());
-  model.contacts = std::move(pairs);
-  return report;
+  return replace_contact_surfaces(model, make);
 }
 
 }  // namespace arthrosim::musculoskeletal
