@@ -115,24 +115,45 @@ TriangleClosest closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vecto
   return {a + ab * v + ac * w, {1 - v - w, v, w}, 0};
 }
 
-// g, G = dg/dx and optionally H = d2g/dx2 (AD of the closed-form gradient).
-double gap_and_derivatives(ContactKind kind, const Eigen::Vector3d* x, double sign, Vec12& G,
-                           Eigen::Matrix<double, 12, 12>* H) {
+// One contact's geometry: g, n, w and G = dg/dx; with H != nullptr one
+// forward-AD pass gives H = d2g/dx2 and, for a rim contact, fade_grad.
+// Rim contacts (rim = true): fade = clamp(n . n_T / cos 45 deg, 0, 1), n_T the
+// normal of the triangle x1, x2, x3 (mesh_contact.h).
+struct ContactGeometry {
+  double g = 0;
   Eigen::Vector3d n;
   double w[4];
-  const double g = gap_kernel<double>(kind, x, sign, n, w);
-  for (int k = 0; k < 4; ++k) G.segment<3>(3 * k) = w[k] * n;
-  if (H) {
-    V3<Ad> xa[4];
-    for (int k = 0; k < 4; ++k)
-      for (int c = 0; c < 3; ++c) xa[k](c) = Ad(x[k](c), 12, 3 * k + c);
-    V3<Ad> na;
-    Ad wa[4];
-    gap_kernel<Ad>(kind, xa, sign, na, wa);
-    for (int k = 0; k < 4; ++k)
-      for (int c = 0; c < 3; ++c) H->row(3 * k + c) = (wa[k] * na(c)).derivatives().transpose();
+  Vec12 G;
+  double fade = 1;
+  Vec12 fade_grad = Vec12::Zero();
+};
+ContactGeometry contact_geometry(ContactKind kind, const Eigen::Vector3d* x, double sign, bool rim,
+                                 Eigen::Matrix<double, 12, 12>* H) {
+  ContactGeometry c;
+  c.g = gap_kernel<double>(kind, x, sign, c.n, c.w);
+  for (int k = 0; k < 4; ++k) c.G.segment<3>(3 * k) = c.w[k] * c.n;
+  const double cos0 = std::sqrt(0.5);
+  double cosang = 0;
+  if (rim) {
+    const Eigen::Vector3d nt = (x[2] - x[1]).cross(x[3] - x[1]).normalized();
+    cosang = c.n.dot(nt) / cos0;
+    c.fade = std::clamp(cosang, 0.0, 1.0);
   }
-  return g;
+  if (!H) return c;
+  V3<Ad> xa[4];
+  for (int k = 0; k < 4; ++k)
+    for (int d = 0; d < 3; ++d) xa[k](d) = Ad(x[k](d), 12, 3 * k + d);
+  V3<Ad> na;
+  Ad wa[4];
+  gap_kernel<Ad>(kind, xa, sign, na, wa);
+  for (int k = 0; k < 4; ++k)
+    for (int d = 0; d < 3; ++d) H->row(3 * k + d) = (wa[k] * na(d)).derivatives().transpose();
+  if (rim && cosang > 0 && cosang < 1) {
+    V3<Ad> nt = (xa[2] - xa[1]).cross(xa[3] - xa[1]);
+    nt = nt / sqrt(nt.squaredNorm());
+    c.fade_grad = (na.dot(nt) / cos0).derivatives();
+  }
+  return c;
 }
 
 Eigen::Vector3d row(const common::Points3& P, int i) { return P.row(i).transpose(); }
@@ -322,10 +343,9 @@ ContactSurface::ContactSurface(const ShellModel& model) {
 
 double contact_gap(ContactKind kind, const std::array<Eigen::Vector3d, 4>& x, double sign,
                    Eigen::Matrix<double, 12, 1>* G, Eigen::Matrix<double, 12, 12>* H) {
-  Vec12 g12;
-  const double g = gap_and_derivatives(kind, x.data(), sign, g12, H);
-  if (G) *G = g12;
-  return g;
+  const ContactGeometry c = contact_geometry(kind, x.data(), sign, false, H);
+  if (G) *G = c.G;
+  return c.g;
 }
 
 MeshContact::MeshContact(std::string name, const ContactSurface& a, const ContactSurface& b,
@@ -448,15 +468,16 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     for (int j = 0; j < 4; ++j) x[j] = row(*X[c.side[j]], c.node[j]);
     double sign = 1.0;
     if (c.kind == ContactKind::kEdgeEdge) sign = c.normal.dot((x[1] - x[0]).cross(x[3] - x[2])) >= 0 ? 1.0 : -1.0;
-    Vec12 G;
-    c.gap = gap_and_derivatives(c.kind, x, sign, G, want_hessian ? &c.H : nullptr);
-    c.G = G;
-    Eigen::Vector3d n;
-    double w[4];
-    gap_kernel<double>(c.kind, x, sign, n, w);
-    c.normal = n;
-    c.point = c.kind == ContactKind::kEdgeEdge ? Eigen::Vector3d(-w[2] * x[2] - w[3] * x[3])
-                                               : Eigen::Vector3d(x[0] - c.gap * n);
+    const ContactGeometry geo =
+        contact_geometry(c.kind, x, sign, c.fade_edge >= 0, want_hessian ? &c.H : nullptr);
+    c.gap = geo.g;
+    c.G = geo.G;
+    c.normal = geo.n;
+    c.fade = geo.fade;
+    c.fade_grad = geo.fade_grad;
+    const Vec12& G = geo.G;
+    c.point = c.kind == ContactKind::kEdgeEdge ? Eigen::Vector3d(-geo.w[2] * x[2] - geo.w[3] * x[3])
+                                               : Eigen::Vector3d(x[0] - c.gap * geo.n);
     c.gap_rate = 0;
     for (int j = 0; j < 4; ++j) {
       const common::Points3* vel = V[c.side[j]];
@@ -477,27 +498,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     c.pressure = p - cc * c.gap_rate;
     c.stiffness = dp;
     keep[k] = c.pressure > 0;
-    if (c.fade_edge >= 0) {
-      // Rim contact: phi = clamp(n . n_T / cos 45 deg, 0, 1), n = (c - p)/|c - p|
-      // the contact normal, n_T the boundary triangle's normal (x1, x2, x3
-      // are its nodes in cyclic order): 1 when p lies squarely behind the
-      // rim, down to 0 when p is beside it in the surface's plane. Its
-      // gradient comes from forward AD.
-      V3<Ad> xa[4];
-      for (int j = 0; j < 4; ++j)
-        for (int d = 0; d < 3; ++d) xa[j](d) = Ad(x[j](d), 12, 3 * j + d);
-      V3<Ad> na;
-      Ad wa[4];
-      gap_kernel<Ad>(c.kind, xa, 1.0, na, wa);
-      V3<Ad> nt = (xa[2] - xa[1]).cross(xa[3] - xa[1]);
-      nt = nt / sqrt(nt.squaredNorm());
-      const double cos0 = std::sqrt(0.5);
-      const Ad cosang = na.dot(nt) / cos0;
-      c.fade = std::clamp(cosang.value(), 0.0, 1.0);
-      c.fade_grad = (cosang.value() > 0 && cosang.value() < 1) ? Eigen::Matrix<double, 12, 1>(cosang.derivatives())
-                                                               : Eigen::Matrix<double, 12, 1>::Zero();
-      if (!(c.fade > 0)) keep[k] = 0;
-    }
+    if (!(c.fade > 0)) keep[k] = 0;  // rim contact beside the rim, or an inactive one
   }
   std::vector<ContactPoint> active;
   active.reserve(out.size());
