@@ -4,8 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <cstdio>
-#include <cstdlib>
 #include <sstream>
 
 #include "common/error.h"
@@ -240,13 +238,6 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
       return true;
     }
     if (k >= opts_.max_newton_iterations) {
-      if (std::getenv("ARTHROSIM_DEBUG_NEWTON")) {  // diagnostics of a failed attempt
-        std::fprintf(stderr, "HHT attempt t=%g h=%g failed:", t_, h);
-        for (size_t j = 0; j < rec.residual_norms.size(); ++j)
-          std::fprintf(stderr, " %.2e/%.1e", rec.residual_norms[j],
-                       j < rec.increment_norms.size() ? rec.increment_norms[j] : 0.0);
-        std::fprintf(stderr, "\n");
-      }
       factor_valid_ = false;
       std::ostringstream s;
       s << "Newton did not converge in " << opts_.max_newton_iterations << " iterations (residual " << r

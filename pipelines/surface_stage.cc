@@ -5,7 +5,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -586,13 +585,20 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   double worst_ratio = 0;
   // One frame: every surface's fields, the contact forces, then /time (so
   // /time counts complete frames).
-  auto write_frame = [&](const Eigen::VectorXd& qs, double t) {
+  // Contact state of every pair at q (computed once per step; the frame
+  // written after that step reuses it).
+  auto contact_reports = [&](const Eigen::VectorXd& qs) {
+    std::vector<cartilage::ContactPairReport> reps;
+    for (int k = 0; k < system.num_contacts(); ++k) reps.push_back(system.contact_report(k, qs));
+    return reps;
+  };
+  auto write_frame = [&](const Eigen::VectorXd& qs, double t, const std::vector<cartilage::ContactPairReport>& reps) {
     std::vector<Eigen::VectorXd> pressure(runs.size());
     for (size_t k = 0; k < runs.size(); ++k) pressure[k] = Eigen::VectorXd::Zero(runs[k].model->num_nodes());
     Eigen::Vector3d total = Eigen::Vector3d::Zero(), medial = total, lateral = total;
     double area = 0, max_pen = 0;
     for (int k = 0; k < system.num_contacts(); ++k) {
-      const cartilage::ContactPairReport rep = system.contact_report(k, qs);
+      const cartilage::ContactPairReport& rep = reps[k];
       const int a = pair_index[k].first, b = pair_index[k].second;
       pressure[a] += rep.pressure_a;
       pressure[b] += rep.pressure_b;
@@ -655,19 +661,16 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   Eigen::VectorXd q0(system.num_dofs());
   for (int k = 0; k < system.num_models(); ++k)
     q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();
-  if (contact) {
-    // The surfaces must start apart (or the first frame's overlap is applied
-    // as an impact): the seating offset has to exceed the initial overlap.
-    for (int k = 0; k < system.num_contacts(); ++k) {
-      const cartilage::ContactPairReport rep = system.contact_report(k, q0);
-      if (rep.counts.vertex_face + rep.counts.edge_edge > 0)
-        throw common::InputError(scene.file.string(), sc->line,
-                                 "scenario '" + sc->name + "': contact pair " + pair_names[k] + " overlaps by " +
-                                     std::to_string(rep.counts.max_penetration_m * 1e3) +
-                                     " mm at t = 0; increase seating_offset_mm (now " +
-                                     std::to_string(seat_offset * 1e3) + " mm)");
-    }
-  }
+  // The surfaces must start apart (or the first frame's overlap is applied
+  // as an impact): the seating offset has to exceed the initial overlap.
+  std::vector<cartilage::ContactPairReport> reports = contact_reports(q0);
+  for (int k = 0; k < system.num_contacts(); ++k)
+    if (reports[k].counts.vertex_face + reports[k].counts.edge_edge > 0)
+      throw common::InputError(scene.file.string(), sc->line,
+                               "scenario '" + sc->name + "': contact pair " + pair_names[k] + " overlaps by " +
+                                   std::to_string(reports[k].counts.max_penetration_m * 1e3) +
+                                   " mm at t = 0; increase seating_offset_mm (now " +
+                                   std::to_string(seat_offset * 1e3) + " mm)");
   HhtIntegrator integrator(system, iopt);
   integrator.initialize(0.0, q0);
   common::log_info("scenario " + sc->name + ": " +
@@ -675,7 +678,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
                            : (quasi_static ? "quasi-static" : "HHT alpha " + std::to_string(iopt.alpha)) +
                                  std::string(", dt ") + std::to_string(dt) + " s to " + std::to_string(total_time) +
                                  " s" + (seating > 0 ? " (" + std::to_string(seating) + " s seating first)" : "")));
-  write_frame(integrator.q(), 0.0);
+  write_frame(integrator.q(), 0.0, reports);
   common::ProgressOptions popt;
   if (!options.progress) popt.mode = common::ProgressOptions::Mode::kOff;
   common::Progress progress("surface " + sc->name, std::max<std::int64_t>(n_steps_expected, 1), popt);
@@ -697,12 +700,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         const cartilage::IntegratorStatistics& s = integrator.statistics();
         const cartilage::StepRecord& rec = s.log.back();
         const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
-        if (std::getenv("ARTHROSIM_DEBUG_STEPS")) {  // TEMP
-          std::fprintf(stderr, "step t=%.4f dt=%.1e wall %.2f ls %ld pat %ld:", t_next, rec.dt, wall, s.line_search_reductions, s.pattern_changes);
-          for (double x : rec.residual_norms) std::fprintf(stderr, " %.1e", x);
-          std::fprintf(stderr, " | inc");
-          for (double x : rec.increment_norms) std::fprintf(stderr, " %.1e", x);
-          std::fprintf(stderr, "\n");
+        if (common::log_level() >= common::LogLevel::kDebug) {  // --verbose: the step's Newton history
+          std::ostringstream m;
+          m << "step to t = " << t_next << " s (dt " << rec.dt << " s, " << wall << " s):  residuals [N]";
+          for (double x : rec.residual_norms) m << " " << x;
+          m << "  increments [m]";
+          for (double x : rec.increment_norms) m << " " << x;
+          common::log_debug(m.str());
         }
         res.final_residual_N = rl;
         res.residual_tolerance_N = std::max(iopt.residual_rtol * r0, iopt.residual_atol_N);
@@ -716,10 +720,10 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         solver_out[6].append(wall);
         solver_out[7].append(max_def);
         if (contact) {
+          reports = contact_reports(integrator.q());
           double pen = 0;
           long active = 0;
-          for (int k = 0; k < system.num_contacts(); ++k) {
-            const cartilage::ContactPairReport rep = system.contact_report(k, integrator.q());
+          for (const cartilage::ContactPairReport& rep : reports) {
             pen = std::max(pen, rep.counts.max_penetration_m);
             active += rep.counts.vertex_face + rep.counts.edge_edge;
           }
@@ -754,7 +758,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         t = t_next;
         progress.step();
       }
-      write_frame(integrator.q(), t);
+      write_frame(integrator.q(), t, reports);
       ++k_out;
     }
   } catch (const std::exception& e) {
