@@ -18,6 +18,7 @@
 #include "cartilage/shell_model.h"
 #include "common/effects.h"
 #include "common/error.h"
+#include "contact_test_helpers.h"
 #include "shell_test_meshes.h"
 
 namespace arthrosim::cartilage {
@@ -381,17 +382,7 @@ TEST(MeshContact, TwoShellsShareLoadAsSpringsInSeries) {
       testing::flipped(shifted(testing::plate_mesh(11, 11, 14e-3, 14e-3, 0.1), {-7.3e-3, -6.9e-3, 0}), s0);
   auto A = make_model(lower, 10e6, 0.5e-3), B = make_model(upper, 10e6, 0.5e-3);
   A->add_foundation_springs(k1);
-  BoneMotion down;
-  down.pose = [d](double t) {
-    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-    X.translation() = Eigen::Vector3d(0, 0, -d * t);
-    return X;
-  };
-  down.spatial_velocity = [d](double) {
-    Eigen::Matrix<double, 6, 1> V = Eigen::Matrix<double, 6, 1>::Zero();
-    V(5) = -d;
-    return V;
-  };
+  const BoneMotion down = testing::translating_bone(Eigen::Vector3d(0, 0, -d));
   B->add_foundation_springs(k2, down);
   fix_in_plane(*A);
   fix_in_plane(*B);
@@ -409,15 +400,8 @@ TEST(MeshContact, TwoShellsShareLoadAsSpringsInSeries) {
   // node around p A_i (the barycentric spreading of the other mesh's
   // vertices), but their local mean is p (force balance).
   auto mean_deflection = [&](int m, double bone_dz, double sign) {
-    const ShellModel& M = sys.model(m);
-    const Eigen::VectorXd qm = sys.segment(m, q);
-    double sum = 0, area = 0;
-    for (int i = 0; i < M.num_nodes(); ++i) {
-      if (M.reference_position(i).head<2>().norm() > 3e-3) continue;
-      sum += M.nodal_areas()(i) * sign * (qm(6 * i + 2) - (M.reference_position(i).z() + bone_dz));
-      area += M.nodal_areas()(i);
-    }
-    return sum / area;
+    return testing::mean_normal_deflection(sys.model(m), sys.segment(m, q), Eigen::Vector3d::Zero(),
+                                           Eigen::Vector3d::UnitZ(), 3e-3, Eigen::Vector3d(0, 0, bone_dz), sign);
   };
   const double wa = mean_deflection(0, 0.0, -1.0);  // lower surface pushed down
   const double wb = mean_deflection(1, -d, 1.0);    // upper surface pushed up relative to its bone

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "../cartilage/contact_test_helpers.h"
 #include "../cartilage/shell_test_meshes.h"
 #include "cartilage/coupled_system.h"
 #include "cartilage/hht_integrator.h"
@@ -52,17 +53,7 @@ SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
   auto A = make(lower), B = make(upper);
   A->add_foundation_springs(k1, BoneMotion::fixed());
   const Eigen::Vector3d down = X.linear() * Eigen::Vector3d(0, 0, -d);
-  BoneMotion moving;
-  moving.pose = [down](double t) {
-    Eigen::Isometry3d Y = Eigen::Isometry3d::Identity();
-    Y.translation() = t * down;
-    return Y;
-  };
-  moving.spatial_velocity = [down](double) {
-    Eigen::Matrix<double, 6, 1> V = Eigen::Matrix<double, 6, 1>::Zero();
-    V.tail<3>() = down;
-    return V;
-  };
+  const BoneMotion moving = testing::translating_bone(down);
   B->add_foundation_springs(k2, moving);
   // Directors fixed (the centre state has no slope) and two opposite corner
   // nodes of each plate carried with its bone: this removes the in-plane
@@ -106,17 +97,7 @@ SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
   const Eigen::Vector3d n = X.linear() * Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d c = X.translation();
   auto mean = [&](int m, const Eigen::Vector3d& bone_shift, double sign) {
-    const ShellModel& M = sys.model(m);
-    const Eigen::VectorXd qm = sys.segment(m, q);
-    double s = 0, a = 0;
-    for (int i = 0; i < M.num_nodes(); ++i) {
-      const Eigen::Vector3d r0 = M.reference_position(i);
-      const Eigen::Vector3d rel = r0 - c;
-      if ((rel - rel.dot(n) * n).norm() > 3e-3) continue;
-      s += M.nodal_areas()(i) * sign * (qm.segment<3>(6 * i) - (r0 + bone_shift)).dot(n);
-      a += M.nodal_areas()(i);
-    }
-    return s / a;
+    return testing::mean_normal_deflection(sys.model(m), sys.segment(m, q), c, n, 3e-3, bone_shift, sign);
   };
   r.w_lower = mean(0, Eigen::Vector3d::Zero(), -1.0);
   r.w_upper = mean(1, down, 1.0);
