@@ -40,8 +40,8 @@ Eigen::VectorXd loaded_pose(const msk::Model& m) {
   return q;
 }
 
-void BM_ModelEvaluate_Medium(benchmark::State& state) {
-  const auto& m = medium_model();
+// One full force evaluation (all forces, TF and PF contact) at the loaded pose.
+void run_evaluate(benchmark::State& state, const msk::Model& m) {
   auto d = msk::make_data(m);
   const Eigen::VectorXd q = loaded_pose(m);
   const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.02);
@@ -54,10 +54,9 @@ void BM_ModelEvaluate_Medium(benchmark::State& state) {
   for (const auto& c : d.contacts) n += c.result.num_contacting;
   state.counters["contacting_triangles"] = n;
 }
-BENCHMARK(BM_ModelEvaluate_Medium)->Unit(benchmark::kMillisecond);
 
-void BM_ModelJacobian_Medium(benchmark::State& state) {
-  const auto& m = medium_model();
+// One evaluation of dQ/dq over the free coordinates at the loaded pose.
+void run_jacobian(benchmark::State& state, const msk::Model& m) {
   auto d = msk::make_data(m);
   const Eigen::VectorXd q = loaded_pose(m);
   const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.02);
@@ -67,6 +66,11 @@ void BM_ModelJacobian_Medium(benchmark::State& state) {
     benchmark::DoNotOptimize(d.dQ_dq.data());
   }
 }
+
+void BM_ModelEvaluate_Medium(benchmark::State& state) { run_evaluate(state, medium_model()); }
+BENCHMARK(BM_ModelEvaluate_Medium)->Unit(benchmark::kMillisecond);
+
+void BM_ModelJacobian_Medium(benchmark::State& state) { run_jacobian(state, medium_model()); }
 BENCHMARK(BM_ModelJacobian_Medium)->Unit(benchmark::kMillisecond);
 
 struct FinePairs {
@@ -123,33 +127,10 @@ const msk::Model& fine_model() {
   return m;
 }
 
-void BM_ModelEvaluate_Fine(benchmark::State& state) {
-  const auto& m = fine_model();
-  auto d = msk::make_data(m);
-  const Eigen::VectorXd q = loaded_pose(m);
-  const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.02);
-  msk::evaluate_forces(m, d, q, {}, a);
-  for (auto _ : state) {
-    msk::evaluate_forces(m, d, q, {}, a);
-    benchmark::DoNotOptimize(d.Q.data());
-  }
-  int n = 0;
-  for (const auto& c : d.contacts) n += c.result.num_contacting;
-  state.counters["contacting_triangles"] = n;
-}
+void BM_ModelEvaluate_Fine(benchmark::State& state) { run_evaluate(state, fine_model()); }
 BENCHMARK(BM_ModelEvaluate_Fine)->Unit(benchmark::kMillisecond);
 
-void BM_ModelJacobian_Fine(benchmark::State& state) {
-  const auto& m = fine_model();
-  auto d = msk::make_data(m);
-  const Eigen::VectorXd q = loaded_pose(m);
-  const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.02);
-  msk::evaluate_forces(m, d, q, {}, a);
-  for (auto _ : state) {
-    msk::evaluate_jacobian(m, d, q, {}, a, {}, m.free_coordinates);
-    benchmark::DoNotOptimize(d.dQ_dq.data());
-  }
-}
+void BM_ModelJacobian_Fine(benchmark::State& state) { run_jacobian(state, fine_model()); }
 BENCHMARK(BM_ModelJacobian_Fine)->Unit(benchmark::kMillisecond);
 
 // mode 0: cold (caches reset every call); 1: warm, fixed pose; 2: warm, moving 1 um per call.
