@@ -68,7 +68,16 @@ void CoupledShellSystem::add_contact(const std::string& name, int a, int b, cons
                              std::to_string(a) + " and " + std::to_string(b));
   if (!(pattern_margin_m >= 0)) throw common::InputError("mesh contact " + name + ": pattern margin must be >= 0");
   Pair p;
-  p.contact = std::make_unique<MeshContact>(name, ContactSurface(*models_[a]), ContactSurface(*models_[b]), options);
+  ContactSurface sa(*models_[a]), sb(*models_[b]);
+  if (!options.constrained_vertices) {
+    // A node is passive when its position is constrained (coordinates 0..2).
+    for (auto [s, m] : {std::pair{&sa, models_[a]}, std::pair{&sb, models_[b]}}) {
+      const std::vector<char>& c = m->constrained();
+      s->passive_vertex.assign(s->num_nodes, 0);
+      for (int i = 0; i < s->num_nodes; ++i) s->passive_vertex[i] = c[6 * i] || c[6 * i + 1] || c[6 * i + 2];
+    }
+  }
+  p.contact = std::make_unique<MeshContact>(name, sa, sb, options);
   p.a = a;
   p.b = b;
   p.margin = pattern_margin_m;

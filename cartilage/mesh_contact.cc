@@ -267,6 +267,7 @@ std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Point
 #pragma omp parallel for schedule(dynamic, 64) if (ng > 256)
   for (int gi = 0; gi < ng; ++gi) {
     const int i = pairs[starts[gi]].first;
+    if (!Sv.passive_vertex.empty() && Sv.passive_vertex[i]) continue;
     const Eigen::Vector3d p = row(Xv, i);
     double best = std::numeric_limits<double>::infinity();
     VertexHit h;

@@ -135,6 +135,38 @@ class FoundationSpringsTerm final : public ShellTerm {
   bool compressive_only_;
 };
 
+// "periphery_fixed" with the normal left to the foundation: each boundary
+// node is tied to its bone-carried anchor p_i(t) in the tangent plane of its
+// reference transverse direction n_i(t) only,
+//   F_i += k_t A_i (I - n_i n_i^T)(r_i - p_i),  dF_i/dr_i = k_t A_i (I - n_i n_i^T)
+// (a penalty tie, symmetric: P depends on t only); its director is free.
+class PeripheryTangentialTerm final : public ShellTerm {
+ public:
+  PeripheryTangentialTerm(const ShellModel& model, std::vector<int> nodes, double k_t, BoneMotion bone)
+      : ShellTerm("periphery_fixed"), geo_(model, std::move(bone)), nodes_(std::move(nodes)), k_t_(k_t) {
+    if (!(k_t > 0) || !std::isfinite(k_t))
+      throw common::InputError("periphery_fixed: tangential tie stiffness must be > 0 N/m^3, found " +
+                               std::to_string(k_t));
+  }
+  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
+    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
+    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
+    for (int i : nodes_) {
+      Eigen::Vector3d p, n, pd, nd;
+      geo_.at(ctx.t, X, V, i, p, n, pd, nd);
+      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - n * n.transpose();
+      const double kA = k_t_ * geo_.area(i);
+      F.segment<3>(6 * i) += kA * P * (ctx.q.segment<3>(6 * i) - p);
+      if (K) K->add_block3(i, 0, i, 0, ctx.kq * kA * P);
+    }
+  }
+
+ private:
+  FoundationGeometry geo_;
+  std::vector<int> nodes_;
+  double k_t_;
+};
+
 class FoundationDampingTerm final : public ShellTerm {
  public:
   FoundationDampingTerm(const ShellModel& model, double c, BoneMotion bone, bool compressive_only, double gate)
@@ -527,6 +559,13 @@ void ShellModel::fix_nodes(const std::string& name, const std::vector<int>& node
   const Eigen::VectorXd q0 = q0_;
   c.value = [q0](double, int node, Eigen::Matrix<double, 6, 1>& q6) { q6 = q0.segment<6>(6 * node); };
   add_constraint(std::move(c));
+}
+
+ShellTerm& ShellModel::add_periphery_tangential(double k_t_N_m3, BoneMotion bone) {
+  std::vector<int> nodes = boundary_nodes();
+  const long n = static_cast<long>(nodes.size());
+  return register_term(std::make_unique<PeripheryTangentialTerm>(*this, std::move(nodes), k_t_N_m3, std::move(bone)),
+                       n);
 }
 
 void ShellModel::add_periphery_fixed(BoneMotion bone) {

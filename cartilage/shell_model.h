@@ -180,6 +180,13 @@ class ShellModel : public TimeIntegrable {
   /// "periphery_fixed": boundary nodes (all 6 coordinates) move rigidly with
   /// the bone: r = X_WB(t) X_WB(0)^-1 r0, d = R(t) R(0)^T d0.
   void add_periphery_fixed(BoneMotion bone = BoneMotion::fixed());
+  /// "periphery_fixed" with the normal free: boundary nodes tied to the bone
+  /// in their tangent plane only (penalty k_t A_i (I - n n^T), n the
+  /// bone-carried reference transverse direction; k_t [N/m^3] > 0), so that
+  /// along the normal they rest on the foundation like interior nodes; the
+  /// directors are free. For contact zones that reach the rim of a surface
+  /// (docs/contact.md). Recorded as periphery_fixed.
+  ShellTerm& add_periphery_tangential(double k_t_N_m3, BoneMotion bone = BoneMotion::fixed());
   /// General prescribed motion.
   void add_constraint(NodeConstraint c);
 

@@ -78,7 +78,10 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
       const double p = parameters.osmotic_pressure_Pa;
       model->add_pressure("osmotic_pressure", -1.0, [p](double) { return p; });
     } else if (e == "periphery_fixed") {
-      model->add_periphery_fixed(bone);
+      if (parameters.periphery_tie_N_m3 > 0)
+        model->add_periphery_tangential(parameters.periphery_tie_N_m3, bone);
+      else
+        model->add_periphery_fixed(bone);
     } else if (e == "inertia") {
       model->add_inertia();
     } else if (e == "fixed_nodes") {

@@ -63,6 +63,12 @@ struct SurfaceParameters {
   /// musculoskeletal stage's elastic-foundation contact (see
   /// matched_foundation_stiffness).
   Eigen::VectorXd foundation_stiffness_per_node_N_m3;
+  /// periphery_fixed: 0 clamps the boundary nodes to the bone (all six
+  /// coordinates, the seed's condition); > 0 ties them to the bone in their
+  /// tangent plane only, with this stiffness per unit area [N/m^3], leaving
+  /// the normal to the foundation and the directors free
+  /// (ShellModel::add_periphery_tangential).
+  double periphery_tie_N_m3 = 0;
 };
 
 /// Per-node foundation modulus of an elastic layer of thickness h_i with the

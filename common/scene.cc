@@ -142,6 +142,16 @@ const std::vector<OptionSpec>& schema_table() {
       {"surface", "contact_edge_edge", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
        "also evaluate edge-edge pairs (sharp features); the vertex test with edge and corner features "
        "covers smooth surfaces"},
+      {"surface", "contact_fixed_vertices", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
+       "nodes fixed to their bone (periphery_fixed) may be penetrating vertices; by default they only "
+       "carry faces, as stage 1 samples the casting surface at triangle centres, never at its rim "
+       "(docs/contact.md)"},
+      {"surface", "periphery_normal", T::kText, U::kNone, "clamped", false, 0, 0, "clamped|foundation", true,
+       "periphery_fixed: clamped = boundary nodes move with the bone in all six coordinates (seed 002); "
+       "foundation = tied to the bone in their tangent plane only, resting on the foundation along the "
+       "normal (for contact zones that reach the rim, as in stage 1's elastic foundation)"},
+      {"surface", "periphery_tie_stiffness_n_per_mm3", T::kNumber, U::kNewtonPerCubicMillimetre, "1000", false,
+       1e-3, 1e9, "", true, "periphery_normal: foundation: stiffness per unit area of the tangential tie"},
       {"surface", "penetration_limit", T::kNumber, U::kNone, "0.1", false, 0, 1e6, "", true,
        "the seed's accuracy rule: largest interpenetration / largest deflection allowed per step"},
       {"surface", "penetration_action", T::kText, U::kNone, "warn", false, 0, 0, "warn|stop", true,

@@ -269,6 +269,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   par.shell_thickness_m = o.si("shell_thickness_mm");
   par.foundation_stiffness_N_m3 = o.si("foundation_stiffness_n_per_mm3");
   par.foundation_damping_N_s_m3 = o.si("foundation_damping_n_s_per_mm3");
+  if (o.text("periphery_normal") == "foundation") par.periphery_tie_N_m3 = o.si("periphery_tie_stiffness_n_per_mm3");
   par.osmotic_pressure_Pa = o.si("osmotic_pressure_mpa");
   // ---- kinematics (imposed_kinematics) -------------------------------------
   const bool moving = sc->wants("imposed_kinematics");
@@ -475,6 +476,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   copt.max_depth_m = o.si("contact_max_depth_mm");
   copt.smoothing_m = o.si("contact_smoothing_mm");
   copt.edge_edge = o.flag("contact_edge_edge");
+  copt.constrained_vertices = o.flag("contact_fixed_vertices");
   for (size_t k = 0; k < pair_index.size(); ++k)
     system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
   ledger.require_only(sc->effects);

@@ -130,6 +130,51 @@ TEST(ShellTerms, FoundationSpringTangent) {
   EXPECT_LT(fd_error(m, 0.5, q, v, 0), kFdTol);
 }
 
+// periphery_fixed with the normal left to the foundation: the tie's tangent
+// against FD on a moving, rotating bone, and its action: a boundary node
+// displaced along its (bone-carried) normal feels no tie force, one displaced
+// in its tangent plane feels k_t A_i times the displacement (exact: linear).
+TEST(ShellTerms, PeripheryTangentialTieTangentAndAction) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  BoneMotion bone;
+  bone.pose = [](double t) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    X.translation() = Eigen::Vector3d(2e-4 * t, 0, 1e-4 * t);
+    return X;
+  };
+  bone.spatial_velocity = [](double) {
+    Eigen::Matrix<double, 6, 1> V;
+    V << 0, 0.3, 0, 2e-4, 0, 1e-4;
+    return V;
+  };
+  const double k_t = 1e12;
+  m.add_periphery_tangential(k_t, bone);
+  const Eigen::VectorXd v = Eigen::VectorXd::Zero(m.num_dofs());
+  EXPECT_LT(fd_error(m, 0.5, deformed(m, 0.02, 5), v, 0), kFdTol);
+  EXPECT_TRUE(std::none_of(m.constrained().begin(), m.constrained().end(), [](char c) { return c != 0; }));
+  // Action at t = 0 (bone at its reference pose).
+  const std::vector<int> rim = m.boundary_nodes();
+  ASSERT_FALSE(rim.empty());
+  const int i = rim.front();
+  const Eigen::Vector3d n = m.reference_director(i).normalized();
+  const Eigen::Vector3d tangent = n.unitOrthogonal();
+  const Eigen::VectorXd areas = m.nodal_areas();
+  for (int along_normal = 0; along_normal < 2; ++along_normal) {
+    Eigen::VectorXd q = m.reference_state();
+    q.segment<3>(6 * i) += 1e-6 * (along_normal ? n : tangent);
+    Eigen::VectorXd F;
+    EvalRequest r;
+    r.q = &q;
+    r.v = &v;
+    m.evaluate(r, F, nullptr, nullptr);
+    const Eigen::Vector3d expected = along_normal ? Eigen::Vector3d::Zero() : Eigen::Vector3d(k_t * areas(i) * 1e-6 * tangent);
+    // Round-off of (I - n n^T) d on a 1e-6 m displacement: ~1e-16 relative to k_t A d.
+    EXPECT_LT((F.segment<3>(6 * i) - expected).norm(), 1e-12 * k_t * areas(i) * 1e-6) << "normal " << along_normal;
+  }
+}
+
 TEST(ShellTerms, FoundationDampingTangents) {
   Fixture f;
   ShellModel m(f.mesh, f.directors, f.thickness, f.material);
