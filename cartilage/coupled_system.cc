@@ -68,16 +68,7 @@ void CoupledShellSystem::add_contact(const std::string& name, int a, int b, cons
                              std::to_string(a) + " and " + std::to_string(b));
   if (!(pattern_margin_m >= 0)) throw common::InputError("mesh contact " + name + ": pattern margin must be >= 0");
   Pair p;
-  ContactSurface sa(*models_[a]), sb(*models_[b]);
-  if (!options.constrained_vertices) {
-    // A node is passive when its position is constrained (coordinates 0..2).
-    for (auto [s, m] : {std::pair{&sa, models_[a]}, std::pair{&sb, models_[b]}}) {
-      const std::vector<char>& c = m->constrained();
-      s->passive_vertex.assign(s->num_nodes, 0);
-      for (int i = 0; i < s->num_nodes; ++i) s->passive_vertex[i] = c[6 * i] || c[6 * i + 1] || c[6 * i + 2];
-    }
-  }
-  p.contact = std::make_unique<MeshContact>(name, sa, sb, options);
+  p.contact = std::make_unique<MeshContact>(name, ContactSurface(*models_[a]), ContactSurface(*models_[b]), options);
   p.a = a;
   p.b = b;
   p.margin = pattern_margin_m;
@@ -337,6 +328,16 @@ void CoupledShellSystem::predict(double t0, double t1, const Eigen::VectorXd& q0
   for (int m = 0; m < num_models(); ++m) {
     Eigen::VectorXd qm;
     models_[m]->predict(t0, t1, segment(m, q0), qm);
+    q1.segment(offsets_[m], qm.size()) = qm;
+  }
+}
+
+void CoupledShellSystem::predict_extrapolated(double tp, const Eigen::VectorXd& qp, double t0,
+                                              const Eigen::VectorXd& q0, double t1, Eigen::VectorXd& q1) const {
+  q1.resize(n_);
+  for (int m = 0; m < num_models(); ++m) {
+    Eigen::VectorXd qm;
+    models_[m]->predict_extrapolated(tp, segment(m, qp), t0, segment(m, q0), t1, qm);
     q1.segment(offsets_[m], qm.size()) = qm;
   }
 }

@@ -95,6 +95,8 @@ class CoupledShellSystem : public TimeIntegrable {
   void apply_constraints(double t, Eigen::VectorXd& q) const override;
   void solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) override;
   void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const override;
+  void predict_extrapolated(double tp, const Eigen::VectorXd& qp, double t0, const Eigen::VectorXd& q0, double t1,
+                            Eigen::VectorXd& q1) const override;
   const Eigen::VectorXd& increment_weights() const override { return weights_; }
   std::string describe_dof(int i) const override;
 

@@ -151,7 +151,9 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
   const auto& c = sys_.constrained();
   const double t1 = t_ + h;
   Eigen::VectorXd q = q_, v = v_, a = a_, F, Ma, G, dq;
-  if (opts_.predictor == IntegratorOptions::Predictor::kSystem)
+  if (opts_.predictor == IntegratorOptions::Predictor::kSystemExtrapolated && h_prev_ > 0)
+    sys_.predict_extrapolated(t_ - h_prev_, q_ - dq_prev_, t_, q_, t1, q);
+  else if (opts_.predictor != IntegratorOptions::Predictor::kPrevious)
     sys_.predict(t_, t1, q_, q);
   else if (opts_.quasi_static && opts_.extrapolate_predictor && h_prev_ > 0)
     q += (h / h_prev_) * dq_prev_;

@@ -67,8 +67,11 @@ struct IntegratorOptions {
   bool extrapolate_predictor = true;      ///< quasi-static secant predictor
   /// Newton start of a step: kPrevious = q_n (quasi-static: with the secant
   /// extrapolation above); kSystem = TimeIntegrable::predict (e.g. the
-  /// surfaces carried by their bones' imposed motion).
-  enum class Predictor { kPrevious, kSystem };
+  /// surfaces carried by their bones' imposed motion); kSystemExtrapolated
+  /// = TimeIntegrable::predict_extrapolated with the step before (e.g. the
+  /// bone-relative deformation extrapolated linearly in time as well), kSystem
+  /// on the first step.
+  enum class Predictor { kPrevious, kSystem, kSystemExtrapolated };
   Predictor predictor = Predictor::kPrevious;
   /// Modified Newton: keep the last factorisation across iterations and steps
   /// (same step size) while the residual contracts by refactor_ratio per

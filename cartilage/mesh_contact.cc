@@ -251,7 +251,7 @@ struct VertexHit {
 std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Points3& Xv, const common::Points3& vnv,
                                    const ContactSurface& Sf, const common::Points3& Xf, const common::Points3& tnf,
                                    const common::Points3& vnf, double radius, double min_opposition,
-                                   long* candidates) {
+                                   bool skip_rim, long* candidates) {
   std::vector<common::Box3> vb(Sv.num_nodes), fb(Sf.F.rows());
   for (int i = 0; i < Sv.num_nodes; ++i) vb[i] = point_box(row(Xv, i), radius);
   for (int t = 0; t < Sf.F.rows(); ++t) fb[t] = triangle_box(Sf, Xf, t, 0.0);
@@ -267,7 +267,7 @@ std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Point
 #pragma omp parallel for schedule(dynamic, 64) if (ng > 256)
   for (int gi = 0; gi < ng; ++gi) {
     const int i = pairs[starts[gi]].first;
-    if (!Sv.passive_vertex.empty() && Sv.passive_vertex[i]) continue;
+    if (skip_rim && Sv.boundary_vertex[i]) continue;
     const Eigen::Vector3d p = row(Xv, i);
     double best = std::numeric_limits<double>::infinity();
     VertexHit h;
@@ -391,7 +391,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     const int sv = pass, sf = 1 - pass;  // vertex side, face side
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf], dmax,
-                                          opts_.min_opposition, &cnt.candidate_vertex_face)) {
+                                          opts_.min_opposition, !opts_.rim_vertices, &cnt.candidate_vertex_face)) {
       if (!(h.signed_distance < 0)) continue;  // in front: no contact
       ContactPoint c;
       const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
@@ -535,7 +535,8 @@ std::vector<std::pair<int, int>> MeshContact::coupling_candidates(const common::
     const int sv = pass, sf = 1 - pass;
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf],
-                                          std::max(opts_.max_depth_m, margin), opts_.min_opposition, nullptr)) {
+                                          std::max(opts_.max_depth_m, margin), opts_.min_opposition,
+                                          !opts_.rim_vertices, nullptr)) {
       if (!(h.signed_distance < margin)) continue;
       for (int k = 0; k < 3; ++k)
         for (int t : Sf.vertex_triangles[Sf.F(h.triangle, k)])

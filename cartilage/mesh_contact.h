@@ -85,11 +85,6 @@ struct ContactSurface {
   Eigen::Matrix<int, Eigen::Dynamic, 3> triangle_edges;
   std::vector<std::vector<int>> vertex_triangles;  ///< triangles around each node
   std::vector<char> boundary_vertex;               ///< 1 on the open boundary
-  /// 1: the node is never the penetrating vertex of a vertex contact (its
-  /// triangles and edges still receive the other surface's vertices). Empty
-  /// or all 0 by default; set from the constrained nodes when
-  /// ContactOptions::constrained_vertices is false.
-  std::vector<char> passive_vertex;
   Eigen::VectorXd triangle_area;  ///< reference area per triangle [m^2]
   Eigen::VectorXd vertex_area;  ///< reference tributary area per node [m^2] (1/3 of adjacent triangles)
   Eigen::VectorXd edge_area;    ///< reference tributary area per edge [m^2] (1/3 of adjacent triangles)
@@ -109,15 +104,15 @@ struct ContactOptions {
   /// A vertex-face pair needs n_vertex . n_triangle < -min_opposition
   /// (the surfaces face each other); in [-1, 1).
   double min_opposition = 0.0;
-  /// Nodes whose positions the model constrains (periphery_fixed, fixed
-  /// nodes) may be the penetrating vertex of a vertex contact. false: they
-  /// only carry faces (CoupledShellSystem::add_contact marks them passive).
-  /// A bone-attached rim node cannot deflect, so a stage-1 pose that puts a
-  /// cartilage rim against the side of the other surface (which stage 1's
-  /// rays from triangle centres never see) would become a deep, unresolvable
-  /// point contact (docs/contact.md). Where such a node is skipped only the
-  /// other surface's vertices sample the contact, at half weight.
-  bool constrained_vertices = true;
+  /// Nodes on a surface's open boundary (its rim, where periphery_fixed
+  /// acts) may be the penetrating vertex of a vertex contact. false: rim
+  /// nodes only carry their triangles, which the other surface's vertices
+  /// still contact; there only those vertices sample the contact, at half
+  /// weight (two-pass). Stage 1 samples its casting surface at triangle
+  /// centres and never at the rim; on the bundled knee the rim nodes of the
+  /// tibial eminence slopes otherwise end up 3 mm deep in the condyles' flanks
+  /// (docs/contact.md, "Rims").
+  bool rim_vertices = true;
 };
 
 /// Vertex contacts are classified by the feature of the other surface that

@@ -673,6 +673,30 @@ void ShellModel::predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen:
   }
 }
 
+void ShellModel::predict_extrapolated(double tp, const Eigen::VectorXd& qp, double t0, const Eigen::VectorXd& q0,
+                                      double t1, Eigen::VectorXd& q1) const {
+  if (!(t0 > tp)) {
+    predict(t0, t1, q0, q1);
+    return;
+  }
+  const double s = (t1 - t0) / (t0 - tp);
+  if (!has_predictor_) {
+    q1 = q0 + s * (q0 - qp);
+    return;
+  }
+  const Eigen::Isometry3d X0 = predictor_.pose(t0);
+  const Eigen::Isometry3d Tp0 = X0 * predictor_.pose(tp).inverse();
+  const Eigen::Isometry3d T01 = predictor_.pose(t1) * X0.inverse();
+  q1.resize(q0.size());
+  for (int i = 0; i < num_nodes_; ++i) {
+    const Eigen::Vector3d r0 = q0.segment<3>(6 * i), d0 = q0.segment<3>(6 * i + 3);
+    const Eigen::Vector3d dr = r0 - Tp0 * Eigen::Vector3d(qp.segment<3>(6 * i));
+    const Eigen::Vector3d dd = d0 - Tp0.linear() * qp.segment<3>(6 * i + 3);
+    q1.segment<3>(6 * i) = T01 * Eigen::Vector3d(r0 + s * dr);
+    q1.segment<3>(6 * i + 3) = T01.linear() * (d0 + s * dd);
+  }
+}
+
 void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {
   if (!has_inertia_) throw common::NumericalError("ShellModel::solve_mass: the model has no inertia term");
   if (!mass_solver_) {

@@ -196,6 +196,12 @@ class ShellModel : public TimeIntegrable {
   /// and only has to find the deformation change.
   void set_motion_predictor(BoneMotion bone) { predictor_ = std::move(bone); has_predictor_ = true; }
   void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const override;
+  /// Extrapolating predictor: the deformation change of the step before, seen
+  /// from the bone (qp carried rigidly from tp to t0, subtracted from q0),
+  /// scaled by (t1 - t0)/(t0 - tp) and added to q0, all then carried by the
+  /// bone from t0 to t1. Without a motion predictor: q0 + s (q0 - qp).
+  void predict_extrapolated(double tp, const Eigen::VectorXd& qp, double t0, const Eigen::VectorXd& q0, double t1,
+                            Eigen::VectorXd& q1) const override;
 
   /// Records every later-built term whose name is in the scene vocabulary
   /// (common/effects.h: foundation_springs, foundation_damping,

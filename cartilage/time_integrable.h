@@ -56,6 +56,15 @@ class TimeIntegrable {
   /// Predicts q at t1 from the converged q0 at t0 (the Newton start of a
   /// step, IntegratorOptions::predictor = kSystem). Default: q1 = q0.
   virtual void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const { q1 = q0; }
+  /// As predict, also given the state qp accepted at tp < t0 (the step
+  /// before): IntegratorOptions::predictor = kSystemExtrapolated. Default:
+  /// predict(t0, t1, q0, q1) (the previous state unused).
+  virtual void predict_extrapolated(double tp, const Eigen::VectorXd& qp, double t0, const Eigen::VectorXd& q0,
+                                    double t1, Eigen::VectorXd& q1) const {
+    (void)tp;
+    (void)qp;
+    predict(t0, t1, q0, q1);
+  }
   /// Human-readable name of coordinate i (for messages), e.g. "node 12 r_z".
   virtual std::string describe_dof(int i) const = 0;
 };

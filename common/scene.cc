@@ -142,10 +142,12 @@ const std::vector<OptionSpec>& schema_table() {
       {"surface", "contact_edge_edge", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
        "also evaluate edge-edge pairs (sharp features); the vertex test with edge and corner features "
        "covers smooth surfaces"},
-      {"surface", "contact_fixed_vertices", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
-       "nodes fixed to their bone (periphery_fixed) may be penetrating vertices; by default they only "
-       "carry faces, as stage 1 samples the casting surface at triangle centres, never at its rim "
-       "(docs/contact.md)"},
+      {"surface", "contact_rim_vertices", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
+       "nodes on a surface's rim may be penetrating vertices; by default they only carry their triangles, "
+       "as stage 1 samples the casting surface at triangle centres, never at its rim (docs/contact.md)"},
+      {"surface", "predictor", T::kText, U::kNone, "extrapolated", false, 0, 0, "rigid|extrapolated", true,
+       "imposed_kinematics: Newton start of a step: the surfaces carried rigidly by their bones (rigid), "
+       "plus the bone-relative deformation change of the step before, extrapolated linearly in time"},
       {"surface", "periphery_normal", T::kText, U::kNone, "clamped", false, 0, 0, "clamped|foundation", true,
        "periphery_fixed: clamped = boundary nodes move with the bone in all six coordinates (seed 002); "
        "foundation = tied to the bone in their tangent plane only, resting on the foundation along the "

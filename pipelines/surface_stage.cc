@@ -476,7 +476,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   copt.max_depth_m = o.si("contact_max_depth_mm");
   copt.smoothing_m = o.si("contact_smoothing_mm");
   copt.edge_edge = o.flag("contact_edge_edge");
-  copt.constrained_vertices = o.flag("contact_fixed_vertices");
+  copt.rim_vertices = o.flag("contact_rim_vertices");
   for (size_t k = 0; k < pair_index.size(); ++k)
     system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
   ledger.require_only(sc->effects);
@@ -659,7 +659,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   iopt.increment_atol_m = o.si("newton_increment_floor_mm");
   // Imposed kinematics: each step starts from the surfaces carried by their
   // bones (rigid predictor), so Newton only finds the deformation change.
-  if (moving) iopt.predictor = cartilage::IntegratorOptions::Predictor::kSystem;
+  if (moving)
+    iopt.predictor = o.text("predictor") == "extrapolated" ? cartilage::IntegratorOptions::Predictor::kSystemExtrapolated
+                                                           : cartilage::IntegratorOptions::Predictor::kSystem;
   Eigen::VectorXd q0(system.num_dofs());
   for (int k = 0; k < system.num_models(); ++k)
     q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();

@@ -432,34 +432,35 @@ TEST(MeshContact, DeterministicAcrossThreadCounts) {
   }
 }
 
-// A small plate whose periphery is fixed to its bone, pushed 0.1 mm into a
-// larger plate: every one of its nodes penetrates. With constrained_vertices
-// (the default) its fixed rim nodes are penetrating vertices too; without,
-// they only carry faces: no active contact has a fixed node as its vertex,
-// the interior nodes still do, the large plate's vertices still meet the
-// small plate's rim triangles, and the tangent stays consistent (FD,
-// tolerance as in NewtonTangentMatchesFiniteDifferences).
-TEST(MeshContact, FixedNodesCanBeExcludedAsPenetratingVertices) {
+// A small plate pushed 0.1 mm into a larger one: every one of its nodes
+// penetrates. With rim_vertices (the library default) its 16 rim nodes are
+// penetrating vertices too; without, rim nodes of both plates only carry
+// their triangles: no active contact has a rim vertex, the small plate's 9
+// interior nodes still do, the large plate's vertices still meet the small
+// plate's rim triangles, and the tangent stays consistent (FD, tolerance as
+// in NewtonTangentMatchesFiniteDifferences).
+TEST(MeshContact, RimNodesCanBeExcludedAsPenetratingVertices) {
   const common::QuadMesh big = shifted(testing::plate_mesh(6, 6, 6e-3, 6e-3, 0.1), {-3e-3, -3e-3, 0});
   const common::QuadMesh small =
       shifted(testing::flipped(testing::plate_mesh(4, 4, 3e-3, 3e-3), -0.1e-3), {-1.5e-3, -1.5e-3, 0});
-  int with_fixed_vertex[2] = {0, 0}, small_vertices[2] = {0, 0};
+  int rim_vertex[2] = {0, 0}, small_vertices[2] = {0, 0};
   for (int excluded = 0; excluded < 2; ++excluded) {
     auto A = make_model(big, 1e6, 0.3e-3), B = make_model(small, 1e6, 0.3e-3);
     B->add_periphery_fixed();
     CoupledShellSystem sys({A.get(), B.get()}, {"big", "small"});
     ContactOptions o;
     o.stiffness_N_m3 = 5e10;
-    o.constrained_vertices = excluded == 0;
+    o.rim_vertices = excluded == 0;
     sys.add_contact("big-small", 0, 1, o);
     Eigen::VectorXd q(sys.num_dofs());
     q << A->reference_state(), B->reference_state();
     const auto active = sys.contact(0).detect(big.V, small.V, nullptr, nullptr, false);
     int rim_faces = 0;
     for (const ContactPoint& c : active) {
+      const ContactSurface& sv = sys.contact(0).surface(c.side[0]);
+      if (sv.boundary_vertex[c.node[0]]) ++rim_vertex[excluded];
       if (c.side[0] == 1) {
         ++small_vertices[excluded];
-        if (B->constrained()[6 * c.node[0]]) ++with_fixed_vertex[excluded];
       } else {
         for (int k = 1; k < 4; ++k)
           if (c.kind == ContactKind::kVertexFace && B->constrained()[6 * c.node[k]]) {
@@ -468,16 +469,16 @@ TEST(MeshContact, FixedNodesCanBeExcludedAsPenetratingVertices) {
           }
       }
     }
-    std::printf("constrained_vertices %d: %zu contacts, %d with the small plate's vertex (%d of them fixed), "
+    std::printf("rim_vertices %d: %zu contacts, %d with the small plate's vertex, %d with a rim vertex, "
                 "%d big-plate vertices on rim triangles\n",
-                excluded == 0, active.size(), small_vertices[excluded], with_fixed_vertex[excluded], rim_faces);
+                excluded == 0, active.size(), small_vertices[excluded], rim_vertex[excluded], rim_faces);
     EXPECT_GT(rim_faces, 0);
     const double e = system_fd_error(sys, q, Eigen::VectorXd::Zero(sys.num_dofs()), 0);
     std::printf("  tangent relative error %.2e\n", e);
     EXPECT_LT(e, 1e-5);
   }
-  EXPECT_EQ(with_fixed_vertex[0], 16);  // the 4 x 4 plate's 16 rim nodes
-  EXPECT_EQ(with_fixed_vertex[1], 0);
+  EXPECT_EQ(rim_vertex[0], 16);  // the 4 x 4 plate's 16 rim nodes (the large plate's rim is outside)
+  EXPECT_EQ(rim_vertex[1], 0);
   EXPECT_EQ(small_vertices[1], small_vertices[0] - 16);  // the 9 interior nodes remain
 }
 

@@ -5,6 +5,7 @@
 #include <omp.h>
 
 #include <Eigen/Dense>
+#include <cstdio>
 #include <random>
 
 #include "cartilage/shell_model.h"
@@ -173,6 +174,49 @@ TEST(ShellTerms, PeripheryTangentialTieTangentAndAction) {
     // Round-off of (I - n n^T) d on a 1e-6 m displacement: ~1e-16 relative to k_t A d.
     EXPECT_LT((F.segment<3>(6 * i) - expected).norm(), 1e-12 * k_t * areas(i) * 1e-6) << "normal " << along_normal;
   }
+}
+
+// Step predictors with a moving bone. A state made of the bone's rigid
+// motion T(t) = X_WB(t) X_WB(0)^-1 applied to a reference shape that deforms
+// linearly in time, r(t) = T(t)(r_0 + t u), d(t) = R(t)(d_0 + t w), is
+// predicted exactly by the extrapolating predictor from its values at tp and
+// t0 (positions and directors, 1e-15 relative: round-off only), while the
+// rigid predictor misses the deformation change (its error is (t1 - t0) u).
+TEST(ShellTerms, ExtrapolatingPredictorIsExactForLinearDeformationOnAMovingBone) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  BoneMotion bone;
+  bone.pose = [](double t) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = Eigen::AngleAxisd(0.4 * t + 0.3 * t * t, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+    X.translation() = Eigen::Vector3d(1e-3 * t, -2e-3 * t * t, 5e-4);
+    return X;
+  };
+  bone.spatial_velocity = [](double) { return Eigen::Matrix<double, 6, 1>::Zero().eval(); };
+  m.set_motion_predictor(bone);
+  const Eigen::VectorXd ref = m.reference_state();
+  Eigen::VectorXd rate(ref.size());
+  for (int i = 0; i < rate.size(); ++i) rate(i) = (i % 6 < 3 ? 1e-3 : 0.1) * std::sin(0.37 * i + 1);
+  const Eigen::Isometry3d X0inv = bone.pose(0).inverse();
+  auto state = [&](double t) {
+    const Eigen::Isometry3d T = bone.pose(t) * X0inv;
+    Eigen::VectorXd q(ref.size());
+    for (int i = 0; i < m.num_nodes(); ++i) {
+      q.segment<3>(6 * i) = T * Eigen::Vector3d(ref.segment<3>(6 * i) + t * rate.segment<3>(6 * i));
+      q.segment<3>(6 * i + 3) = T.linear() * (ref.segment<3>(6 * i + 3) + t * rate.segment<3>(6 * i + 3));
+    }
+    return q;
+  };
+  const double tp = 0.2, t0 = 0.25, t1 = 0.27;
+  Eigen::VectorXd q1, q1_rigid;
+  m.predict_extrapolated(tp, state(tp), t0, state(t0), t1, q1);
+  m.predict(t0, t1, state(t0), q1_rigid);
+  const Eigen::VectorXd exact = state(t1);
+  const double err = (q1 - exact).cwiseAbs().maxCoeff() / exact.cwiseAbs().maxCoeff();
+  const double err_rigid = (q1_rigid - exact).cwiseAbs().maxCoeff() / exact.cwiseAbs().maxCoeff();
+  std::printf("extrapolated predictor error %.2e, rigid %.2e (relative)\n", err, err_rigid);
+  EXPECT_LT(err, 1e-14);
+  EXPECT_GT(err_rigid, 1e-4);  // (t1 - t0) |w| = 2e-3 on directors of size 1
 }
 
 TEST(ShellTerms, FoundationDampingTangents) {
