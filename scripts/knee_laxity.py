@@ -15,10 +15,9 @@ The trial is written to a scratch folder with the loads given directly
 (X anterior, Y proximal, Z lateral), about the knee centre. Compression is the
 ground pushing the tibia proximally (+Y).
 
-Reference for what to expect: in cadaver knees under no compression the
-total axial laxity at 20-30 deg flexion is of the order of 20-30 deg for
-+-3 to 5 N m, and compressive load reduces it several-fold (e.g. Markolf,
-Bargar, Shoemaker & Amstutz 1981, J Bone Joint Surg Am 63:570).
+Joint load is known to reduce the rotational laxity of real knees
+substantially (Markolf, Bargar, Shoemaker & Amstutz 1981, J Bone Joint Surg Am
+63:570); compare with laxity data of your own choice before calibrating.
 
 Sample runs (a few seconds each; h5py: Debian python3-h5py, i.e. /usr/bin/python3):
   python3 scripts/knee_laxity.py --model data/models/knee_parametric/knee_coarse.urdf
