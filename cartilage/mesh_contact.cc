@@ -510,7 +510,9 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       ++cnt.edge_edge;
     else
       ++cnt.vertex_face;
-    cnt.max_penetration_m = std::max(cnt.max_penetration_m, -c.gap);
+    const bool rim = c.fade_edge >= 0;
+    cnt.max_penetration_m = std::max(cnt.max_penetration_m, rim ? c.fade * -c.gap : -c.gap);
+    if (rim) cnt.max_rim_depth_m = std::max(cnt.max_rim_depth_m, -c.gap);
     active.push_back(std::move(c));
   }
   if (counts) *counts = cnt;

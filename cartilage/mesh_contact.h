@@ -146,7 +146,11 @@ struct ContactPoint {
 struct ContactCounts {
   long candidate_vertex_face = 0, candidate_edge_edge = 0;
   long vertex_face = 0, edge_edge = 0;  ///< active
-  double max_penetration_m = 0;         ///< max(-g) over active contacts
+  /// max over active contacts of the interpenetration -g, times the fade
+  /// phi for rim contacts (a vertex beside the other surface's rim has
+  /// crossed no triangle; phi (-g) is the depth its faded force stands for).
+  double max_penetration_m = 0;
+  double max_rim_depth_m = 0;  ///< max(-g) over active rim contacts, unweighted (diagnostics)
 };
 
 /// Contact between surface a and surface b.

@@ -538,6 +538,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     solver_out.push_back(out.appender("/solver/max_penetration_m", {}, so));
     solver_out.push_back(out.appender("/solver/penetration_ratio", {}, so));
     solver_out.push_back(out.appender_int("/solver/active_contacts", {}, so));
+    solver_out.push_back(out.appender("/solver/max_rim_depth_m", {}, so));
   }
   // Tibiofemoral contact force per frame (on the second surface of each
   // pair, in its bone's frame; pairs named medial/lateral are the
@@ -725,16 +726,18 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         solver_out[7].append(max_def);
         if (contact) {
           reports = contact_reports(integrator.q());
-          double pen = 0;
+          double pen = 0, rim_depth = 0;
           long active = 0;
           for (const cartilage::ContactPairReport& rep : reports) {
             pen = std::max(pen, rep.counts.max_penetration_m);
+            rim_depth = std::max(rim_depth, rep.counts.max_rim_depth_m);
             active += rep.counts.vertex_face + rep.counts.edge_edge;
           }
           const double ratio = max_def > 0 ? pen / max_def : (pen > 0 ? std::numeric_limits<double>::infinity() : 0.0);
           solver_out[8].append(pen);
           solver_out[9].append(ratio);
           solver_out[10].append(static_cast<int>(active));
+          solver_out[11].append(rim_depth);
           res.max_penetration_m = std::max(res.max_penetration_m, pen);
           res.contact_steps += active > 0 ? 1 : 0;
           res.active_contacts_sum += active;

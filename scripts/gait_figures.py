@@ -1,0 +1,129 @@
+#!/usr/bin/env python3
+"""Issue-6 figures of a walking surface run against its stage-1 kinematics.
+
+Reads the kinematics file of arthrosim-comak (stage 1) and the output of
+arthrosim-surface for a walking scenario (stage 2, docs/surface_output.md) and
+prints, over the frames both cover (stage 2 on the stage-1 clock, /trial_time):
+
+- the tibiofemoral contact force of both stages (force on the tibia, tibia
+  frame; the axial component is tibia +Y, "Fz" in the seed's wording), the
+  time-averaged RMS difference of the axial (compressive) force relative to the mean of
+  stage 1, and the first/second peaks of each;
+- the medial share of the axial force at stage 2's first peak;
+- the largest femoral cartilage deflection and its time, and the extremes of
+  the first and second principal strains over the femoral surface;
+- the solver's per-step record: steps, Newton iterations, rejections, wall
+  time, the worst penetration/deflection ratio.
+
+A run still being written can be read: only complete frames are used
+(attribute arthrosim_frames_complete). Needs h5py and numpy (Debian:
+python3-h5py, python3-numpy, i.e. /usr/bin/python3).
+
+Sample run:
+  /usr/bin/python3 scripts/gait_figures.py out/gait/kinematics.h5 out/gait/surface_gait.h5
+"""
+import argparse
+import os
+import sys
+
+os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
+import h5py  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def complete(ds):
+    n = int(ds.attrs.get("arthrosim_frames_complete", ds.shape[0]))
+    return ds[:n]
+
+
+def peaks(t, f, split):
+    """Largest value before and after time `split` (the stance trough)."""
+    a = np.where(t < split)[0]
+    b = np.where((t >= split) & (t < 0.7))[0]
+    out = []
+    for idx in (a, b):
+        if idx.size == 0:
+            out.append((float("nan"), float("nan")))
+        else:
+            k = idx[np.argmax(f[idx])]
+            out.append((float(f[k]), float(t[k])))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("kinematics", help="stage-1 kinematics file (arthrosim-comak)")
+    ap.add_argument("surface", help="stage-2 output of a walking scenario (arthrosim-surface)")
+    ap.add_argument("--trough-s", type=float, default=0.3, help="time separating the two stance peaks [s]")
+    a = ap.parse_args()
+    k = h5py.File(a.kinematics, "r")
+    s = h5py.File(a.surface, "r")
+    if "/contact/tibiofemoral/force" not in s or "/trial_time" not in s:
+        sys.exit(f"{a.surface}: no /contact/tibiofemoral/force or /trial_time (not a walking run with mesh_contact)")
+    mass = float(k.attrs.get("body_mass_kg", float("nan")))
+    bw = mass * 9.81
+    t1 = k["time"][:]
+    F1 = k["contact/tibiofemoral/force"][:]
+    M1 = k["contact/tibiofemoral/medial_force"][:]
+    tt = complete(s["trial_time"])
+    F2 = complete(s["contact/tibiofemoral/force"])[: len(tt)]
+    M2 = complete(s["contact/tibiofemoral/medial_force"])[: len(tt)]
+    L2 = complete(s["contact/tibiofemoral/lateral_force"])[: len(tt)]
+    n = min(len(tt), len(F2))
+    keep = np.where((tt[:n] >= t1[0] - 1e-12) & (tt[:n] <= t1[-1] + 1e-12))[0]
+    tt, F2, M2, L2 = tt[keep], F2[keep], M2[keep], L2[keep]
+    # Stage 1 on stage 2's frame times (linear interpolation per component).
+    F1i = np.stack([np.interp(tt, t1, F1[:, c]) for c in range(3)], axis=1)
+    # Compression positive: the force on the tibia points distally (-Y).
+    ax1, ax2 = -F1i[:, 1], -F2[:, 1]
+    rms = float(np.sqrt(np.mean((ax2 - ax1) ** 2)))
+    mean1 = float(np.mean(ax1))
+    print(f"frames compared: {len(tt)} (trial time {tt[0]:.3f} .. {tt[-1]:.3f} s); body weight {bw:.1f} N")
+    print(f"axial (compressive, -Y on the tibia) tibiofemoral force: stage 1 mean {mean1:.1f} N, stage 2 mean {np.mean(ax2):.1f} N")
+    print(f"RMS difference {rms:.1f} N = {100 * rms / abs(mean1):.1f} % of the stage-1 mean")
+    for name, f in (("stage 1", ax1), ("stage 2", ax2)):
+        (p1, tp1), (p2, tp2) = peaks(tt, f, a.trough_s)
+        print(f"{name}: first peak {p1:.0f} N = {p1 / bw:.2f} BW at {tp1:.2f} s, "
+              f"second peak {p2:.0f} N = {p2 / bw:.2f} BW at {tp2:.2f} s")
+    (p1, tp1), _ = peaks(tt, ax2, a.trough_s)
+    i1 = int(np.argmin(np.abs(tt - tp1)))
+    share = -M2[i1, 1] / ax2[i1] if ax2[i1] != 0 else float("nan")
+    print(f"stage 2 medial share of the axial force at its first peak: {100 * share:.0f} % "
+          f"(medial {-M2[i1, 1]:.0f} N, lateral {-L2[i1, 1]:.0f} N)")
+    frames = keep[keep < complete(s["time"]).shape[0]]
+    D = s["surfaces/femur/deflection"]
+    e1 = s["surfaces/femur/strain/e1"]
+    e2 = s["surfaces/femur/strain/e2"]
+    dmax, dt_, e1max, e1t, e2min, e2t = 0.0, 0.0, -np.inf, 0.0, np.inf, 0.0
+    tr = complete(s["trial_time"])
+    for f in frames:
+        d = np.abs(D[f])
+        if d.max() > dmax:
+            dmax, dt_ = float(d.max()), float(tr[f])
+        a1, a2 = e1[f], e2[f]
+        if a1.max() > e1max:
+            e1max, e1t = float(a1.max()), float(tr[f])
+        if a2.min() < e2min:
+            e2min, e2t = float(a2.min()), float(tr[f])
+    print(f"femoral cartilage: max |deflection| {1e3 * dmax:.2f} mm at {dt_:.2f} s; "
+          f"e1 max {100 * e1max:.2f} % at {e1t:.2f} s; e2 min {100 * e2min:.2f} % at {e2t:.2f} s")
+    st = s["solver"]
+    its = complete(st["newton_iterations"])
+    wall = complete(st["wall_s"])
+    rej = complete(st["rejections"])
+    ratio = complete(st["penetration_ratio"]) if "penetration_ratio" in st else np.zeros(0)
+    active = complete(st["active_contacts"]) if "active_contacts" in st else np.zeros(0)
+    print(f"solver: {len(its)} steps to t = {complete(st['time'])[-1]:.3f} s, Newton iterations "
+          f"{its.sum()} (median {np.median(its):.0f} per step), {rej.sum()} rejected attempts, "
+          f"wall {wall.sum():.0f} s (median {np.median(wall):.2f} s per step)")
+    if ratio.size:
+        print(f"penetration/deflection: median {np.median(ratio):.3f}, max {ratio.max():.3f}; "
+              f"steps over 0.1: {(ratio > 0.1).sum()}; active contacts per step: median {np.median(active):.0f}")
+    for key in ("assembly_s", "contact_s", "factorization_s", "solve_s"):
+        if key in st.attrs:
+            print(f"  {key}: {float(st.attrs[key]):.1f}")
+    print(f"run status: {s.attrs.get('status', '?')}")
+
+
+if __name__ == "__main__":
+    main()
