@@ -496,6 +496,18 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       p = 0.5 * kc * c.gap * c.gap / delta;
       dp = -kc * c.gap / delta;
     }
+    // Depth fade: over the last quarter of max_depth the elastic pressure
+    // goes smoothly to zero, p s(d) with s the smoothstep from 1 at
+    // d0 = 0.75 max_depth to 0 at max_depth (d = -g), so a contact that
+    // reaches the cut-off (the far side; in practice a vertex beside and
+    // below a rim) leaves without a force jump.
+    const double depth = -c.gap, d0 = 0.75 * dmax;
+    if (depth > d0) {
+      const double u = std::min((depth - d0) / (dmax - d0), 1.0);
+      const double s = 1 - u * u * (3 - 2 * u), ds = -6 * u * (1 - u) / (dmax - d0);  // ds/dd
+      dp = s * dp + p * ds;  // -d(p s)/dg = s (-dp/dg) + p ds/dd
+      p *= s;
+    }
     c.pressure = p - cc * c.gap_rate;
     c.stiffness = dp;
     keep[k] = c.pressure > 0;

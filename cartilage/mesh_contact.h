@@ -50,7 +50,10 @@
 //             p(g) = k (-g - delta/2) for g <= -delta, k g^2 / (2 delta) for -delta < g < 0
 //             (k: stiffness per unit area [N/m^3]; the quadratic toe of width
 //             delta makes p and p' continuous at g = 0: no tangent jump when a
-//             contact switches on, so Newton does not cycle)
+//             contact switches on, so Newton does not cycle), times the depth
+//             fade s(-g): 1 up to 0.75 max_depth, a smoothstep to 0 at
+//             max_depth (a contact reaching the cut-off leaves without a
+//             force jump; the damping part is not faded)
 //   residual  F += -A phi lambda G   (F = f_int - f_ext convention of ShellModel;
 //             phi the boundary fade, 1 away from open boundaries)
 //   tangent   dF/dx = A (phi (-p' G G^T + c G (H v)^T - lambda H) - lambda G grad phi^T),

@@ -155,6 +155,38 @@ TEST(MeshContact, NewtonTangentMatchesFiniteDifferences) {
   }
 }
 
+// The depth fade near max_depth: the cap of NewtonTangentMatchesFiniteDifferences
+// penetrates up to 0.3 mm; with max_depth 0.36 mm the deepest contacts lie in
+// the fade zone (0.27-0.36 mm), where the pressure falls with depth. The
+// tangent still matches central differences (tolerance as there), and the
+// total force is below the unfaded one.
+TEST(MeshContact, DepthFadeTangentMatchesFiniteDifferences) {
+  const common::QuadMesh plate = shifted(testing::plate_mesh(5, 5, 6e-3, 6e-3, 0.15), {-3e-3, -3e-3, 0});
+  const common::QuadMesh cap = testing::flipped(testing::spherical_patch(6, 5e-3, 6e-3), -0.3e-3);
+  double force[2] = {0, 0};
+  for (int faded = 0; faded < 2; ++faded) {
+    auto A = make_model(plate, 1e6, 0.3e-3), B = make_model(cap, 1e6, 0.3e-3);
+    CoupledShellSystem sys({A.get(), B.get()}, {"plate", "cap"});
+    ContactOptions o;
+    o.stiffness_N_m3 = 5e10;
+    o.max_depth_m = faded ? 0.36e-3 : 1e-3;
+    sys.add_contact("plate-cap", 0, 1, o);
+    Eigen::VectorXd q(sys.num_dofs());
+    q << A->reference_state(), B->reference_state();
+    const ContactPairReport rep = sys.contact_report(0, q, nullptr);
+    force[faded] = rep.total_force_a.norm();
+    int in_zone = 0;
+    for (const ContactPoint& c : sys.contact(0).detect(plate.V, cap.V, nullptr, nullptr, false))
+      if (-c.gap > 0.75 * o.max_depth_m) ++in_zone;
+    const double e = system_fd_error(sys, q, Eigen::VectorXd::Zero(sys.num_dofs()), 0);
+    std::printf("max_depth %.2f mm: %d contacts in the fade zone, force %.4f N, tangent relative error %.2e\n",
+                o.max_depth_m * 1e3, in_zone, force[faded], e);
+    if (faded) EXPECT_GT(in_zone, 0);
+    EXPECT_LT(e, 1e-5);
+  }
+  EXPECT_LT(force[1], force[0]);
+}
+
 // A cap narrower than its contact zone: plate vertices beside the cap's rim
 // are behind the plane of its boundary triangles, and their face contacts
 // fade out over one triangle size beyond the open edge (no force jump when a

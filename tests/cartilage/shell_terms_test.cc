@@ -31,6 +31,24 @@ Eigen::VectorXd deformed(const ShellModel& m, double amp, uint64_t seed) {
   return q;
 }
 
+/// A bone turning at a constant rate omega about the unit axis through the
+/// origin while its origin moves at the constant velocity v.
+BoneMotion steady_bone(const Eigen::Vector3d& axis, double omega, const Eigen::Vector3d& v) {
+  BoneMotion bone;
+  bone.pose = [axis, omega, v](double t) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.linear() = Eigen::AngleAxisd(omega * t, axis).toRotationMatrix();
+    X.translation() = v * t;
+    return X;
+  };
+  bone.spatial_velocity = [axis, omega, v](double) {
+    Eigen::Matrix<double, 6, 1> V;
+    V << omega * axis, v;
+    return V;
+  };
+  return bone;
+}
+
 /// max |K - K_fd| / max |K| with K = dF/dq (wrt = 0) or dF/dv (wrt = 1).
 double fd_error(ShellModel& m, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, int wrt) {
   const int n = m.num_dofs();
@@ -111,18 +129,7 @@ TEST(ShellTerms, FoundationSpringTangent) {
   Fixture f;
   ShellModel m(f.mesh, f.directors, f.thickness, f.material);
   // Moving, rotated bone (the anchors translate and turn).
-  BoneMotion bone;
-  bone.pose = [](double t) {
-    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-    X.linear() = Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d::UnitX()).toRotationMatrix();
-    X.translation() = Eigen::Vector3d(0, 0, 1e-4 * t);
-    return X;
-  };
-  bone.spatial_velocity = [](double) {
-    Eigen::Matrix<double, 6, 1> V;
-    V << 0.3, 0, 0, 0, 0, 1e-4;
-    return V;
-  };
+  const BoneMotion bone = steady_bone(Eigen::Vector3d::UnitX(), 0.3, Eigen::Vector3d(0, 0, 1e-4));
   m.add_foundation_springs(7e8, bone);
   // Push the nodes towards the bone so most springs are compressed.
   Eigen::VectorXd q = deformed(m, 0.02, 3);
@@ -138,18 +145,7 @@ TEST(ShellTerms, FoundationSpringTangent) {
 TEST(ShellTerms, PeripheryTangentialTieTangentAndAction) {
   Fixture f;
   ShellModel m(f.mesh, f.directors, f.thickness, f.material);
-  BoneMotion bone;
-  bone.pose = [](double t) {
-    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-    X.linear() = Eigen::AngleAxisd(0.3 * t, Eigen::Vector3d::UnitY()).toRotationMatrix();
-    X.translation() = Eigen::Vector3d(2e-4 * t, 0, 1e-4 * t);
-    return X;
-  };
-  bone.spatial_velocity = [](double) {
-    Eigen::Matrix<double, 6, 1> V;
-    V << 0, 0.3, 0, 2e-4, 0, 1e-4;
-    return V;
-  };
+  const BoneMotion bone = steady_bone(Eigen::Vector3d::UnitY(), 0.3, Eigen::Vector3d(2e-4, 0, 1e-4));
   const double k_t = 1e12;
   m.add_periphery_tangential(k_t, bone);
   const Eigen::VectorXd v = Eigen::VectorXd::Zero(m.num_dofs());
