@@ -361,6 +361,9 @@ MeshContact::MeshContact(std::string name, const ContactSurface& a, const Contac
     bad("damping must be >= 0 N s/m^3, found " + std::to_string(opts_.damping_N_s_m3));
   if (!(opts_.max_depth_m > 0) || !std::isfinite(opts_.max_depth_m))
     bad("max_depth must be > 0 m, found " + std::to_string(opts_.max_depth_m));
+  if (!(opts_.rim_max_depth_m == 0 || (opts_.rim_max_depth_m > opts_.smoothing_m && std::isfinite(opts_.rim_max_depth_m))))
+    bad("rim max depth must be 0 (= max depth) or larger than the smoothing width, found " +
+        std::to_string(opts_.rim_max_depth_m));
   if (!(opts_.smoothing_m > 0) || !(opts_.smoothing_m < opts_.max_depth_m))
     bad("smoothing must be in (0, max_depth), found " + std::to_string(opts_.smoothing_m) + " m");
   if (!(opts_.min_opposition >= -1 && opts_.min_opposition < 1))
@@ -501,10 +504,12 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     // d0 = 0.75 max_depth to 0 at max_depth (d = -g), so a contact that
     // reaches the cut-off (the far side; in practice a vertex beside and
     // below a rim) leaves without a force jump.
-    const double depth = -c.gap, d0 = 0.75 * dmax;
+    // Rim contacts have their own, shorter cut-off (rim_max_depth_m).
+    const double cut = (c.fade_edge >= 0 && opts_.rim_max_depth_m > 0) ? std::min(dmax, opts_.rim_max_depth_m) : dmax;
+    const double depth = -c.gap, d0 = 0.75 * cut;
     if (depth > d0) {
-      const double u = std::min((depth - d0) / (dmax - d0), 1.0);
-      const double s = 1 - u * u * (3 - 2 * u), ds = -6 * u * (1 - u) / (dmax - d0);  // ds/dd
+      const double u = std::min((depth - d0) / (cut - d0), 1.0);
+      const double s = 1 - u * u * (3 - 2 * u), ds = -6 * u * (1 - u) / (cut - d0);  // ds/dd
       dp = s * dp + p * ds;  // -d(p s)/dg = s (-dp/dg) + p ds/dd
       p *= s;
     }

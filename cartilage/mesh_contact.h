@@ -116,6 +116,13 @@ struct ContactOptions {
   /// tibial eminence slopes otherwise end up 3 mm deep in the condyles' flanks
   /// (docs/contact.md, "Rims").
   bool rim_vertices = true;
+  /// Cut-off depth of rim contacts [m] (a vertex beside the other surface's
+  /// open boundary and behind its boundary triangle's plane), with the same
+  /// depth fade over its last quarter; 0: max_depth_m. A rim contact stands
+  /// for a penetrating vertex sliding off an edge, so its depth is of the
+  /// order of the penetrations; a vertex millimetres beside and below a rim
+  /// has crossed no triangle and is not a contact.
+  double rim_max_depth_m = 0;
 };
 
 /// Vertex contacts are classified by the feature of the other surface that

@@ -477,6 +477,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   copt.smoothing_m = o.si("contact_smoothing_mm");
   copt.edge_edge = o.flag("contact_edge_edge");
   copt.rim_vertices = o.flag("contact_rim_vertices");
+  copt.rim_max_depth_m = o.si("contact_rim_max_depth_mm");
   for (size_t k = 0; k < pair_index.size(); ++k)
     system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
   ledger.require_only(sc->effects);

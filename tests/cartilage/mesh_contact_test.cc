@@ -216,6 +216,21 @@ TEST(MeshContact, BoundaryFadeTangentMatchesFiniteDifferences) {
   const double e = system_fd_error(sys, q, Eigen::VectorXd::Zero(sys.num_dofs()), 0);
   std::printf("  rim tangent relative error %.2e\n", e);
   EXPECT_LT(e, 1e-5);
+  // A rim cut-off just above the deepest rim contact puts it in the depth
+  // fade: still consistent, and the faded rim force is smaller.
+  double deepest = 0;
+  for (const ContactPoint& c : active)
+    if (c.fade_edge >= 0) deepest = std::max(deepest, -c.gap);
+  ContactOptions o2 = o;
+  o2.rim_max_depth_m = 1.1 * deepest;
+  CoupledShellSystem sys2({A.get(), B.get()}, {"plate", "cap"});
+  sys2.add_contact("plate-cap", 0, 1, o2);
+  const double e2 = system_fd_error(sys2, q, Eigen::VectorXd::Zero(sys2.num_dofs()), 0);
+  const double f1 = sys.contact_report(0, q).total_force_a.norm(), f2 = sys2.contact_report(0, q).total_force_a.norm();
+  std::printf("  rim cut-off %.3e m: tangent relative error %.2e, force %.5f N (was %.5f N)\n", o2.rim_max_depth_m, e2,
+              f2, f1);
+  EXPECT_LT(e2, 1e-5);
+  EXPECT_LT(f2, f1);
 }
 
 // Two tents whose ridges cross: the ridges' edges interpenetrate by delta but
