@@ -19,8 +19,10 @@ A run still being written can be read: only complete frames are used
 (attribute arthrosim_frames_complete). Needs h5py and numpy (Debian:
 python3-h5py, python3-numpy, i.e. /usr/bin/python3).
 
-Sample run:
+Sample runs:
   /usr/bin/python3 scripts/gait_figures.py out/gait/kinematics.h5 out/gait/surface_gait.h5
+  /usr/bin/python3 scripts/gait_figures.py out/gait/kinematics.h5 out/gait/surface_gait.h5 \\
+      --prepared out/gait/prepared.h5     # plus the rigid overlaps at the stage-1 poses
 """
 import argparse
 import os
@@ -55,6 +57,10 @@ def main():
     ap.add_argument("kinematics", help="stage-1 kinematics file (arthrosim-comak)")
     ap.add_argument("surface", help="stage-2 output of a walking scenario (arthrosim-surface)")
     ap.add_argument("--trough-s", type=float, default=0.3, help="time separating the two stance peaks [s]")
+    ap.add_argument("--prepared", help="prepared model (arthrosim-prepare): also print the rigid overlap of the "
+                    "tibial and femoral shell surfaces at the stage-1 poses, at rim and interior nodes")
+    ap.add_argument("--overlap-times", default="0,0.05,0.1,0.2,0.35,0.45,0.6",
+                    help="trial times [s] for --prepared, comma separated")
     a = ap.parse_args()
     k = h5py.File(a.kinematics, "r")
     s = h5py.File(a.surface, "r")
@@ -123,6 +129,35 @@ def main():
         if key in st.attrs:
             print(f"  {key}: {float(st.attrs[key]):.1f}")
     print(f"run status: {s.attrs.get('status', '?')}")
+    if a.prepared:
+        rigid_overlap(k, a.prepared, [float(x) for x in a.overlap_times.split(",")])
+
+
+def rigid_overlap(k, prepared, times):
+    """Overlap of each tibial node with the femoral surface (signed distance
+    to the nearest femoral node along that node's normal, positive inside),
+    with both bones rigid at the stage-1 pose: what the shells must absorb by
+    deflection and penetration. Prepared nodes are in the bone frames."""
+    p = h5py.File(prepared, "r")
+    Vf = p["surfaces/femur/quads/nodes"][:]
+    Nf = p["surfaces/femur/quads/normals"][:]
+    t1 = k["time"][:]
+    XF, XT = k["bodies/femur/X_W"][:], k["bodies/tibia/X_W"][:]
+    for tib in ("tibia_medial", "tibia_lateral"):
+        g = "surfaces/" + tib + "/quads/"
+        if g + "nodes" not in p:
+            continue
+        Vt = p[g + "nodes"][:]
+        rim = np.zeros(len(Vt), bool)
+        rim[p[g + "periphery"][:]] = True
+        for t in times:
+            i = int(np.argmin(np.abs(t1 - t)))
+            A = np.linalg.inv(XF[i]) @ XT[i]  # tibia frame -> femur frame
+            q = Vt @ A[:3, :3].T + A[:3, 3]
+            j = np.array([np.argmin(((Vf - x) ** 2).sum(1)) for x in q])
+            ov = -((q - Vf[j]) * Nf[j]).sum(1)
+            print(f"rigid overlap {tib} at {t1[i]:.2f} s: rim max {1e3 * ov[rim].max():.2f} mm, "
+                  f"interior max {1e3 * ov[~rim].max():.2f} mm")
 
 
 if __name__ == "__main__":
