@@ -324,12 +324,8 @@ void CoupledShellSystem::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd&
 }
 
 void CoupledShellSystem::predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const {
-  q1.resize(n_);
-  for (int m = 0; m < num_models(); ++m) {
-    Eigen::VectorXd qm;
-    models_[m]->predict(t0, t1, segment(m, q0), qm);
-    q1.segment(offsets_[m], qm.size()) = qm;
-  }
+  // Without a step before (tp = t0) each model falls back to its predict().
+  predict_extrapolated(t0, q0, t0, q0, t1, q1);
 }
 
 void CoupledShellSystem::predict_extrapolated(double tp, const Eigen::VectorXd& qp, double t0,

@@ -12,6 +12,7 @@
 #include "common/effects.h"
 #include "common/error.h"
 #include "shell_test_meshes.h"
+#include "tangent_fd.h"
 
 namespace arthrosim::cartilage {
 namespace {
@@ -50,39 +51,14 @@ BoneMotion steady_bone(const Eigen::Vector3d& axis, double omega, const Eigen::V
 }
 
 /// max |K - K_fd| / max |K| with K = dF/dq (wrt = 0) or dF/dv (wrt = 1).
+/// Steps: 1e-9 m on positions (0.1% of the 1 mm thickness scale times 1e-3)
+/// and 1e-6 on dimensionless gradients; central differences then have
+/// truncation and round-off errors < 1e-7 relative.
 double fd_error(ShellModel& m, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, int wrt) {
-  const int n = m.num_dofs();
-  Eigen::SparseMatrix<double> K;
-  Eigen::VectorXd F;
-  EvalRequest r;
-  r.t = t;
-  r.q = &q;
-  r.v = &v;
-  r.kq = wrt == 0 ? 1.0 : 0.0;
-  r.kv = wrt == 1 ? 1.0 : 0.0;
-  m.evaluate(r, F, nullptr, &K);
-  const Eigen::MatrixXd Kd = Eigen::MatrixXd(K);
-  Eigen::MatrixXd Kfd(n, n);
-  for (int j = 0; j < n; ++j) {
-    // Steps: 1e-9 m on positions (0.1% of the 1 mm thickness scale times
-    // 1e-3) and 1e-6 on dimensionless gradients; central differences then
-    // have truncation and round-off errors < 1e-7 relative.
-    const double h = (j % 6 < 3) ? 1e-9 : 1e-6;
-    Eigen::VectorXd qp = q, qm = q, vp = v, vm = v, Fp, Fm;
-    (wrt == 0 ? qp : vp)(j) += h;
-    (wrt == 0 ? qm : vm)(j) -= h;
-    EvalRequest a = r, b = r;
-    a.q = &qp;
-    a.v = &vp;
-    b.q = &qm;
-    b.v = &vm;
-    m.evaluate(a, Fp, nullptr, nullptr);
-    m.evaluate(b, Fm, nullptr, nullptr);
-    Kfd.col(j) = (Fp - Fm) / (2 * h);
-  }
-  const double scale = Kd.cwiseAbs().maxCoeff();
+  double scale = 0;
+  const double e = testing::tangent_fd_error(m, t, q, v, wrt, 1e-9, 1e-6, &scale);
   EXPECT_GT(scale, 0.0);
-  return (Kd - Kfd).cwiseAbs().maxCoeff() / scale;
+  return e;
 }
 
 // Tolerance for all FD checks below: 1e-6 relative to max|K|. Central
