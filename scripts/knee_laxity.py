@@ -141,13 +141,17 @@ def main():
         names = [s.decode() for s in f["coordinates/names"][:]]
         q = f["coordinates/values"][:]
         status = f["solver/status"][:]
+        lig_force = f["ligaments/force"][:].sum(axis=1)
     rot = [math.degrees(v) for v in q[:, names.index("knee_rotation")]]
     add = [math.degrees(v) for v in q[:, names.index("knee_adduction")]]
     scaled = f" (ligament stiffness scaled: {', '.join(a.scale_stiffness)})" if a.scale_stiffness else ""
     print(f"model {a.model}{scaled}: flexion {a.flexion_deg} deg, compression {a.compression_bw} BW ({force_y:.0f} N)")
-    print(" moment_Nm  rotation_deg  adduction_deg  status")
-    for m, r_, d, s in zip(moments, rot, add, status):
-        print(f" {m:9.2f}  {r_:12.2f}  {d:13.2f}  {'ok' if s == 0 else 'FAILED'}")
+    # knee_ty: tibia along its long axis relative to the femur (smaller = condyles seated deeper);
+    # ligament force: sum over every bundle (patellar tendon included).
+    ty = [1000.0 * v for v in q[:, names.index("knee_ty")]]
+    print(" moment_Nm  rotation_deg  adduction_deg  knee_ty_mm  ligament_force_N  status")
+    for m, r_, d, y, lf, s in zip(moments, rot, add, ty, lig_force, status):
+        print(f" {m:9.2f}  {r_:12.2f}  {d:13.2f}  {y:10.2f}  {lf:16.0f}  {'ok' if s == 0 else 'FAILED'}")
     mid = n // 2
     i0, i1 = (mid - 1, mid + 1) if n % 2 == 1 else (mid - 1, mid)
     k = (moments[i1] - moments[i0]) / math.radians(rot[i1] - rot[i0]) if rot[i1] != rot[i0] else float("inf")
