@@ -27,6 +27,8 @@ HhtIntegrator::HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& op
   if (!(opts_.dt_s > 0)) throw common::InputError("HHT: dt must be > 0 s, found " + std::to_string(opts_.dt_s));
   if (opts_.max_newton_iterations < 1 || opts_.max_halvings < 0)
     throw common::InputError("HHT: max_newton_iterations >= 1 and max_halvings >= 0 required");
+  if (!(opts_.min_step_fraction > 0 && opts_.min_step_fraction < 1))
+    throw common::InputError("HHT: min_step_fraction must be in (0, 1), found " + std::to_string(opts_.min_step_fraction));
   if (!opts_.quasi_static && !sys_.has_inertia())
     throw common::InputError("HHT: dynamic integration needs an inertia term (or set quasi_static)");
   gamma_ = 0.5 - opts_.alpha;
@@ -346,12 +348,17 @@ void HhtIntegrator::advance_to(double t_end) {
     std::ostringstream s;
     s << "t=" << t_ << " s, dt=" << h << " s: " << reason;
     stats_.rejections.push_back(s.str());
-    if (++halvings > opts_.max_halvings) {
+    // Give up after max_halvings consecutive halvings, or when a step no
+    // longer than min_step_fraction dt_s fails: otherwise rare successes of
+    // ever shorter steps (each resetting the count) could creep on without end.
+    const bool floor = h <= opts_.min_step_fraction * opts_.dt_s;
+    if (++halvings > opts_.max_halvings || floor) {
       stats_.status = IntegratorStatus::kFailed;
       stats_.total_s += since(t0);
       std::ostringstream m;
-      m << "HHT: step from t = " << t_ << " s failed after " << opts_.max_halvings
-        << " halvings (last dt " << h << " s, residual " << r << " N): " << reason;
+      m << "HHT: step from t = " << t_ << " s failed after " << halvings << " consecutive halvings"
+        << (floor ? " (the step reached the floor min_step_fraction x dt)" : std::string()) << " (last dt " << h
+        << " s, residual " << r << " N): " << reason;
       throw common::NumericalError(m.str());
     }
     dt_ = 0.5 * h;

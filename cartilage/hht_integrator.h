@@ -31,9 +31,11 @@
 // A step whose Newton iteration does not converge in max_newton_iterations,
 // or meets a non-finite value or a failed factorisation, is rejected (counted,
 // reason logged) and retried with half the step; after max_halvings
-// consecutive halvings the run stops with common::NumericalError naming the
-// time and the residual. After steps_before_growth successful steps the step
-// doubles again, up to dt_s.
+// consecutive halvings, or when a step no longer than min_step_fraction dt_s
+// fails (rare successes of ever shorter steps must not creep on without
+// end), the run stops with common::NumericalError naming the time and the
+// residual. After steps_before_growth successful steps the step doubles
+// again, up to dt_s.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <memory>
@@ -85,6 +87,8 @@ struct IntegratorOptions {
   /// combined with reuse_factorization.
   int line_search_halvings = 0;
   int max_halvings = 10;           ///< consecutive halvings before giving up
+  /// A failed step no longer than this fraction of dt_s stops the run, in (0, 1).
+  double min_step_fraction = 1.0 / (1 << 20);
   int steps_before_growth = 4;     ///< successful steps before doubling dt back
   LinearSolverChoice solver = LinearSolverChoice::kAuto;
   bool keep_step_log = true;       ///< keep per-step residual histories

@@ -127,11 +127,24 @@ struct ContactGeometry {
   double fade = 1;
   Vec12 fade_grad = Vec12::Zero();
 };
+// rho (kFadeInside, nullptr otherwise): the node weights of x1..x3 (0 on the
+// rim, 1 elsewhere); fade = s(r), r = -(w1 rho1 + w2 rho2 + w3 rho3) the
+// barycentric interpolation of rho at the closest point and s the smoothstep
+// r^2 (3 - 2 r): zero with zero slope at the rim (C1 with the region beyond
+// it, where nothing is a contact); its gradient by the same AD pass.
+template <class T>
+T inside_fade(const T* w, const double* rho) {
+  T r = -(w[1] * rho[0] + w[2] * rho[1] + w[3] * rho[2]);
+  if (r <= 0.0) return T(0.0);
+  if (r >= 1.0) return T(1.0);
+  return r * r * (T(3.0) - T(2.0) * r);
+}
 ContactGeometry contact_geometry(ContactKind kind, const Eigen::Vector3d* x, double sign, bool rim,
-                                 Eigen::Matrix<double, 12, 12>* H) {
+                                 const double* rho, Eigen::Matrix<double, 12, 12>* H) {
   ContactGeometry c;
   c.g = gap_kernel<double>(kind, x, sign, c.n, c.w);
   for (int k = 0; k < 4; ++k) c.G.segment<3>(3 * k) = c.w[k] * c.n;
+  if (rho) c.fade = inside_fade<double>(c.w, rho);
   const double cos0 = std::sqrt(0.5);
   double cosang = 0;
   if (rim) {
@@ -148,6 +161,7 @@ ContactGeometry contact_geometry(ContactKind kind, const Eigen::Vector3d* x, dou
   gap_kernel<Ad>(kind, xa, sign, na, wa);
   for (int k = 0; k < 4; ++k)
     for (int d = 0; d < 3; ++d) H->row(3 * k + d) = (wa[k] * na(d)).derivatives().transpose();
+  if (rho && c.fade > 0 && c.fade < 1) c.fade_grad = inside_fade<Ad>(wa, rho).derivatives();
   if (rim && cosang > 0 && cosang < 1) {
     V3<Ad> nt = (xa[2] - xa[1]).cross(xa[3] - xa[1]);
     nt = nt / sqrt(nt.squaredNorm());
@@ -251,7 +265,7 @@ struct VertexHit {
 std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Points3& Xv, const common::Points3& vnv,
                                    const ContactSurface& Sf, const common::Points3& Xf, const common::Points3& tnf,
                                    const common::Points3& vnf, double radius, double min_opposition,
-                                   bool skip_rim, long* candidates) {
+                                   bool skip_rim, bool rim_contacts, long* candidates) {
   std::vector<common::Box3> vb(Sv.num_nodes), fb(Sf.F.rows());
   for (int i = 0; i < Sv.num_nodes; ++i) vb[i] = point_box(row(Xv, i), radius);
   for (int t = 0; t < Sf.F.rows(); ++t) fb[t] = triangle_box(Sf, Xf, t, 0.0);
@@ -290,6 +304,7 @@ std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Point
     const int f = h.closest.feature;
     const bool on_boundary = (f >= 1 && f <= 3 && Sf.edge_triangles[Sf.triangle_edges(h.triangle, f - 1)][1] < 0) ||
                              (f >= 4 && Sf.boundary_vertex[Sf.F(h.triangle, f - 4)]);
+    if (on_boundary && !rim_contacts) continue;  // beyond the rim: nothing behind it (kFadeInside)
     if (on_boundary) {
       // Beyond the open boundary (the other surface's rim): the distance to
       // the rim edge or corner, behind the plane of this boundary triangle;
@@ -344,7 +359,7 @@ ContactSurface::ContactSurface(const ShellModel& model) {
 
 double contact_gap(ContactKind kind, const std::array<Eigen::Vector3d, 4>& x, double sign,
                    Eigen::Matrix<double, 12, 1>* G, Eigen::Matrix<double, 12, 12>* H) {
-  const ContactGeometry c = contact_geometry(kind, x.data(), sign, false, H);
+  const ContactGeometry c = contact_geometry(kind, x.data(), sign, false, nullptr, H);
   if (G) *G = c.G;
   return c.g;
 }
@@ -394,7 +409,8 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     const int sv = pass, sf = 1 - pass;  // vertex side, face side
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf], dmax,
-                                          opts_.min_opposition, !opts_.rim_vertices, &cnt.candidate_vertex_face)) {
+                                          opts_.min_opposition, !opts_.rim_vertices,
+                                          opts_.rim == RimTreatment::kRimContacts, &cnt.candidate_vertex_face)) {
       if (!(h.signed_distance < 0)) continue;  // in front: no contact
       ContactPoint c;
       const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
@@ -410,6 +426,10 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
         c.node = {h.vertex, tri[f - 4], tri[(f - 3) % 3], tri[(f - 2) % 3]};
       }
       c.fade_edge = h.fade_edge;
+      if (opts_.rim == RimTreatment::kFadeInside &&
+          (Sf.boundary_vertex[c.node[1]] || (c.kind != ContactKind::kVertexVertex && Sf.boundary_vertex[c.node[2]]) ||
+           (c.kind == ContactKind::kVertexFace && Sf.boundary_vertex[c.node[3]])))
+        c.fade_edge = 0;  // a face (or its edge / corner) touching the rim: faded
       c.side = {sv, sf, sf, sf};
       c.area = 0.5 * S[sv]->vertex_area(h.vertex);
       vf_active[sv][h.vertex] = 1;
@@ -472,8 +492,13 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     for (int j = 0; j < 4; ++j) x[j] = row(*X[c.side[j]], c.node[j]);
     double sign = 1.0;
     if (c.kind == ContactKind::kEdgeEdge) sign = c.normal.dot((x[1] - x[0]).cross(x[3] - x[2])) >= 0 ? 1.0 : -1.0;
-    const ContactGeometry geo =
-        contact_geometry(c.kind, x, sign, c.fade_edge >= 0, want_hessian ? &c.H : nullptr);
+    double rho[3] = {1, 1, 1};
+    if (c.fade_edge == 0) {
+      const ContactSurface& Sf = *S[c.side[1]];
+      for (int j = 0; j < 3; ++j) rho[j] = Sf.boundary_vertex[c.node[j + 1]] ? 0.0 : 1.0;
+    }
+    const ContactGeometry geo = contact_geometry(c.kind, x, sign, c.fade_edge == 1, c.fade_edge == 0 ? rho : nullptr,
+                                                 want_hessian ? &c.H : nullptr);
     c.gap = geo.g;
     c.G = geo.G;
     c.normal = geo.n;
@@ -505,7 +530,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     // reaches the cut-off (the far side; in practice a vertex beside and
     // below a rim) leaves without a force jump.
     // Rim contacts have their own, shorter cut-off (rim_max_depth_m).
-    const double cut = (c.fade_edge >= 0 && opts_.rim_max_depth_m > 0) ? std::min(dmax, opts_.rim_max_depth_m) : dmax;
+    const double cut = (c.fade_edge == 1 && opts_.rim_max_depth_m > 0) ? std::min(dmax, opts_.rim_max_depth_m) : dmax;
     const double depth = -c.gap, d0 = 0.75 * cut;
     if (depth > d0) {
       const double u = std::min((depth - d0) / (cut - d0), 1.0);
@@ -527,9 +552,8 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       ++cnt.edge_edge;
     else
       ++cnt.vertex_face;
-    const bool rim = c.fade_edge >= 0;
-    cnt.max_penetration_m = std::max(cnt.max_penetration_m, rim ? c.fade * -c.gap : -c.gap);
-    if (rim) cnt.max_rim_depth_m = std::max(cnt.max_rim_depth_m, -c.gap);
+    cnt.max_penetration_m = std::max(cnt.max_penetration_m, c.fade_edge == 1 ? c.fade * -c.gap : -c.gap);
+    if (c.fade_edge >= 0) cnt.max_rim_depth_m = std::max(cnt.max_rim_depth_m, -c.gap);
     active.push_back(std::move(c));
   }
   if (counts) *counts = cnt;
@@ -555,7 +579,7 @@ std::vector<std::pair<int, int>> MeshContact::coupling_candidates(const common::
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf],
                                           std::max(opts_.max_depth_m, margin), opts_.min_opposition,
-                                          !opts_.rim_vertices, nullptr)) {
+                                          !opts_.rim_vertices, opts_.rim == RimTreatment::kRimContacts, nullptr)) {
       if (!(h.signed_distance < margin)) continue;
       for (int k = 0; k < 3; ++k)
         for (int t : Sf.vertex_triangles[Sf.F(h.triangle, k)])

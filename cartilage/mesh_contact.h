@@ -93,6 +93,22 @@ struct ContactSurface {
   Eigen::VectorXd edge_area;    ///< reference tributary area per edge [m^2] (1/3 of adjacent triangles)
 };
 
+/// How contact ends at a surface's open boundary (rim); docs/contact.md, "Rims".
+enum class RimTreatment {
+  /// Contacts with the faces next to a rim are weighted by the barycentric
+  /// interpolation of a node weight that is 0 on the rim and 1 elsewhere:
+  /// the force goes continuously to zero at the rim, beyond which nothing is
+  /// a contact. Continuous, tangent exact, never a sideways force.
+  kFadeInside,
+  /// The earlier treatment: a vertex beyond the rim keeps its distance to the
+  /// rim edge or corner as gap, weighted by how squarely it lies behind the
+  /// rim (phi = clamp(n . n_T / cos 45 deg, 0, 1)). Its force points along
+  /// p - c, up to 45 deg off the rim's normal with the penalty of the whole
+  /// distance; with stiff penalties Newton stalls at rims
+  /// (ContactStability.ContactStiffnessThousandTimesTheDefault).
+  kRimContacts,
+};
+
 struct ContactOptions {
   double stiffness_N_m3 = 7e9;   ///< k: penalty pressure per unit penetration [N/m^3], > 0
   double damping_N_s_m3 = 0;     ///< c [N s/m^3], >= 0 (0: symmetric tangent)
@@ -123,6 +139,7 @@ struct ContactOptions {
   /// order of the penetrations; a vertex millimetres beside and below a rim
   /// has crossed no triangle and is not a contact.
   double rim_max_depth_m = 0;
+  RimTreatment rim = RimTreatment::kFadeInside;
 };
 
 /// Vertex contacts are classified by the feature of the other surface that
@@ -145,8 +162,10 @@ struct ContactPoint {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();   ///< contact point on the face / second edge [m]
   Eigen::Matrix<double, 12, 1> G = Eigen::Matrix<double, 12, 1>::Zero();   ///< dg/dx
   Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero(); ///< d2g/dx2 (if requested)
-  /// Rim contact (fade_edge >= 0: the closest point is on the other
-  /// surface's open boundary): weight fade in [0, 1] and fade_grad = d fade/dx.
+  /// Faded contact: fade_edge = 0, a contact with a face next to the other
+  /// surface's rim (RimTreatment::kFadeInside); 1, a rim contact (the closest
+  /// point on the other surface's open boundary, kRimContacts); -1 neither.
+  /// Weight fade in [0, 1] and fade_grad = d fade/dx.
   int fade_edge = -1;
   double fade = 1;
   Eigen::Matrix<double, 12, 1> fade_grad = Eigen::Matrix<double, 12, 1>::Zero();
@@ -157,10 +176,12 @@ struct ContactCounts {
   long candidate_vertex_face = 0, candidate_edge_edge = 0;
   long vertex_face = 0, edge_edge = 0;  ///< active
   /// max over active contacts of the interpenetration -g, times the fade
-  /// phi for rim contacts (a vertex beside the other surface's rim has
-  /// crossed no triangle; phi (-g) is the depth its faded force stands for).
+  /// phi for rim contacts (kRimContacts: a vertex beside the other surface's
+  /// rim has crossed no triangle; phi (-g) is the depth its faded force
+  /// stands for). Faded contacts next to a rim (kFadeInside) count with
+  /// their whole depth: they have crossed a triangle.
   double max_penetration_m = 0;
-  double max_rim_depth_m = 0;  ///< max(-g) over active rim contacts, unweighted (diagnostics)
+  double max_rim_depth_m = 0;  ///< max(-g) over active faded contacts (either kind), unweighted (diagnostics)
 };
 
 /// Contact between surface a and surface b.

@@ -142,9 +142,13 @@ const std::vector<OptionSpec>& schema_table() {
       {"surface", "contact_edge_edge", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
        "also evaluate edge-edge pairs (sharp features); the vertex test with edge and corner features "
        "covers smooth surfaces"},
+      {"surface", "contact_rim", T::kText, U::kNone, "fade_inside", false, 0, 0, "fade_inside|rim_contacts", true,
+       "how contact ends at a surface's rim: fade_inside weights contacts on the faces next to a rim by a node "
+       "weight interpolated from 0 on the rim to 1 inside (continuous, never sideways); rim_contacts is the "
+       "earlier treatment (a vertex beyond a rim keeps its distance to it, faded by angle; docs/contact.md)"},
       {"surface", "contact_rim_max_depth_mm", T::kNumber, U::kMillimetre, "0.5", false, 0, 100, "", true,
-       "cut-off depth of rim contacts (a vertex beside the other surface's rim), faded over its last "
-       "quarter; 0: contact_max_depth_mm"},
+       "contact_rim: rim_contacts: cut-off depth of rim contacts (a vertex beside the other surface's rim), "
+       "faded over its last quarter; 0: contact_max_depth_mm"},
       {"surface", "contact_rim_vertices", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
        "nodes on a surface's rim may be penetrating vertices; by default they only carry their triangles, "
        "as stage 1 samples the casting surface at triangle centres, never at its rim (docs/contact.md)"},

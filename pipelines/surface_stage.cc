@@ -478,6 +478,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   copt.edge_edge = o.flag("contact_edge_edge");
   copt.rim_vertices = o.flag("contact_rim_vertices");
   copt.rim_max_depth_m = o.si("contact_rim_max_depth_mm");
+  copt.rim = o.text("contact_rim") == "rim_contacts" ? cartilage::RimTreatment::kRimContacts
+                                                      : cartilage::RimTreatment::kFadeInside;
   for (size_t k = 0; k < pair_index.size(); ++k)
     system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
   ledger.require_only(sc->effects);

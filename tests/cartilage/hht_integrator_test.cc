@@ -220,6 +220,74 @@ TEST(Hht, RejectionHalvingAndFailureReport) {
   }
 }
 
+/// Quasi-static F(q, t) = atan(q - g(t)), g(t) = -log(1 - t): Newton from
+/// the previous state converges only while g changes by less than about 1.4
+/// per step, i.e. for steps shorter than about 1 - t: approaching t = 1 the
+/// steps that succeed get ever shorter.
+class ZenoSystem final : public TimeIntegrable {
+ public:
+  ZenoSystem() {
+    std::vector<Eigen::Triplet<double>> t{{0, 0, 0.0}};
+    pattern_.resize(1, 1);
+    pattern_.setFromTriplets(t.begin(), t.end());
+    pattern_.makeCompressed();
+  }
+  int num_dofs() const override { return 1; }
+  bool has_inertia() const override { return false; }
+  bool tangent_symmetric() const override { return true; }
+  void evaluate(const EvalRequest& r, Eigen::VectorXd& F, Eigen::VectorXd*, Eigen::SparseMatrix<double>* K) override {
+    const double e = (*r.q)(0) + std::log(1 - r.t);
+    F.resize(1);
+    F(0) = std::atan(e);
+    if (K) {
+      *K = pattern_;
+      K->valuePtr()[0] = 1 / (1 + e * e);
+    }
+  }
+  const Eigen::SparseMatrix<double>& tangent_pattern() const override { return pattern_; }
+  const std::vector<char>& constrained() const override { return constrained_; }
+  void apply_constraints(double, Eigen::VectorXd&) const override {}
+  void solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) override { a = rhs; }
+  const Eigen::VectorXd& increment_weights() const override { return weights_; }
+  std::string describe_dof(int) const override { return "q"; }
+
+ private:
+  Eigen::SparseMatrix<double> pattern_;
+  std::vector<char> constrained_{0};
+  Eigen::VectorXd weights_ = Eigen::VectorXd::Ones(1);
+};
+
+// Steps that succeed only when ever shorter must not creep on: once a step
+// no longer than min_step_fraction dt fails, the run stops with a message,
+// after a bounded number of steps (each success resets the count of
+// consecutive halvings).
+TEST(Hht, EverShorterStepsStopAtTheStepFloor) {
+  ZenoSystem sys;
+  IntegratorOptions o;
+  o.quasi_static = true;
+  o.extrapolate_predictor = false;
+  o.dt_s = 0.1;
+  o.max_halvings = 30;  // the count of consecutive halvings must not be what stops it
+  o.min_step_fraction = 1.0 / 256;
+  o.max_newton_iterations = 8;
+  HhtIntegrator hht(sys, o);
+  hht.initialize(0, Eigen::VectorXd::Zero(1));
+  try {
+    hht.advance_to(1.0);
+    FAIL() << "expected NumericalError";
+  } catch (const common::NumericalError& e) {
+    const std::string msg = e.what();
+    std::printf("step floor: t = %.6f after %ld steps, %ld rejected: %s\n", hht.time(), hht.statistics().steps,
+                hht.statistics().rejected_steps, msg.c_str());
+    EXPECT_NE(msg.find("min_step_fraction"), std::string::npos);
+    EXPECT_EQ(hht.statistics().status, IntegratorStatus::kFailed);
+    // The last successful steps were about dt / 2^8 = 4e-4 s long, near
+    // t = 1 - 4e-4 / 1.4: a few hundred steps at most, not an endless crawl.
+    EXPECT_GT(hht.time(), 0.99);
+    EXPECT_LT(hht.statistics().steps, 2000);
+  }
+}
+
 // Modified Newton (reuse_factorization) reaches the same solution as full
 // Newton on a nonlinear oscillator trajectory, with fewer factorisations.
 TEST(Hht, FactorizationReuseSameSolutionFewerFactorizations) {

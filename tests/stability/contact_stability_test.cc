@@ -1,7 +1,8 @@
 // Hard cases of deformable mesh contact (issue 8, label stability): a large
 // rigid rotation of the whole contact configuration must not change the
-// result. (Contact stiffness 1000 x the default is not in the suite: with
-// these plates' in-plane motion free it does not converge; docs/status.md.)
+// result; a contact stiffness a thousand times the surface stage's default
+// should still converge to the springs-in-series state (disabled: it does not
+// yet, see the case).
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -25,8 +26,10 @@ common::QuadMesh placed(common::QuadMesh m, const Eigen::Isometry3d& X) {
 
 struct SeriesResult {
   double w_lower = 0, w_upper = 0, p_expected = 0;
+  double k1 = 0, k2 = 0;  // the foundations [N/m^3]
   Eigen::Vector3d force_on_lower_B = Eigen::Vector3d::Zero();  // in the configuration's own frame
-  long newton = 0;
+  double max_penetration = 0;  // [m]
+  IntegratorStatistics stats;
 };
 
 /// Two flat shells on foundations k1 (at rest) and k2 (its bone moving by d
@@ -34,7 +37,7 @@ struct SeriesResult {
 /// configuration placed by X (a rigid motion of the joint). Returns the
 /// area-weighted mean deflections within 3 mm of the centre (not the
 /// springs-in-series value: directors and corners are held here).
-SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
+SeriesResult press_plates(const ContactOptions& o, const Eigen::Isometry3d& X, double residual_floor_N = 1e-8) {
   const double k1 = 7e8, k2 = 2.1e9, d = 0.3e-3, s0 = 0.05e-3;
   common::QuadMesh lower = testing::plate_mesh(14, 14, 20e-3, 20e-3);
   lower.V.rowwise() += Eigen::RowVector3d(-10e-3, -10e-3, 0);
@@ -74,8 +77,6 @@ SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
     m->add_constraint(std::move(c));
   }
   CoupledShellSystem sys({A.get(), B.get()}, {"lower", "upper"});
-  ContactOptions o;
-  o.stiffness_N_m3 = kc;
   sys.add_contact("lower-upper", 0, 1, o);
   Eigen::VectorXd q(sys.num_dofs());
   q << A->reference_state(), B->reference_state();
@@ -85,15 +86,17 @@ SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
   opt.max_newton_iterations = 30;
   opt.line_search_halvings = 8;
   opt.residual_rtol = 1e-9;
-  opt.residual_atol_N = 1e-8;
+  opt.residual_atol_N = residual_floor_N;
   HhtIntegrator hht(sys, opt);
   hht.initialize(0.0, q);
   hht.advance_to(1.0);
   q = hht.q();
   EXPECT_TRUE(q.allFinite());
   SeriesResult r;
-  r.newton = hht.statistics().newton_iterations;
-  r.p_expected = (d - s0 - 0.5 * o.smoothing_m) / (1 / k1 + 1 / k2 + 1 / kc);
+  r.stats = hht.statistics();
+  r.k1 = k1;
+  r.k2 = k2;
+  r.p_expected = (d - s0 - 0.5 * o.smoothing_m) / (1 / k1 + 1 / k2 + 1 / o.stiffness_N_m3);
   const Eigen::Vector3d n = X.linear() * Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d c = X.translation();
   auto mean = [&](int m, const Eigen::Vector3d& bone_shift, double sign) {
@@ -101,8 +104,16 @@ SeriesResult press_plates(double kc, const Eigen::Isometry3d& X) {
   };
   r.w_lower = mean(0, Eigen::Vector3d::Zero(), -1.0);
   r.w_upper = mean(1, down, 1.0);
-  r.force_on_lower_B = X.linear().transpose() * sys.contact_report(0, q).total_force_a;
+  const ContactPairReport rep = sys.contact_report(0, q);
+  r.force_on_lower_B = X.linear().transpose() * rep.total_force_a;
+  r.max_penetration = rep.counts.max_penetration_m;
   return r;
+}
+
+ContactOptions with_stiffness(double kc) {
+  ContactOptions o;
+  o.stiffness_N_m3 = kc;
+  return o;
 }
 
 // The same pressed plates rotated by 170 degrees about an oblique axis and
@@ -113,13 +124,56 @@ TEST(ContactStability, LargeRigidRotationOfTheWholeContact) {
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
   X.linear() = Eigen::AngleAxisd(170 * M_PI / 180, Eigen::Vector3d(1, -2, 0.7).normalized()).toRotationMatrix();
   X.translation() << 0.05, -0.02, 0.11;
-  const SeriesResult a = press_plates(2e10, Eigen::Isometry3d::Identity());
-  const SeriesResult b = press_plates(2e10, X);
+  const SeriesResult a = press_plates(with_stiffness(2e10), Eigen::Isometry3d::Identity());
+  const SeriesResult b = press_plates(with_stiffness(2e10), X);
   std::printf("rotated: w1 %.8e vs %.8e, w2 %.8e vs %.8e, F %.6f vs %.6f N\n", a.w_lower, b.w_lower, a.w_upper,
               b.w_upper, a.force_on_lower_B.z(), b.force_on_lower_B.z());
   EXPECT_NEAR(b.w_lower, a.w_lower, 1e-6 * std::abs(a.w_lower));
   EXPECT_NEAR(b.w_upper, a.w_upper, 1e-6 * std::abs(a.w_upper));
   EXPECT_LT((b.force_on_lower_B - a.force_on_lower_B).norm(), 1e-6 * a.force_on_lower_B.norm());
+}
+
+// Contact stiffness 1000 x the surface stage's default (20 N/mm^3 ->
+// 2e13 N/m^3, 3e4 x the upper foundation), with the stage's other contact
+// defaults (docs/scenes.md: rim nodes are not penetrating vertices, contact
+// fades to zero towards a rim). Reference: the centre deflections of the
+// pressed plates against springs in series at the default stiffness and at
+// 1000 x. The measured differences at the default stiffness, from the plate
+// bending near the held corners and the upper plate's edge, are a few per
+// cent, so 6 % is asked of both. The interpenetration must stay within the
+// penalty's toe (its equilibrium value is sqrt(2 delta p / k) = 0.1 um).
+// Newton's residual floor for the stiff case is 0.1 % of the contact force,
+// the rule of the gait scenes (newton_residual_floor_n 2 N of about 2 kN):
+// where a vertex's closest point moves from one facet to its neighbour
+// across a concave kink the force direction turns by the kink angle, a jump
+// of about p A theta (here a few mN) that no Newton iterate can remove.
+// DISABLED (a known failure, docs/status.md): at 1000 x, Newton stalls at 86 %
+// of the approach (t = 0.856 s, residual 0.026 N at the step floor); the
+// default-stiffness half converges. Run it with
+//   build/tests/contact_stability_test --gtest_also_run_disabled_tests --gtest_filter='*Thousand*'
+TEST(ContactStability, DISABLED_ContactStiffnessThousandTimesTheDefault) {
+  SeriesResult r[2];
+  const double kc[2] = {2e10, 2e13};
+  for (int i = 0; i < 2; ++i) {
+    ContactOptions o = with_stiffness(kc[i]);
+    o.rim_vertices = false;
+    o.rim_max_depth_m = 0.5e-3;
+    r[i] = press_plates(o, Eigen::Isometry3d::Identity(), i == 0 ? 1e-8 : 0.03);  // 0.1 % of the ~30 N contact force
+    const IntegratorStatistics& s = r[i].stats;
+    std::printf("k_c %.0e N/m^3: %s, %ld steps, %ld rejected, %ld Newton iterations; w1 %.4e (p/k1 %.4e), "
+                "w2 %.4e (p/k2 %.4e), force %.4f N, max penetration %.3e m\n",
+                kc[i], s.status == IntegratorStatus::kFailed ? "FAILED" : "converged", s.steps, s.rejected_steps,
+                s.newton_iterations, r[i].w_lower, r[i].p_expected / r[i].k1, r[i].w_upper,
+                r[i].p_expected / r[i].k2, r[i].force_on_lower_B.z(), r[i].max_penetration);
+    ASSERT_NE(s.status, IntegratorStatus::kFailed);
+    EXPECT_NEAR(r[i].w_lower, r[i].p_expected / r[i].k1, 0.06 * r[i].p_expected / r[i].k1);
+    EXPECT_NEAR(r[i].w_upper, r[i].p_expected / r[i].k2, 0.06 * r[i].p_expected / r[i].k2);
+    EXPECT_TRUE(std::isfinite(r[i].force_on_lower_B.norm()));
+  }
+  EXPECT_LT(r[1].max_penetration, 1e-6);
+  // Stiffer contact, slightly larger deflections (less contact compliance).
+  EXPECT_GT(r[1].w_lower, r[0].w_lower);
+  EXPECT_GT(r[1].w_upper, r[0].w_upper);
 }
 
 }  // namespace
