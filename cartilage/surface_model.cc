@@ -75,8 +75,12 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
     } else if (e == "foundation_damping") {
       model->add_foundation_damping(parameters.foundation_damping_N_s_m3, bone, true);
     } else if (e == "osmotic_pressure") {
-      const double p = parameters.osmotic_pressure_Pa;
-      model->add_pressure("osmotic_pressure", -1.0, [p](double) { return p; });
+      const double p = parameters.osmotic_pressure_Pa, T = parameters.osmotic_ramp_s;
+      model->add_pressure("osmotic_pressure", -1.0, [p, T](double t) {
+        if (!(T > 0) || t >= T) return p;
+        const double u = std::max(t, 0.0) / T;
+        return p * u * u * (3 - 2 * u);
+      });
     } else if (e == "periphery_fixed") {
       if (parameters.periphery_tie_N_m3 > 0)
         model->add_periphery_tangential(parameters.periphery_tie_N_m3, bone);

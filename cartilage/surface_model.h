@@ -58,6 +58,10 @@ struct SurfaceParameters {
   double foundation_stiffness_N_m3 = 7e8;   ///< k [N/m^3] (0.7 N/mm^3)
   double foundation_damping_N_s_m3 = 7e15;  ///< c [N s/m^3] (7e6 N s/mm^3)
   double osmotic_pressure_Pa = 0.2e6;       ///< on the internal face [Pa]
+  /// > 0: the osmotic pressure rises from 0 to its value over this time with
+  /// a smoothstep (e.g. during the seating of imposed kinematics) instead of
+  /// acting in full from t = 0 [s].
+  double osmotic_ramp_s = 0;
   /// If non-empty (one value per node, N/m^3), used by foundation_springs
   /// instead of foundation_stiffness_N_m3, e.g. k_i = K / h_i matched to the
   /// musculoskeletal stage's elastic-foundation contact (see

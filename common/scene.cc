@@ -114,6 +114,9 @@ const std::vector<OptionSpec>& schema_table() {
       {"surface", "foundation_damping_n_s_per_mm3", T::kNumber,
        U::kNewtonSecondPerCubicMillimetre, "7e6", false, 0, 1e12, "", true,
        "foundation damping per unit area and unit compression rate (foundation_damping)"},
+      {"surface", "osmotic_surfaces", T::kTextList, U::kNone, "[]", false, 0, 0, "", true,
+       "osmotic_pressure: the surfaces that carry it (each one of `surfaces`); empty: every simulated "
+       "surface (the seed's run pressurised the femoral cartilage)"},
       {"surface", "osmotic_pressure_mpa", T::kNumber, U::kMegapascal, "0.2", false, 0, 100, "",
        true, "pressure on the internal face of the shells (osmotic_pressure)"},
       {"surface", "steady_state", T::kFlag, U::kNone, "false", false, 0, 0, "", true,

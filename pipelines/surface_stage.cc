@@ -419,7 +419,19 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       throw common::InputError(scene.file.string(), sc->line,
                                "scenario '" + sc->name + "' lists mesh_contact but contact_pairs is empty");
   }
+  // osmotic_surfaces: which surfaces carry osmotic_pressure (empty: all).
+  std::vector<std::string> osmotic_surfaces;
+  if (!generic && sc->wants("osmotic_pressure")) {
+    osmotic_surfaces = o.list("osmotic_surfaces");
+    for (const std::string& s : osmotic_surfaces)
+      if (std::find(surface_names.begin(), surface_names.end(), s) == surface_names.end())
+        throw common::InputError(scene.file.string(), o.value("osmotic_surfaces").line,
+                                 "osmotic surface '" + s + "' is not one of this scenario's `surfaces`");
+  }
   const double seating = moving ? o.si("seating_time_s") : 0.0;
+  // With imposed kinematics the pressure rises during the seating ramp (a
+  // step load on the resting shells would start a dynamic inflation).
+  if (moving) par.osmotic_ramp_s = seating;
   const double seat_offset = o.si("seating_offset_mm");
   for (const std::string& name : surface_names) {
     const H5File& prepared = *prepared_file;
@@ -451,7 +463,11 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           h, o.si("matched_youngs_modulus_mpa"), o.si("matched_poisson_ratio"),
           options.prepared + ": dataset /surfaces/" + name + "/quads/thickness");
     }
-    r.model = cartilage::build_surface_model(r.input, p, sc->effects, r.bone, &ledger);
+    std::vector<std::string> effects = sc->effects;
+    if (!osmotic_surfaces.empty() &&
+        std::find(osmotic_surfaces.begin(), osmotic_surfaces.end(), name) == osmotic_surfaces.end())
+      effects.erase(std::remove(effects.begin(), effects.end(), "osmotic_pressure"), effects.end());
+    r.model = cartilage::build_surface_model(r.input, p, effects, r.bone, &ledger);
     if (moving) r.model->set_motion_predictor(r.bone);
     r.basis = cartilage::node_strain_basis(*r.model);
     r.summary.name = name;

@@ -103,6 +103,37 @@ TEST(SurfaceModel, BuildsExactlyTheListedEffects) {
   EXPECT_EQ(model->built_terms(), expected);
 }
 
+// osmotic_ramp_s: the osmotic pressure's nodal forces (the residual of the
+// undeformed plate, where internal forces vanish) are 0 at t = 0, the
+// smoothstep's 1/2 at half the ramp, s(1/4) = 0.15625 at a quarter and the
+// full pressure from the end of the ramp on; without a
+// ramp the full pressure acts from t = 0. Exact up to round-off (1e-12).
+TEST(SurfaceModel, OsmoticPressureRampsOverTheGivenTime) {
+  const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.1);
+  SurfaceParameters par;
+  par.osmotic_ramp_s = 0.02;
+  auto ramped = build_surface_model(s, par, {"osmotic_pressure"}, BoneMotion::fixed(), nullptr);
+  auto plain = build_surface_model(s, SurfaceParameters{}, {"osmotic_pressure"}, BoneMotion::fixed(), nullptr);
+  const Eigen::VectorXd q = ramped->reference_state();
+  auto force = [&](ShellModel& m, double t) {
+    EvalRequest r;
+    r.t = t;
+    r.q = &q;
+    Eigen::VectorXd F;
+    m.evaluate(r, F, nullptr, nullptr);
+    return F;
+  };
+  const Eigen::VectorXd full = force(*plain, 0.0);
+  ASSERT_GT(full.norm(), 0.0);
+  const double s_quarter = 0.25 * 0.25 * (3 - 2 * 0.25);
+  EXPECT_LT(force(*ramped, 0.0).norm(), 1e-12 * full.norm());
+  EXPECT_LT((force(*ramped, 0.005) - s_quarter * full).norm(), 1e-12 * full.norm());
+  EXPECT_LT((force(*ramped, 0.01) - 0.5 * full).norm(), 1e-12 * full.norm());
+  EXPECT_LT((force(*ramped, 0.02) - full).norm(), 1e-12 * full.norm());
+  EXPECT_LT((force(*ramped, 0.5) - full).norm(), 1e-12 * full.norm());
+  EXPECT_LT((force(*plain, 0.5) - full).norm(), 1e-12 * full.norm());
+}
+
 TEST(SurfaceModel, EffectsItCannotBuildAreErrorsNotOmissions) {
   const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.0);
   common::EffectLedger ledger("test");

@@ -161,6 +161,51 @@ TEST(SurfaceStage, NoPressureTermWhenNotListed) {
   for (const auto& s : r.surfaces) EXPECT_LT(std::abs(s.max_deflection_m), 1e-12) << s.name;
 }
 
+// osmotic_surfaces: the pressure term is built on the listed surfaces only
+// (the ledger counts one term per loaded quad), the others stay unloaded; a
+// name that is not simulated stops with the scene line.
+TEST(SurfaceStage, OsmoticPressureOnTheListedSurfacesOnly) {
+  const std::string scene = write_scene("osmotic_some", R"(surface:
+  scenarios:
+    swell:
+      surfaces: [tibia_medial, tibia_lateral]
+      osmotic_surfaces: [tibia_lateral]
+      steady_state: true
+      end_time_s: 1.0
+      foundation_stiffness_n_per_mm3: 5
+      effects: [foundation_springs, osmotic_pressure, periphery_fixed]
+)");
+  const SurfaceStageOptions o = stage_options(scene, "swell", "osmotic_some.h5");
+  const SurfaceStageResult r = run_surface_stage(o);
+  ASSERT_EQ(r.status, SurfaceStageStatus::kCompleted);
+  const common::H5File f(o.out, common::H5File::Mode::kRead);
+  const common::EffectLedger ledger = common::read_effect_ledger(f);
+  const long lateral_quads = f.read_matrix_int("/surfaces/tibia_lateral/quads").rows();
+  EXPECT_EQ(ledger.count("osmotic_pressure"), lateral_quads);
+  for (const auto& s : r.surfaces) {
+    std::printf("%s: max deflection %.4e m\n", s.name.c_str(), s.max_deflection_m);
+    if (s.name == "tibia_medial") EXPECT_LT(std::abs(s.max_deflection_m), 1e-12);
+    if (s.name == "tibia_lateral") EXPECT_GT(std::abs(s.max_deflection_m), 1e-6);
+  }
+  const std::string bad = write_scene("osmotic_bad", R"(surface:
+  scenarios:
+    swell:
+      surfaces: [tibia_medial]
+      osmotic_surfaces: [femur]
+      steady_state: true
+      end_time_s: 1.0
+      effects: [foundation_springs, osmotic_pressure, periphery_fixed]
+)");
+  try {
+    run_surface_stage(stage_options(bad, "swell", "osmotic_bad.h5"));
+    FAIL() << "an osmotic surface that is not simulated must not be accepted";
+  } catch (const common::InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("osmotic surface 'femur'"), std::string::npos) << m;
+    EXPECT_NE(m.find("osmotic_bad.yaml:7:"), std::string::npos) << m;  // the osmotic_surfaces line
+  }
+}
+
 // mesh_contact needs both surfaces of each contact pair: a scenario that
 // simulates only one of them stops before anything is written, naming the
 // pair.
