@@ -59,6 +59,8 @@ const std::vector<OptionSpec>& schema_table() {
       // --- prepare -------------------------------------------------------------
       {"prepare", "edge_length_mm", T::kNumber, U::kMillimetre, "3", false, 0.2, 20, "", false,
        "target edge length of the remeshed cartilage surfaces"},
+      {"prepare", "surface_edge_length_mm", T::kTextList, U::kNone, "[]", false, 0, 0, "", false,
+       "per-surface target edge lengths in place of edge_length_mm, items 'name=mm' (e.g. [femur=3.7])"},
       {"prepare", "mesh_unit", T::kText, U::kNone, "mm", false, 0, 0, "mm|cm|m", false,
        "length unit of the model's mesh files (STL carries none)"},
       {"prepare", "max_cast_distance_mm", T::kNumber, U::kMillimetre, "10", false, 1, 50, "", false,

@@ -158,6 +158,17 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
   if (!(options.edge_length >= 0.2e-3 && options.edge_length <= 20e-3))
     throw InputError("prepare", 0, "expected edge length in [0.2, 20] mm, found " +
                                        std::to_string(options.edge_length * 1e3) + " mm");
+  for (const auto& [name, e] : options.surface_edge_length) {
+    if (!(e >= 0.2e-3 && e <= 20e-3))
+      throw InputError("prepare", 0, "expected the edge length of " + name + " in [0.2, 20] mm, found " +
+                                         std::to_string(e * 1e3) + " mm");
+    if (!files.cartilage.count(name)) {
+      std::string have;
+      for (const auto& [c, p] : files.cartilage) have += (have.empty() ? "" : ", ") + c;
+      throw InputError("prepare", 0, "edge length given for '" + name + "', which is not a cartilage surface of " +
+                                         files.folder + " (it has: " + have + ")");
+    }
+  }
   if (!(options.max_cast_distance >= 1e-3 && options.max_cast_distance <= 50e-3))
     throw InputError("prepare", 0, "expected max cast distance in [1, 50] mm, found " +
                                        std::to_string(options.max_cast_distance * 1e3) + " mm");
@@ -215,6 +226,9 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
     }
     s.stats.input_triangles = input.num_triangles();
     common::RemeshStatistics rs;
+    const auto own = options.surface_edge_length.find(name);
+    ro.target_edge_length = own != options.surface_edge_length.end() ? own->second : options.edge_length;
+    s.stats.target_edge_length = ro.target_edge_length;
     s.triangles = common::isotropic_remesh(input, ro, &rs);
     s.triangles.name = name;
     s.vertex_normals = common::vertex_normals(s.triangles);
@@ -310,6 +324,7 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
     h5.set_attribute(g, "vertices_inside_bone", s.stats.vertices_inside_bone);
     h5.set_attribute(g, "nodes_fallback", s.stats.nodes_closest_point);
     h5.set_attribute(g, "mean_edge_length_m", s.stats.mean_edge_length);
+    h5.set_attribute(g, "target_edge_length_m", s.stats.target_edge_length);
     const std::string t = g + "/triangles", q = g + "/quads";
     h5.write(t + "/vertices", s.triangles.V);
     h5.write(t + "/faces", s.triangles.F);

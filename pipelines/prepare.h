@@ -47,6 +47,10 @@ struct PrepareOptions {
   /// Target edge length of the remeshed cartilage surfaces [m]. Range
   /// 0.2e-3 .. 20e-3 (scene key prepare.edge_length_mm, default 3 mm).
   double edge_length = 3e-3;
+  /// Per-surface target edge lengths [m] (cartilage name -> length, same
+  /// range) in place of edge_length, e.g. a femoral mesh coarser than the
+  /// tibial ones (scene key prepare.surface_edge_length_mm, "name=mm" items).
+  std::map<std::string, double> surface_edge_length;
   /// Unit of the coordinates in the input files.
   common::LengthUnit unit = common::LengthUnit::kMillimetre;
   /// Longest thickness ray [m]; a ray that meets no bone within it falls
@@ -90,6 +94,7 @@ struct PreparedSurfaceStatistics {
   int vertices_inside_bone = 0;    ///< ... inside their bone
   int nodes_closest_point = 0;     ///< quad nodes with a fallback (either kind)
   double mean_edge_length = 0.0;   ///< of the remeshed triangles [m]
+  double target_edge_length = 0.0; ///< the remeshing target used for this surface [m]
   double thickness_min = 0.0;      ///< over triangle vertices [m]
   double thickness_max = 0.0;
   double thickness_mean = 0.0;

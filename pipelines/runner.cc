@@ -308,6 +308,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
                    "--max-cast-distance-mm", scene.prepare.value("max_cast_distance_mm").canonical,
                    "--remesh-iterations", scene.prepare.value("remesh_iterations").canonical,
                    "--out", (out_dir / kPrepared).string()};
+    for (const std::string& item : scene.prepare.list("surface_edge_length_mm"))
+      s.arguments.insert(s.arguments.end(), {"--surface-edge-length-mm", item});
     plan.push_back(std::move(s));
   }
   if (want_comak) {

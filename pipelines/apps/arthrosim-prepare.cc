@@ -11,6 +11,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "common/error.h"
 #include "common/log.h"
 #include "common/mesh_io.h"
 #include "common/metadata.h"
@@ -34,6 +35,9 @@ int main(int argc, char** argv) {
   app.add_option("--model", model_dir, "model folder")->required();
   app.add_option("--edge-length-mm", edge_mm, "target edge length of the remeshed cartilage [mm], 0.2..20")
       ->capture_default_str();
+  std::vector<std::string> surface_edges;
+  app.add_option("--surface-edge-length-mm", surface_edges,
+                 "NAME=MM: target edge length of one cartilage surface instead of --edge-length-mm (repeatable)");
   app.add_option("--out", out, "prepared-model HDF5 file to write (XDMF next to it)")->required();
   app.add_option("--unit", unit, "length unit of the input files: mm, cm or m")->capture_default_str();
   app.add_option("--max-cast-distance-mm", max_cast_mm, "longest thickness ray [mm], 1..50")->capture_default_str();
@@ -44,6 +48,8 @@ int main(int argc, char** argv) {
       "Sample runs:\n"
       "  arthrosim-prepare --model data/models/knee_parametric/coarse --edge-length-mm 3 --out prepared_coarse.h5\n"
       "  arthrosim-prepare --model data/models/knee_parametric/medium --edge-length-mm 2 --out prepared_medium.h5\n"
+      "  arthrosim-prepare --model data/models/knee_parametric/coarse --edge-length-mm 3 \\\n"
+      "      --surface-edge-length-mm femur=4.2 --out prepared_anchor.h5   # femoral 3,579 shells, tibial 1,059\n"
       "Your own segmentation (files named as above):\n"
       "  arthrosim-prepare --model my_segmentation/ --unit mm --edge-length-mm 1 --out prepared.h5\n");
   CLI11_PARSE(app, argc, argv);
@@ -53,12 +59,27 @@ int main(int argc, char** argv) {
   try {
     pipelines::PrepareOptions options;
     options.edge_length = edge_mm * 1e-3;
+    for (const std::string& item : surface_edges) {
+      const auto eq = item.find('=');
+      double mm = 0;
+      try {
+        size_t used = 0;
+        mm = eq == std::string::npos ? 0 : std::stod(item.substr(eq + 1), &used);
+        if (eq != std::string::npos && used != item.size() - eq - 1) mm = 0;
+      } catch (const std::exception&) {
+        mm = 0;
+      }
+      if (eq == std::string::npos || eq == 0 || !(mm > 0))
+        throw common::InputError("--surface-edge-length-mm", 0, "expected NAME=MM (e.g. femur=3.7), found '" + item + "'");
+      options.surface_edge_length[item.substr(0, eq)] = mm * 1e-3;
+    }
     options.unit = common::parse_length_unit(unit);
     options.max_cast_distance = max_cast_mm * 1e-3;
     options.remesh_iterations = iterations;
     std::ostringstream echo;
     echo << "model: " << model_dir << "\nedge_length_mm: " << edge_mm << "\nunit: " << unit
          << "\nmax_cast_distance_mm: " << max_cast_mm << "\nremesh_iterations: " << iterations << "\n";
+    for (const std::string& item : surface_edges) echo << "surface_edge_length_mm: " << item << "\n";
     common::log_info("options: model " + model_dir + ", edge " + std::to_string(edge_mm) + " mm, unit " + unit +
                      ", max cast " + std::to_string(max_cast_mm) + " mm, " + std::to_string(iterations) +
                      " remesh iterations -> " + out);

@@ -116,7 +116,7 @@ const GaitInputs& gait_inputs() {
       if (s.name != "prepare" && s.name != "comak") continue;
       std::string cmd = (fs::path(ARTHROSIM_BINARY_DIR) / "bin" / s.executable).string();
       for (const std::string& a : s.arguments) cmd += " '" + a + "'";
-      cmd += " -q";
+      cmd += " --quiet";
       std::printf("setup: %s\n", cmd.c_str());
       const auto t0 = std::chrono::steady_clock::now();
       const int rc = std::system(cmd.c_str());

@@ -196,6 +196,12 @@ TEST_F(RunnerTest, StagesFollowFromOutputs) {
       "--prepared", (out / "prepared.h5").string(), "--scene", osmotic.file.string(),
       "--scenario", "osmotic", "--out", (out / "surface_osmotic.h5").string()};
   EXPECT_EQ(surf.arguments, expect_args);
+  // prepare.surface_edge_length_mm items become --surface-edge-length-mm flags.
+  const Scene per_surface = scene(
+      "model: ../models/knee\noutputs: [prepared_model]\nprepare:\n  surface_edge_length_mm: [femur=4.2, patella=2]\n");
+  const StageStep prep_own = plan_stages(per_surface, out).at(0);
+  const std::vector<std::string> tail(prep_own.arguments.end() - 4, prep_own.arguments.end());
+  EXPECT_EQ(tail, (V{"--surface-edge-length-mm", "femur=4.2", "--surface-edge-length-mm", "patella=2"}));
   // Post gets kinematics only when COMAK is part of the run.
   const Scene report_osmotic = scene(
       "model: ../models/knee\noutputs: [report]\nsurface:\n  scenarios:\n"
