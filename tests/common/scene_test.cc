@@ -219,7 +219,7 @@ TEST_F(SceneTest, CanonicalTextIgnoresSpelling) {
                        "prepare: {edge_length_mm: 2.5}\n");
   EXPECT_EQ(a.prepare.canonical_text(),
             "prepare.edge_length_mm = 3\nprepare.max_cast_distance_mm = 10\n"
-            "prepare.mesh_unit = mm\nprepare.remesh_iterations = 5\n");
+            "prepare.mesh_unit = mm\nprepare.remesh_iterations = 5\nprepare.surface_edge_length_mm = []\n");
   EXPECT_EQ(a.prepare.canonical_text(), b.prepare.canonical_text());
   EXPECT_EQ(a.prepare.canonical_text(), c.prepare.canonical_text());
   EXPECT_EQ(d.prepare.value("edge_length_mm").canonical, "2.5");
