@@ -18,7 +18,13 @@
 //    (convex kinks between facets), g = -|p - c| with n = (c - p)/|c - p|.
 //    A closest point on the open boundary (the other surface's rim, an edge
 //    or corner used by one triangle side only) means p has slid beyond the
-//    edge of that surface: the edge/corner gap g = -|p - c| is kept while p
+//    edge of that surface. RimTreatment::kFadeInside (default): that is no
+//    contact, and contacts whose closest point lies on a face touching the
+//    rim are weighted by phi = s(r), r = sum_k N_k rho_k the barycentric
+//    interpolation of a node weight rho (0 on the rim, 1 elsewhere) and s the
+//    smoothstep r^2 (3 - 2 r): the force falls to zero, C1, before the rim.
+//    RimTreatment::kRimContacts (the earlier treatment, below): the
+//    edge/corner gap g = -|p - c| is kept while p
 //    is behind the boundary triangle's plane, weighted by
 //    phi = clamp(n . n_T / cos 45 deg, 0, 1) (n_T that triangle's normal):
 //    full weight when p lies squarely behind the rim, fading to zero as it
