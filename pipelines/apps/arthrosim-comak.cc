@@ -28,6 +28,7 @@
 #include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
+#include "pipelines/apps/name_value.h"
 
 using namespace arthrosim;
 namespace msk = arthrosim::musculoskeletal;
@@ -150,12 +151,8 @@ int main(int argc, char** argv) {
       }
     }
     for (const std::string& wa : weight_args) {
-      const size_t eq = wa.find('=');
-      char* end = nullptr;
-      const double w = eq == std::string::npos ? 0.0 : std::strtod(wa.c_str() + eq + 1, &end);
-      if (eq == std::string::npos || !end || *end != 0)
-        throw common::InputError("--muscle-weight: expected name=value, found '" + wa + "'");
-      o.muscle_weights[wa.substr(0, eq)] = w;  // name and range checked by ComakProblem
+      const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
+      o.muscle_weights[name] = w;  // name and range checked by ComakProblem
     }
     auto wants = [&](const char* e) { return std::find(effects.begin(), effects.end(), e) != effects.end(); };
     if (!wants("muscles"))

@@ -11,10 +11,10 @@
 
 #include <CLI/CLI.hpp>
 
-#include "common/error.h"
 #include "common/log.h"
 #include "common/mesh_io.h"
 #include "common/metadata.h"
+#include "pipelines/apps/name_value.h"
 #include "pipelines/prepare.h"
 
 using namespace arthrosim;
@@ -59,19 +59,9 @@ int main(int argc, char** argv) {
   try {
     pipelines::PrepareOptions options;
     options.edge_length = edge_mm * 1e-3;
-    for (const std::string& item : surface_edges) {
-      const auto eq = item.find('=');
-      double mm = 0;
-      try {
-        size_t used = 0;
-        mm = eq == std::string::npos ? 0 : std::stod(item.substr(eq + 1), &used);
-        if (eq != std::string::npos && used != item.size() - eq - 1) mm = 0;
-      } catch (const std::exception&) {
-        mm = 0;
-      }
-      if (eq == std::string::npos || eq == 0 || !(mm > 0))
-        throw common::InputError("--surface-edge-length-mm", 0, "expected NAME=MM (e.g. femur=3.7), found '" + item + "'");
-      options.surface_edge_length[item.substr(0, eq)] = mm * 1e-3;
+    for (const std::string& item : surface_edges) {  // names and ranges checked by prepare_model
+      const auto [name, mm] = pipelines::parse_name_value(item, "--surface-edge-length-mm");
+      options.surface_edge_length[name] = mm * 1e-3;
     }
     options.unit = common::parse_length_unit(unit);
     options.max_cast_distance = max_cast_mm * 1e-3;
