@@ -177,6 +177,65 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     json.begin_object().value("label", s.label).array("time_s", s.x).array("value_N", s.y).end_object();
   }
   json.end_array();
+  // The seed's accuracy rule per step of every scenario with mesh contact
+  // (/solver/penetration_ratio, docs/surface_output.md), on the trial clock
+  // like the forces: steps with active contacts only, as the stage checks it.
+  std::vector<report::Series> ratio_series;
+  std::vector<std::vector<std::string>> rule_rows;
+  json.begin_array("accuracy_rule");
+  for (const auto& [scenario, file] : in.surfaces) {
+    common::H5File f(file, common::H5File::Mode::kRead);
+    if (!f.exists("/solver/penetration_ratio") || !f.exists("/solver/time") || !f.exists("/solver/active_contacts")) continue;
+    const Eigen::VectorXd t = f.read_vector("/solver/time");
+    const Eigen::VectorXd r = f.read_vector("/solver/penetration_ratio");
+    const Eigen::VectorXd n = f.read_vector("/solver/active_contacts");
+    if (r.size() != t.size() || n.size() != t.size())
+      throw InputError(file, 0, "/solver/penetration_ratio, /solver/active_contacts and /solver/time have different lengths (" +
+                                    std::to_string(r.size()) + ", " + std::to_string(n.size()) + ", " + std::to_string(t.size()) + ")");
+    double offset = 0;  // surface clock -> trial clock (seating first)
+    if (f.exists("/trial_time") && f.exists("/time")) {
+      const Eigen::VectorXd tt = f.read_vector("/trial_time"), ts = f.read_vector("/time");
+      if (tt.size() > 0 && tt.size() == ts.size()) offset = tt(tt.size() - 1) - ts(ts.size() - 1);
+    }
+    const bool has_limit = f.has_attribute("/solver", "penetration_limit");
+    const double limit = has_limit ? f.attribute_double("/solver", "penetration_limit") : 0.0;
+    report::Series s;
+    s.label = "stage 2 " + scenario;
+    std::vector<double> in_contact;
+    int over = 0;
+    for (Eigen::Index i = 0; i < t.size(); ++i) {
+      if (n(i) <= 0) continue;
+      s.x.push_back(t(i) + offset);
+      s.y.push_back(r(i));
+      in_contact.push_back(r(i));
+      if (has_limit && r(i) > limit) ++over;
+    }
+    if (in_contact.empty()) continue;
+    std::vector<double> sorted = in_contact;
+    std::sort(sorted.begin(), sorted.end());
+    const size_t m = sorted.size();
+    const double median = m % 2 ? sorted[m / 2] : 0.5 * (sorted[m / 2 - 1] + sorted[m / 2]);
+    json.begin_object().value("scenario", scenario).value("steps_in_contact", static_cast<int>(m))
+        .value("median_ratio", median).value("max_ratio", sorted.back());
+    if (has_limit) json.value("limit", limit).value("steps_over_limit", over);
+    json.end_object();
+    rule_rows.push_back({scenario, std::to_string(m), report::number(median), report::number(sorted.back()),
+                         has_limit ? report::number(limit) : std::string("(not recorded)"),
+                         has_limit ? std::to_string(over) : std::string("-")});
+    if (has_limit && ratio_series.empty()) {
+      report::Series lim;
+      lim.label = "limit " + report::number(limit);
+      lim.x = {s.x.front(), s.x.back()};
+      lim.y = {limit, limit};
+      ratio_series.push_back(std::move(lim));
+    }
+    ratio_series.push_back(std::move(s));
+  }
+  json.end_array();
+  if (!rule_rows.empty())
+    add_figure("fig-accuracy-rule", "The seed's accuracy rule per step: largest interpenetration / largest deflection "
+                                    "(steps with active contacts)",
+               report::line_plot("Interpenetration / deflection", "time [s]", "ratio", ratio_series));
   // Key frames: peaks of the total stage-1 force, else largest deflection and last frame.
   std::vector<std::pair<std::string, double>> key_times;
   if (!force.empty()) {
@@ -366,6 +425,12 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
                         "fraction within " + report::number(opt.comparison.threshold_rad * 180.0 / std::numbers::pi) + " deg",
                         "outline distance after registration [mm]", "averaging radius [mm]"},
                        rows);
+  }
+  if (!rule_rows.empty()) {
+    h += "<h2>Accuracy rule of the mesh contact</h2>\n<p>Per step in contact: largest interpenetration over largest "
+         "deflection of any surface (the seed's rule asks for at most the limit, 0.1 by default).</p>\n";
+    h += report::table({"scenario", "steps in contact", "median ratio", "max ratio", "limit", "steps over the limit"},
+                       rule_rows);
   }
   h += "<h2>Figures</h2>\n<ol>";
   for (const auto& f : figures) h += "<li><a href=\"#" + f.id + "\">" + report::escape(f.caption) + "</a></li>";

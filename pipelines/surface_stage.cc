@@ -835,6 +835,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   if (contact) {
     out.set_attribute("/solver", "penetration_warnings", static_cast<std::int64_t>(penetration_warnings));
     out.set_attribute("/solver", "worst_penetration_ratio", worst_ratio);
+    out.set_attribute("/solver", "penetration_limit", limit);
     out.set_attribute("/solver", "max_penetration_m", res.max_penetration_m);
   }
   res.steps = s.steps;

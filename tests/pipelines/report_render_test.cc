@@ -24,7 +24,10 @@ namespace fs = std::filesystem;
 const fs::path kDir = fs::path(ARTHROSIM_BINARY_DIR) / "report_render_test";
 
 // Planar 41 x 31 grid, 50 x 30 mm, z = 0 (normals +z), seen along -z.
-void write_surface(const fs::path& path, double phase) {
+// With `walking`, also what a mesh-contact scenario writes (docs/surface_output.md):
+// /trial_time (a 0.02 s seating before the trial clock), the tibiofemoral force and
+// the per-step accuracy-rule records, the first step without active contacts.
+void write_surface(const fs::path& path, double phase, bool walking = false) {
   const int nx = 40, ny = 30, T = 5;
   Eigen::MatrixXd V((nx + 1) * (ny + 1), 3);
   for (int j = 0; j <= ny; ++j)
@@ -59,6 +62,16 @@ void write_surface(const fs::path& path, double phase) {
   f.create_group("/solver/femur");
   f.set_attribute("/solver/femur", "total_s", 12.5);
   f.set_attribute("/solver/femur", "newton_iterations", 42);
+  if (!walking) return;
+  const Eigen::VectorXd time = Eigen::VectorXd::LinSpaced(T, 0.0, 1.0);
+  f.write("/trial_time", Eigen::VectorXd(time.array() - 0.02));
+  Eigen::MatrixXd F = Eigen::MatrixXd::Zero(T, 3);
+  F.col(2) = Eigen::VectorXd::LinSpaced(T, 100.0, 900.0);
+  f.write("/contact/tibiofemoral/force", F);
+  f.write("/solver/time", Eigen::VectorXd(time.tail(T - 1)));
+  f.write("/solver/penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.5, 0.05, 0.2, 0.08).finished()));
+  f.write("/solver/active_contacts", Eigen::VectorXd((Eigen::VectorXd(4) << 0, 10, 12, 9).finished()));
+  f.set_attribute("/solver", "penetration_limit", 0.1);
 }
 
 void write_kinematics(const fs::path& path) {
@@ -123,7 +136,7 @@ std::string slurp(const fs::path& p) {
 TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   fs::create_directories(kDir);
   write_surface(kDir / "surface_osmotic.h5", 0.0);
-  write_surface(kDir / "surface_gait.h5", 0.3);
+  write_surface(kDir / "surface_gait.h5", 0.3, /*walking=*/true);
   write_kinematics(kDir / "kinematics.h5");
   PostInputs in;
   in.surfaces = {{"osmotic", (kDir / "surface_osmotic.h5").string()}, {"gait", (kDir / "surface_gait.h5").string()}};
@@ -132,13 +145,11 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   opt.view = ViewOptions{};  // along -z, y up: the grid's own plane
   opt.splitline_map = std::string(ARTHROSIM_SOURCE_DIR) + "/data/splitlines/synthetic_femur.csv";
   const PostSummary s = run_post(in, opt, (kDir / "full").string());
-  // contact + 2 x (3 key frames x (deflection + e1) + directions + overlay + error)
-  EXPECT_EQ(s.figures.size(), 1u + 2u * (6u + 3u));
+  // contact + accuracy rule + 2 x (3 key frames x (deflection + e1) + directions + overlay + error)
+  EXPECT_EQ(s.figures.size(), 2u + 2u * (6u + 3u));
   ASSERT_EQ(s.scenarios.size(), 2u);
-  // Only stage 2's contact force is absent (the surface stage writes none yet).
-  ASSERT_EQ(s.missing.size(), 1u);
-  EXPECT_NE(s.missing[0].find("stage-2 contact force"), std::string::npos);
-  EXPECT_EQ(check(kDir / "full", 19), 0);
+  EXPECT_TRUE(s.missing.empty());
+  EXPECT_EQ(check(kDir / "full", 20), 0);
   const std::string html = slurp(kDir / "full" / "report.html");
   EXPECT_NE(html.find("SYNTHETIC"), std::string::npos);
   EXPECT_NE(html.find("first peak"), std::string::npos);  // key frames from the force peaks
@@ -146,6 +157,14 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   EXPECT_EQ(html.find("stage 1 cop"), std::string::npos);
   EXPECT_EQ(html.find("stage 1 area"), std::string::npos);
   EXPECT_NE(html.find("total_s"), std::string::npos);     // solver statistics table
+  EXPECT_NE(html.find("stage 2 gait force |F|"), std::string::npos);
+  // The accuracy rule over the three steps in contact (0.05, 0.2, 0.08; the first
+  // step's 0.5 has no active contact and is not counted).
+  const std::string json = slurp(kDir / "full" / "summary.json");
+  for (const char* item : {"\"steps_in_contact\": 3", "\"median_ratio\": 0.08", "\"max_ratio\": 0.2",
+                           "\"limit\": 0.1", "\"steps_over_limit\": 1"})
+    EXPECT_NE(json.find(item), std::string::npos) << item;
+  EXPECT_NE(html.find("Accuracy rule of the mesh contact"), std::string::npos);
   // The gait field is the osmotic one turned by 0.3 rad = 17.2 deg, so its mean error
   // is larger; the grid's outline is a rectangle, not the map's outline, so only the
   // ordering is asserted here (the known-answer bound is post_synthetic_test).
