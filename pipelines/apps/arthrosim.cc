@@ -6,11 +6,13 @@
 #include <CLI/CLI.hpp>
 
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 
 #include "common/effects.h"
 #include "common/error.h"
 #include "common/scene.h"
+#include "common/scene_edit.h"
 #include "common/version.h"
 #include "pipelines/runner.h"
 #include "pipelines/study.h"
@@ -34,6 +36,10 @@ Sample runs (from the repository root, after scripts/build.sh):
       rerun every stage of the plan
   build/bin/arthrosim run data/scenes/osmotic.yaml --out out/osmotic
       the seed's osmotic scenario: prepare, then the surface stage (no COMAK)
+  build/bin/arthrosim run data/scenes/gait.yaml --out out/gait_stance \
+      --set surface.scenarios.gait.end_time_s=0.63
+      the scene with one option changed (dotted keys as in `arthrosim study`;
+      the changed scene is written to OUT/scene_set.yaml and run from there)
   build/bin/arthrosim schema
       every scene key with its type, unit, default and range, and every effect
   build/bin/arthrosim study accuracy data/studies/surface_edge_length.yaml \
@@ -109,6 +115,11 @@ int main(int argc, char** argv) {
   run->add_option("--out", out_dir, "output folder (created when missing)")->capture_default_str();
   run->add_flag("--force", options.force, "run every planned stage even when up to date");
   run->add_flag("--dry-run", options.dry_run, "print the plan and what would run; run nothing");
+  std::vector<std::string> set_items;
+  run->add_option("--set", set_items,
+                  "KEY=VALUE: change one scalar option of the scene (dotted key, e.g. "
+                  "surface.scenarios.gait.end_time_s=0.3 or prepare.edge_length_mm=2.5); repeatable")
+      ->allow_extra_args(false);
 
   CLI::App* schema = app.add_subcommand("schema", "print every scene key and effect");
 
@@ -173,7 +184,27 @@ int main(int argc, char** argv) {
   }
 
   try {
-    const cm::Scene scene = cm::load_scene(scene_file);
+    std::string file = scene_file;
+    if (!set_items.empty()) {
+      // The scene with the settings applied (paths made absolute) goes into
+      // the output folder: the stage programs read it from there.
+      std::vector<std::pair<std::string, std::string>> settings;
+      for (const std::string& item : set_items) {
+        const size_t eq = item.find('=');
+        if (eq == std::string::npos || eq == 0 || eq + 1 == item.size())
+          throw cm::InputError("--set: expected KEY=VALUE, found '" + item + "'");
+        settings.emplace_back(item.substr(0, eq), item.substr(eq + 1));
+      }
+      const cm::Scene original = cm::load_scene(scene_file);
+      for (const auto& [key, value] : settings) cm::find_settable_key(original, key);
+      const std::string text = cm::edit_scene_text(scene_file, settings);
+      std::filesystem::create_directories(out_dir);
+      file = (std::filesystem::path(out_dir) / "scene_set.yaml").string();
+      std::ofstream(file, std::ios::binary) << text;
+      std::cout << "arthrosim: scene " << scene_file << " with " << set_items.size()
+                << " setting(s) written to " << file << "\n";
+    }
+    const cm::Scene scene = cm::load_scene(file);
     options.out_dir = out_dir;
     options.stage_dir = pl::default_stage_dir();
     const pl::RunReport report = pl::run_scene(scene, options, std::cout);

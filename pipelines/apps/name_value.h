@@ -11,7 +11,7 @@
 namespace arthrosim::pipelines {
 
 /// NAME=VALUE -> (NAME, VALUE); throws common::InputError naming the option
-/// and the item when there is no '=', no name, or VALUE is not a whole number.
+/// and the item when there is no '=', no name, or VALUE is not a number.
 inline std::pair<std::string, double> parse_name_value(const std::string& item, const std::string& option) {
   const size_t eq = item.find('=');
   char* end = nullptr;
