@@ -821,30 +821,53 @@ SeriesDifference compare_series(const TimeSeries& x, const TimeSeries& ref) {
   return d;
 }
 
-int recommend_setting(const std::vector<std::vector<std::size_t>>& grid,
-                      const std::vector<double>& error, const std::vector<double>& cost,
-                      double tolerance) {
+namespace {
+bool at_least_as_fine(const std::vector<std::vector<std::size_t>>& grid, std::size_t t, std::size_t s) {
+  for (std::size_t a = 0; a < grid[s].size(); ++a) {
+    if (grid[t][a] < grid[s][a]) return false;
+  }
+  return true;
+}
+// Setting s qualifies when it and every setting at least as fine have a
+// known error within the tolerance.
+std::vector<bool> qualifying(const std::vector<std::vector<std::size_t>>& grid,
+                             const std::vector<double>& error, double tolerance) {
   const std::size_t n = grid.size();
-  auto at_least_as_fine = [&](std::size_t t, std::size_t s) {  // t >= s on every axis
-    for (std::size_t a = 0; a < grid[s].size(); ++a) {
-      if (grid[t][a] < grid[s][a]) return false;
-    }
-    return true;
-  };
   std::vector<bool> ok(n, false);
   for (std::size_t s = 0; s < n; ++s) {
     bool all = true;
     for (std::size_t t = 0; t < n && all; ++t) {
-      if (at_least_as_fine(t, s)) all = std::isfinite(error[t]) && error[t] <= tolerance;
+      if (at_least_as_fine(grid, t, s)) all = std::isfinite(error[t]) && error[t] <= tolerance;
     }
     ok[s] = all;
   }
+  return ok;
+}
+}  // namespace
+
+int cheapest_qualifying_setting(const std::vector<std::vector<std::size_t>>& grid,
+                                const std::vector<double>& error, const std::vector<double>& cost,
+                                double tolerance) {
+  const std::vector<bool> ok = qualifying(grid, error, tolerance);
+  int best = -1;
+  for (std::size_t s = 0; s < ok.size(); ++s) {
+    if (ok[s] && std::isfinite(cost[s]) && (best < 0 || cost[s] < cost[static_cast<std::size_t>(best)]))
+      best = static_cast<int>(s);
+  }
+  return best;
+}
+
+int recommend_setting(const std::vector<std::vector<std::size_t>>& grid,
+                      const std::vector<double>& error, const std::vector<double>& cost,
+                      double tolerance) {
+  const std::size_t n = grid.size();
+  const std::vector<bool> ok = qualifying(grid, error, tolerance);
   int best = -1;
   for (std::size_t s = 0; s < n; ++s) {
     if (!ok[s]) continue;
     bool coarsest = true;
     for (std::size_t u = 0; u < n && coarsest; ++u) {
-      if (u != s && ok[u] && at_least_as_fine(s, u) && grid[u] != grid[s]) coarsest = false;
+      if (u != s && ok[u] && at_least_as_fine(grid, s, u) && grid[u] != grid[s]) coarsest = false;
     }
     if (!coarsest) continue;
     const double c = std::isfinite(cost[s]) ? cost[s] : std::numeric_limits<double>::infinity();
@@ -1196,6 +1219,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
     Recommendation rec;
     rec.stage = stage;
     rec.setting = recommend_setting(gi, err, cost, options.tolerance);
+    rec.cheapest = cheapest_qualifying_setting(gi, err, cost, options.tolerance);
     std::set<std::string> keys;
     for (const SettingResult& r : result.settings) {
       for (const StageRecord& x : r.stages) {
@@ -1216,6 +1240,12 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
       rec.reason = "coarsest setting from which every finer setting stays within " +
                    percent(options.tolerance) + " of the reference (stage error " +
                    percent(err[s]) + ", " + fixed(cost[s], 1) + " s to this output)";
+      if (rec.cheapest >= 0 && rec.cheapest != rec.setting) {
+        const std::size_t c = static_cast<std::size_t>(rec.cheapest);
+        rec.reason += "; the finer " + result.settings[c].label + " also qualifies and took less time (" +
+                      fixed(cost[c], 1) + " s, stage error " + percent(err[c]) +
+                      "): coarser is not cheaper here";
+      }
     } else if (std::none_of(err.begin(), err.end(), [](double e) { return std::isfinite(e); })) {
       rec.reason = "no error available for this stage (see the notes)";
     } else {
@@ -1412,6 +1442,8 @@ void write_study_outputs(const StudyOptions& options, const StudyResult& result)
   for (const Recommendation& r : result.recommended) {
     j.begin_object().value("stage", r.stage)
         .value("setting", r.setting >= 0 ? result.settings[static_cast<std::size_t>(r.setting)].label : "")
+        .value("cheapest_qualifying",
+               r.cheapest >= 0 ? result.settings[static_cast<std::size_t>(r.cheapest)].label : "")
         .value("reason", r.reason).end_object();
   }
   j.end_array();

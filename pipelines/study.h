@@ -127,6 +127,8 @@ struct Recommendation {
   std::string stage;
   int setting = -1;     ///< index into StudyResult::settings; -1: none qualifies
   std::string reason;
+  /// cheapest_qualifying_setting(); reported when it is not `setting`.
+  int cheapest = -1;
 };
 
 struct StudyResult {
@@ -197,6 +199,14 @@ std::vector<Metric> post_metrics(const std::filesystem::path& file,
 int recommend_setting(const std::vector<std::vector<std::size_t>>& grid,
                       const std::vector<double>& error, const std::vector<double>& cost,
                       double tolerance);
+
+/// The cheapest (cost) of all qualifying settings in the sense of
+/// recommend_setting, coarsest or not; -1 when none qualifies or no
+/// qualifying setting has a finite cost. Coarser is not always cheaper: a
+/// looser Newton floor can cost more rejected steps than it saves.
+int cheapest_qualifying_setting(const std::vector<std::vector<std::size_t>>& grid,
+                                const std::vector<double>& error, const std::vector<double>& cost,
+                                double tolerance);
 
 /// Settings on the Pareto front of (time, error): none other is at most as
 /// slow and at most as wrong, and strictly better in one. NaN points excluded.
