@@ -52,7 +52,15 @@ SurfaceField read_surface_field(const std::string& path, const std::string& surf
     for (Eigen::Index i = 0; i < N; ++i)
       for (int k = 0; k < 3; ++k) s.e1_dir[t](i, k) = d(t, i, k);
   }
-  if (f.exists("/time")) {
+  // A run with imposed kinematics starts with a seating ramp: /trial_time
+  // puts its frames on the kinematics file's clock, where the report's key
+  // frames (stage-1 force peaks) and force curves live.
+  if (f.exists("/trial_time")) {
+    s.time = f.read_vector("/trial_time");
+    if (s.time.size() != T)
+      throw InputError(path, 0, "dataset /trial_time: expected " + std::to_string(T) + " frames, found " +
+                                    std::to_string(s.time.size()));
+  } else if (f.exists("/time")) {
     s.time = f.read_vector("/time");
   } else {
     s.time = Eigen::VectorXd::LinSpaced(T, 0, T - 1);

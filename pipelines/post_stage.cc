@@ -188,7 +188,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     if (!f.exists("/solver/penetration_ratio") || !f.exists("/solver/time") || !f.exists("/solver/active_contacts")) continue;
     const Eigen::VectorXd t = f.read_vector("/solver/time");
     const Eigen::VectorXd r = f.read_vector("/solver/penetration_ratio");
-    const Eigen::VectorXd n = f.read_vector("/solver/active_contacts");
+    const Eigen::VectorXi n = f.read_vector_int("/solver/active_contacts");  // int, as the stage writes it
     if (r.size() != t.size() || n.size() != t.size())
       throw InputError(file, 0, "/solver/penetration_ratio, /solver/active_contacts and /solver/time have different lengths (" +
                                     std::to_string(r.size()) + ", " + std::to_string(n.size()) + ", " + std::to_string(t.size()) + ")");

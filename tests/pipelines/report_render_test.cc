@@ -70,7 +70,7 @@ void write_surface(const fs::path& path, double phase, bool walking = false) {
   f.write("/contact/tibiofemoral/force", F);
   f.write("/solver/time", Eigen::VectorXd(time.tail(T - 1)));
   f.write("/solver/penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.5, 0.05, 0.2, 0.08).finished()));
-  f.write("/solver/active_contacts", Eigen::VectorXd((Eigen::VectorXd(4) << 0, 10, 12, 9).finished()));
+  f.write("/solver/active_contacts", Eigen::VectorXi((Eigen::VectorXi(4) << 0, 10, 12, 9).finished()));  // int, as written
   f.set_attribute("/solver", "penetration_limit", 0.1);
 }
 
@@ -165,6 +165,9 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
                            "\"limit\": 0.1", "\"steps_over_limit\": 1"})
     EXPECT_NE(json.find(item), std::string::npos) << item;
   EXPECT_NE(html.find("Accuracy rule of the mesh contact"), std::string::npos);
+  // Key frames of the walking scenario on the trial clock (/trial_time =
+  // /time - 0.02 s): the first peak's frame is the one at 0.25 - 0.02 s.
+  EXPECT_NE(json.find("\"name\": \"first peak\",\n          \"time_s\": 0.23"), std::string::npos) << json.substr(0, 3000);
   // The gait field is the osmotic one turned by 0.3 rad = 17.2 deg, so its mean error
   // is larger; the grid's outline is a rectangle, not the map's outline, so only the
   // ordering is asserted here (the known-answer bound is post_synthetic_test).
