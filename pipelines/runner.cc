@@ -121,10 +121,13 @@ std::string portable_arguments(const StageStep& step, const fs::path& out_dir,
     for (const auto& [label, path] : step.inputs) {
       if (fs::path(a) == path) word = "<" + label + ">";
     }
-    if (fs::path(a) == scene_file) word = "<scene>";
     const std::string prefix = out_dir.string() + "/";
     if (a == out_dir.string()) word = "$OUT";
     if (a.rfind(prefix, 0) == 0) word = "$OUT/" + a.substr(prefix.size());
+    // Last: a scene inside the output folder (`arthrosim run --set` writes
+    // OUT/scene_set.yaml) is still the scene, whose options are hashed
+    // separately; where it lives must not force a rerun.
+    if (fs::path(a) == scene_file) word = "<scene>";
     out += (out.empty() ? "" : " ") + word;
   }
   return out;
