@@ -43,7 +43,7 @@ int main(int argc, char** argv) {
       "  arthrosim-surface --scene data/scenes/cantilever_plate.yaml --out cantilever.h5\n"
       "      # generic quad mesh (scene key mesh): cantilever plate vs beam theory\n"
       "  arthrosim run data/scenes/gait.yaml --out out/gait [--dry-run]\n"
-      "      # one gait cycle (about 12 min on 2 cores): prepare, COMAK, then this stage with mesh contact\n");
+      "      # one gait cycle (about 9 min on 2 cores): prepare, COMAK, then this stage with mesh contact\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-surface");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));

@@ -537,11 +537,10 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
   const fs::path out = "/nonexistent/out";
   using V = std::vector<std::string>;
   const Scene demo = common::load_scene(dir / "demo.yaml");
-  // The demo runs every stage this build has; the walking scenarios wait for
-  // mesh_contact (issue 6), so the demo lists only the osmotic one.
+  // The demo runs every stage and the seed's three surface scenarios.
   EXPECT_EQ(RunnerTest::names(plan_stages(demo, out)),
-            (V{"prepare", "comak", "surface.osmotic", "post"}));
-  EXPECT_EQ(demo.scenarios.size(), 1u);
+            (V{"prepare", "comak", "surface.osmotic", "surface.gait", "surface.gait_osmotic", "post"}));
+  EXPECT_EQ(demo.scenarios.size(), 3u);
   EXPECT_FALSE(demo.require_scenario("osmotic").wants("mesh_contact"));
 
   const Scene osmotic = common::load_scene(dir / "osmotic.yaml");
@@ -559,6 +558,26 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
             (V{"prepare", "comak", "surface.gait_osmotic"}));
   EXPECT_TRUE(both.require_scenario("gait_osmotic").wants("osmotic_pressure"));
   EXPECT_TRUE(both.require_scenario("gait_osmotic").wants("mesh_contact"));
+
+  // The demo's walking scenarios are the bundled walking scenes' over stance:
+  // every option, effect and the prepared resolution the same, apart from
+  // end_time_s and the description (the demo file repeats the settings).
+  EXPECT_EQ(demo.prepare.canonical_text(), gait.prepare.canonical_text());
+  EXPECT_EQ(demo.model, gait.model);
+  for (const Scene* whole : {&gait, &both}) {
+    const std::string name = whole->scenarios.front().name;
+    const common::Scenario& stance = demo.require_scenario(name);
+    EXPECT_EQ(stance.effects, whole->scenarios.front().effects) << name;
+    auto options = [](const common::Scenario& sc) {
+      std::vector<std::pair<std::string, std::string>> kept;
+      for (const auto& kv : sc.options.canonical())
+        if (kv.first.find("end_time_s") == std::string::npos && kv.first.find("description") == std::string::npos)
+          kept.push_back(kv);
+      return kept;
+    };
+    EXPECT_EQ(options(stance), options(whole->scenarios.front())) << name;
+    EXPECT_DOUBLE_EQ(stance.options.si("end_time_s"), 0.63) << name;
+  }
 }
 
 }  // namespace

@@ -6,35 +6,70 @@ add_test(NAME sample.arthrosim.schema COMMAND arthrosim schema)
 set_tests_properties(sample.arthrosim.schema PROPERTIES LABELS sample
   PASS_REGULAR_EXPRESSION "edge_length_mm.*ipopt_tolerance.*time_step_s.*angle_threshold_deg.*mesh_contact")
 
-# The demo scene runs prepare, comak, surface (osmotic) and post;
-# registered once that program is part of the source tree.
+# The demo scene runs prepare, comak, the three surface scenarios and post;
+# registered once that program is part of the source tree. The suite shortens
+# the two walking scenarios to their first 30 ms (seating plus three steps)
+# with --set; README command 1 runs the demo as bundled (stance, 0.63 s).
 if(EXISTS ${CMAKE_SOURCE_DIR}/pipelines/apps/arthrosim-prepare.cc)
   set(_demo_out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_demo)
+  set(_demo_short --set surface.scenarios.gait.end_time_s=0.03 --set surface.scenarios.gait_osmotic.end_time_s=0.03)
   # `arthrosim run data/scenes/demo.yaml --out out/demo` (--force: always run
   # the stage, whatever an earlier ctest left behind).
   add_test(NAME sample.arthrosim.demo
-    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} --force
+    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} --force ${_demo_short}
     WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
   set_tests_properties(sample.arthrosim.demo PROPERTIES LABELS sample
     FIXTURES_SETUP arthrosim_demo
     TIMEOUT 600
-    PASS_REGULAR_EXPRESSION "comak: effects built: ligaments [0-9]+, muscles 13.*surface.osmotic: effects built: foundation_springs.*arthrosim: finished: prepare ran .*comak ran .*surface.osmotic ran .*post ran"
-    FAIL_REGULAR_EXPRESSION "mesh_contact|[1-9][0-9]* failed")
+    PASS_REGULAR_EXPRESSION "with 2 setting\\(s\\) written to .*scene_set.yaml.*comak: effects built: ligaments [0-9]+, muscles 13.*surface.osmotic: effects built: foundation_springs.*surface.gait: effects built: imposed_kinematics [0-9]+, foundation_springs [0-9]+, foundation_damping [0-9]+, periphery_fixed [0-9]+, inertia [0-9]+, mesh_contact 2\n.*surface.gait_osmotic: effects built: imposed_kinematics [0-9]+, foundation_springs [0-9]+, foundation_damping [0-9]+, osmotic_pressure [0-9]+, periphery_fixed [0-9]+, inertia [0-9]+, mesh_contact 2\n.*arthrosim: finished: prepare ran .*comak ran .*surface.osmotic ran .*surface.gait ran .*surface.gait_osmotic ran .*post ran"
+    FAIL_REGULAR_EXPRESSION "[1-9][0-9]* failed")
   # The same run again reuses every stage.
   add_test(NAME sample.arthrosim.demo_reuse
-    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out}
+    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} ${_demo_short}
     WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
   set_tests_properties(sample.arthrosim.demo_reuse PROPERTIES LABELS sample
     FIXTURES_REQUIRED arthrosim_demo
-    PASS_REGULAR_EXPRESSION "prepare: skipping .* inputs, options and code unchanged.*arthrosim: finished: prepare reused, comak reused, surface.osmotic reused, post reused")
+    PASS_REGULAR_EXPRESSION "prepare: skipping .* inputs, options and code unchanged.*arthrosim: finished: prepare reused, comak reused, surface.osmotic reused, surface.gait reused, surface.gait_osmotic reused, post reused")
   # `--dry-run` on the same folder: says it would reuse, runs nothing.
   add_test(NAME sample.arthrosim.demo_dry_run
-    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} --dry-run
+    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} --dry-run ${_demo_short}
     WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
   set_tests_properties(sample.arthrosim.demo_dry_run PROPERTIES LABELS sample
     FIXTURES_REQUIRED arthrosim_demo DEPENDS sample.arthrosim.demo_reuse
     PASS_REGULAR_EXPRESSION "prepare: would skip .*dry run finished: prepare would be reused")
+  # The demo as bundled (no --set) plans the walking scenarios to 0.63 s:
+  # a dry run in the same folder sees the option change and would rerun them.
+  add_test(NAME sample.arthrosim.demo_bundled_dry_run
+    COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} --dry-run
+    WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+  set_tests_properties(sample.arthrosim.demo_bundled_dry_run PROPERTIES LABELS sample
+    FIXTURES_REQUIRED arthrosim_demo DEPENDS sample.arthrosim.demo_dry_run
+    PASS_REGULAR_EXPRESSION "surface.gait: would run .*options changed: surface.gait.end_time_s 0.03 -> 0.63")
 endif()
+
+# `arthrosim run --set`: an unknown key and a bad value stop before anything
+# runs (exit 1), naming the key or the line and column of the written scene.
+add_test(NAME sample.arthrosim.set_unknown_key
+  COMMAND sh -c "$<TARGET_FILE:arthrosim> run data/scenes/osmotic.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_set --dry-run --set surface.scenarios.osmotic.pressure=0.1 2>&1; echo exit=$?"
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.set_unknown_key PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "unknown scene key 'surface.scenarios.osmotic.pressure'.*exit=1")
+add_test(NAME sample.arthrosim.set_bad_value
+  COMMAND sh -c "$<TARGET_FILE:arthrosim> run data/scenes/osmotic.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_set --dry-run --set surface.scenarios.osmotic.osmotic_pressure_mpa=abc 2>&1; echo exit=$?"
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.set_bad_value PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "scene_set.yaml:[0-9]+:[0-9]+: error: 'osmotic_pressure_mpa': expected a number, found 'abc'.*exit=1")
+add_test(NAME sample.arthrosim.set_malformed
+  COMMAND sh -c "$<TARGET_FILE:arthrosim> run data/scenes/osmotic.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_set --dry-run --set prepare.edge_length_mm 2>&1; echo exit=$?"
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.set_malformed PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "--set: expected KEY=VALUE, found 'prepare.edge_length_mm'.*exit=1")
+add_test(NAME sample.arthrosim.set_dry_run
+  COMMAND arthrosim run data/scenes/osmotic.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_set --dry-run
+          --set prepare.edge_length_mm=2.5
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.set_dry_run PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "with 1 setting\\(s\\) written to .*scene_set.yaml.*plan: prepare surface.osmotic")
 
 # `arthrosim run data/scenes/osmotic.yaml`: prepare, then the osmotic surface
 # scenario; no musculoskeletal stage, no mesh contact (the runner checks the
