@@ -348,6 +348,7 @@ void HhtIntegrator::advance_to(double t_end) {
     std::ostringstream s;
     s << "t=" << t_ << " s, dt=" << h << " s: " << reason;
     stats_.rejections.push_back(s.str());
+    if (opts_.on_rejection) opts_.on_rejection(stats_.rejections.back());
     // Give up after max_halvings consecutive halvings, or when a step no
     // longer than min_step_fraction dt_s fails: otherwise rare successes of
     // ever shorter steps (each resetting the count) could creep on without end.

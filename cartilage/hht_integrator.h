@@ -38,6 +38,7 @@
 // again, up to dt_s.
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -92,6 +93,10 @@ struct IntegratorOptions {
   int steps_before_growth = 4;     ///< successful steps before doubling dt back
   LinearSolverChoice solver = LinearSolverChoice::kAuto;
   bool keep_step_log = true;       ///< keep per-step residual histories
+  /// Called at once for every rejected (halved) step with its record line
+  /// (also kept in statistics().rejections), so a caller can report it while
+  /// a single advance_to() is still creeping on with short steps.
+  std::function<void(const std::string& rejection)> on_rejection;
 };
 
 enum class IntegratorStatus { kNotStarted, kRunning, kFailed };

@@ -695,6 +695,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
                                    std::to_string(reports[k].counts.max_penetration_m * 1e3) +
                                    " mm at t = 0; increase seating_offset_mm (now " +
                                    std::to_string(seat_offset * 1e3) + " mm)");
+  // Rejections are reported as they happen: one output step may hold many
+  // halved sub-steps, and the run must not look idle meanwhile.
+  long rejections_logged = 0;
+  iopt.on_rejection = [&](const std::string& rejection) {
+    common::log_warn("surface " + sc->name + ": step rejected and halved (" + std::to_string(++rejections_logged) +
+                     " so far): " + rejection);
+  };
   HhtIntegrator integrator(system, iopt);
   integrator.initialize(0.0, q0);
   common::log_info("scenario " + sc->name + ": " +
@@ -776,9 +783,6 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
                                std::to_string(penetration_warnings) + ")");
           }
         }
-        for (long j = last_rejections; j < s.rejected_steps && j < static_cast<long>(s.rejections.size()); ++j)
-          common::log_warn("surface " + sc->name + ": step rejected and halved (" + std::to_string(j + 1) +
-                           " so far): " + s.rejections[j]);
         last_iterations = s.newton_iterations;
         last_rejections = s.rejected_steps;
         t = t_next;

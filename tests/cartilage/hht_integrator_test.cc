@@ -270,6 +270,9 @@ TEST(Hht, EverShorterStepsStopAtTheStepFloor) {
   o.max_halvings = 30;  // the count of consecutive halvings must not be what stops it
   o.min_step_fraction = 1.0 / 256;
   o.max_newton_iterations = 8;
+  // Every rejection reaches the caller at once, during the one advance_to().
+  std::vector<std::string> reported;
+  o.on_rejection = [&](const std::string& r) { reported.push_back(r); };
   HhtIntegrator hht(sys, o);
   hht.initialize(0, Eigen::VectorXd::Zero(1));
   try {
@@ -285,6 +288,8 @@ TEST(Hht, EverShorterStepsStopAtTheStepFloor) {
     // t = 1 - 4e-4 / 1.4: a few hundred steps at most, not an endless crawl.
     EXPECT_GT(hht.time(), 0.99);
     EXPECT_LT(hht.statistics().steps, 2000);
+    EXPECT_EQ(reported, hht.statistics().rejections);
+    EXPECT_EQ(static_cast<long>(reported.size()), hht.statistics().rejected_steps);
   }
 }
 
