@@ -100,3 +100,12 @@ add_test(NAME sample.arthrosim.study_accuracy_grid
   WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
 set_tests_properties(sample.arthrosim.study_accuracy_grid PROPERTIES LABELS sample
   PASS_REGULAR_EXPRESSION "study: \\[4/4\\] done.*prepare reused.*recommended for surface.cantilever: .*study: wrote .*report.html")
+
+# The --set sample of `arthrosim --help` (gait over stance), as a dry run:
+# the plan and the written scene, nothing solved.
+add_test(NAME sample.arthrosim.set_gait_stance
+  COMMAND arthrosim run data/scenes/gait.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/gait_stance
+          --set surface.scenarios.gait.end_time_s=0.63 --dry-run
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.set_gait_stance PROPERTIES LABELS sample
+  PASS_REGULAR_EXPRESSION "with 1 setting\\(s\\) written to .*gait_stance/scene_set.yaml.*plan: prepare comak surface.gait\n")
