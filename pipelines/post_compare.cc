@@ -194,13 +194,14 @@ double median_nn(const Eigen::MatrixX2d& p, const std::vector<bool>* use = nullp
   std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
   return d[d.size() / 2];
 }
+}  // namespace
+
 double median_of(std::vector<double> v) {
   if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
   std::sort(v.begin(), v.end());
   const size_t n = v.size();
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
-}  // namespace
 
 Eigen::Vector2d Registration::warp(const Eigen::Vector2d& p) const {
   Eigen::MatrixXd y = p.transpose();

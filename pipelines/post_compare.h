@@ -93,6 +93,9 @@ struct Registration {
 /// Resamples a closed polygon to n points equally spaced in arc length.
 Eigen::MatrixX2d resample_closed(const Eigen::MatrixX2d& polygon, int n);
 
+/// Median of the values (mean of the middle two for an even count); NaN when empty.
+double median_of(std::vector<double> v);
+
 Registration register_map(const Eigen::MatrixX2d& map_outline, const Eigen::MatrixX2d& model_outline,
                           const RegistrationOptions& options);
 

@@ -14,6 +14,7 @@
 #include "common/scene.h"
 #include "common/scene_edit.h"
 #include "common/version.h"
+#include "pipelines/apps/name_value.h"
 #include "pipelines/runner.h"
 #include "pipelines/study.h"
 
@@ -189,14 +190,8 @@ int main(int argc, char** argv) {
       // The scene with the settings applied (paths made absolute) goes into
       // the output folder: the stage programs read it from there.
       std::vector<std::pair<std::string, std::string>> settings;
-      for (const std::string& item : set_items) {
-        const size_t eq = item.find('=');
-        if (eq == std::string::npos || eq == 0 || eq + 1 == item.size())
-          throw cm::InputError("--set: expected KEY=VALUE, found '" + item + "'");
-        settings.emplace_back(item.substr(0, eq), item.substr(eq + 1));
-      }
-      const cm::Scene original = cm::load_scene(scene_file);
-      for (const auto& [key, value] : settings) cm::find_settable_key(original, key);
+      for (const std::string& item : set_items) settings.push_back(pl::split_name_value(item, "--set", "KEY=VALUE"));
+      // Checks the original scene and every key (the values: when the copy is loaded below).
       const std::string text = cm::edit_scene_text(scene_file, settings);
       std::filesystem::create_directories(out_dir);
       file = (std::filesystem::path(out_dir) / "scene_set.yaml").string();
