@@ -34,6 +34,16 @@ the curves here are shaped like them, not fitted to tabulated data):
     (1989/1990) J Orthop Res 7:849-860 / 8:383-392. Flexion ~30 deg at heel
     strike, ~-10 deg at ~52 %, ~34 deg at ~87 %; adduction ~+8 deg at ~18 %,
     ~-6 deg abduction at ~70 %; rotation within +-5 deg (internal +).
+  * Vertical GRF after the second peak: near-linear unloading during double
+    support, ~0.60 BW at 90 % of stance (Winter 2009 curve shape).
+  * Centre of pressure along the sole: keyed to the measured timing of the COP
+    sub-phases (heel contact 0-7 %, forefoot contact 7-12 %, foot flat 12-61 %,
+    push-off 61-100 % of stance; "Gait speed and gender effects on center of
+    pressure progression during normal walking", 2013, 30 young adults), with
+    anatomical positions at the boundaries (see COP_PROGRESSION). Issue 4: the
+    earlier "shape only" curve left the COP ~3 cm too far back at loading
+    response (external knee flexion moment 0.80 N m/kg instead of 0.4-0.6);
+    docs/trials.md gives the measurement.
   * Medio-lateral GRF ~0.05 BW directed medially with a small lateral
     transient at heel contact (Winter 2009; Perry 1992).
   * Free moment: a few N m (e.g. Li Y. et al. 2001, J Exp Biol 204:47-58);
@@ -111,17 +121,32 @@ ANKLE_FLEXION = [(0, 0), (7, -6), (20, 3), (35, 8), (45, 10), (55, 0), (62, -17)
                  (78, 8), (92, 2)]
 
 # ---- ground reaction key points: (percent of stance, value) -------------------
+# Unloading in double support (83-100 % of stance = 50-60 % of the cycle) is
+# close to linear from ~1.0 BW at contralateral heel strike to zero at toe-off
+# (Winter 2009 normative curve): ~0.6 BW at 90 % of stance (was 0.70, which with
+# the monotone interpolation kept ~0.5 BW at 94 % of stance).
 GRF_VERTICAL_BW = [(0, 0), (4, 0.35), (10, 0.85), (22, 1.10), (35, 0.92), (50, 0.78),
-                   (65, 0.92), (77, 1.10), (90, 0.70), (100, 0)]
+                   (65, 0.92), (77, 1.10), (90, 0.60), (100, 0)]
 GRF_AP_BW = [(0, 0), (15, -0.20), (30, -0.12), (50, 0.0), (55, 0.03), (70, 0.12),
              (85, 0.20), (95, 0.08), (100, 0)]
 # Right foot: medial is -Z.
 GRF_ML_BW = [(0, 0), (4, 0.02), (10, 0.0), (22, -0.05), (50, -0.035), (77, -0.05),
              (92, -0.02), (100, 0)]
 FREE_MOMENT_NM_PER_KG = [(0, 0), (10, -0.015), (35, 0.0), (70, 0.05), (100, 0)]
-# Centre of pressure: fraction of the heel-to-toe length along the sole.
-COP_PROGRESSION = [(0, 0.02), (10, 0.15), (30, 0.35), (50, 0.50), (70, 0.65), (85, 0.78),
-                   (100, 0.92)]
+# Centre of pressure: fraction of the heel-to-toe length along the sole, keyed to
+# the sub-phases of COP progression measured in 30 healthy young adults with a
+# foot pressure system ("Gait speed and gender effects on center of pressure
+# progression during normal walking", 2013; abstract read at
+# hearingaid.cc/made-in-china/uncategorized/100024171/; we believe Chiu et al.,
+# Gait & Posture, not checked): initial contact phase (heel only) 0-7 % of stance, forefoot
+# contact phase 7-12 %, foot-flat phase 12-61 %, forefoot push-off 61-100 %.
+# Positions at the phase boundaries are anatomical (not read off a curve): heel
+# pad 0.05, end of heel contact 0.12, forefoot contact (COP jumps to the
+# midfoot) 0.28, heel-off 0.60 (just behind the metatarsal heads at 0.73),
+# toe-off 0.95 (hallux). The previous curve (0.02 -> 0.92, "shape only") kept
+# the COP ~3 cm too far back in loading response, which gave an external knee
+# flexion moment of 0.8 N m/kg there (normative 0.4-0.6).
+COP_PROGRESSION = [(0, 0.05), (7, 0.12), (12, 0.28), (61, 0.60), (100, 0.95)]
 # Medio-lateral COP offset from the foot's long axis (m, +Z lateral for the right
 # foot): lateral heel contact, medial forefoot push-off.
 COP_ML_M = [(0, 0.005), (100, -0.010)]
