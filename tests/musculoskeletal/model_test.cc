@@ -175,6 +175,30 @@ TEST(ModelIo, BadFilesGiveFileLineErrors) {
        "unknown surface 'a'"},
       {"<arthrosim:spring name=\"x\"/>\n", "unknown element <arthrosim:spring>"},
       {"<arthrosim:prescribed joint=\"knee\"/>\n", "prescribed: expected a revolute"},
+      // Negative slack length (the "slack length <= 0": 0 above, < 0 here).
+      {"<arthrosim:ligament name=\"X\" stiffness=\"500\">\n"
+       "<bundle slack_length=\"-0.02\"><point body=\"femur\" xyz=\"0 0 0\"/><point body=\"tibia\" xyz=\"0 -0.05 0\"/></bundle>\n"
+       "</arthrosim:ligament>\n",
+       "slack length > 0"},
+      // A reference strain <= -1 would give a negative or infinite slack length.
+      {"<arthrosim:ligament name=\"X\" stiffness=\"500\">\n"
+       "<bundle reference_strain=\"-1\"><point body=\"femur\" xyz=\"0 0 0\"/><point body=\"tibia\" xyz=\"0 -0.05 0\"/></bundle>\n"
+       "</arthrosim:ligament>\n",
+       "reference_strain > -1"},
+      {"<arthrosim:ligament name=\"X\" stiffness=\"500\" reference_strain=\"0\" damping=\"-0.1\">\n"
+       "<bundle><point body=\"femur\" xyz=\"0 0 0\"/><point body=\"tibia\" xyz=\"0 -0.05 0\"/></bundle>\n"
+       "</arthrosim:ligament>\n",
+       "damping >= 0"},
+      // Unknown body on a muscle point; F_max <= 0.
+      {"<arthrosim:muscle name=\"m\" max_isometric_force=\"100\"><point body=\"femur\" xyz=\"0 0 0\"/>"
+       "<point body=\"foot\" xyz=\"0 0 0\"/></arthrosim:muscle>\n",
+       "unknown body 'foot'"},
+      {"<arthrosim:muscle name=\"m\" max_isometric_force=\"0\"><point body=\"femur\" xyz=\"0 0 0\"/>"
+       "<point body=\"tibia\" xyz=\"0 0 0\"/></arthrosim:muscle>\n",
+       "max_isometric_force > 0"},
+      // Missing mesh of a URDF link (<visual>), reported at the <mesh> line.
+      {"<link name=\"extra\"><visual><geometry>\n<mesh filename=\"no_such_bone.stl\"/></geometry></visual></link>\n",
+       "expected an existing file, found 'no_such_bone.stl'"},
       {"<arthrosim:ligament name=\"X\" stiffness=\"500\" reference_strain=\"0\">\n"
        "<bundle wrap=\"nope\"><point body=\"femur\" xyz=\"0 0 0\"/><point body=\"tibia\" xyz=\"0 -0.05 0\"/></bundle>\n"
        "</arthrosim:ligament>\n",
@@ -271,9 +295,10 @@ TEST(ModelForces, MuscleForcesAreEqualAndOppositeAndScaleWithActivation) {
 namespace {
 // Q must satisfy Q(q + e v) = Q(q) + e J v + O(e^2): the remainder shrinks 4x when e halves.
 void expect_taylor_second_order(const msk::Model& m, const Eigen::VectorXd& q,
-                                const msk::ForceOptions& opt, const std::vector<int>& cols) {
+                                const msk::ForceOptions& opt, const std::vector<int>& cols,
+                                const Eigen::VectorXd& activations = {}) {
   auto d = msk::make_data(m);
-  msk::evaluate_jacobian(m, d, q, {}, {}, opt, cols);
+  msk::evaluate_jacobian(m, d, q, {}, activations, opt, cols);
   const Eigen::MatrixXd J = d.dQ_dq;
   const Eigen::VectorXd Q0 = d.Q;
   std::mt19937_64 rng(7);
@@ -282,7 +307,7 @@ void expect_taylor_second_order(const msk::Model& m, const Eigen::VectorXd& q,
   for (int c : cols) v[c] = u(rng) * 0.01;  // mixed rad / ~1 cm scale per unit e
   std::vector<double> rem;
   for (double e : {0.2, 0.1, 0.05}) {
-    msk::evaluate_forces(m, d, q + e * v, {}, {}, opt);
+    msk::evaluate_forces(m, d, q + e * v, {}, activations, opt);
     rem.push_back((d.Q - Q0 - e * J * v).norm());
   }
   std::printf("Taylor remainders %.3e %.3e %.3e (ratios %.2f %.2f), |Jv| %.3e\n", rem[0], rem[1],
@@ -318,6 +343,27 @@ TEST(ModelForces, LigamentJacobianPassesTaylorTestAndIsSymmetric) {
   std::vector<int> all;
   for (int i = 0; i < m.num_coordinates(); ++i) all.push_back(i);
   expect_taylor_second_order(m, q, opt, all);
+}
+
+// Muscles: Q = a F_max r(q) with via points on four bodies (pelvis and
+// calcaneus on the prescribed hip and ankle joints): the finite-difference
+// dQ/dq over all 16 coordinates passes the same Taylor test, and the columns
+// of the prescribed coordinates are non-zero (the hip and ankle angles move
+// the biarticular paths).
+TEST(ModelForces, MuscleJacobianPassesTaylorTest) {
+  const auto m = msk::parse_model(model_xml(kSoftTissue), "inline.urdf", ".");
+  msk::ForceOptions opt;
+  opt.ligaments = opt.contact = false;
+  const Eigen::VectorXd q = some_q(m, 1.0);
+  const Eigen::Vector4d a(0.4, 0.3, 0.5, 0.2);
+  std::vector<int> all;
+  for (int i = 0; i < m.num_coordinates(); ++i) all.push_back(i);
+  auto d = msk::make_data(m);
+  msk::evaluate_jacobian(m, d, q, {}, a, opt, all);
+  // Rectus femoris (pelvis -> patella) and gastrocnemius (femur -> calcaneus).
+  EXPECT_GT(d.dQ_dq.col(m.tree.coordinate_index("hip_flexion")).norm(), 1.0);
+  EXPECT_GT(d.dQ_dq.col(m.tree.coordinate_index("ankle_flexion")).norm(), 1.0);
+  expect_taylor_second_order(m, q, opt, all, a);
 }
 
 #include "common/mesh_io.h"

@@ -33,7 +33,33 @@ Sources
          cruciates and collaterals near taut in extension, PCL and
          patellofemoral ligaments slack). They are NOT the calibrated
          lenhart2015 values (not available here) and should be calibrated
-         against passive laxity data before quantitative use.
+         against passive laxity data before quantitative use. Values written:
+         -0.03 .. 0.03 (see ligaments()).
+  [OS]   OpenSim Blankevoort1991Ligament (used by [L15] through opensim-jam):
+         damping coefficient c = 0.003 N s per unit strain rate (its default).
+  [GEO]  docs/knee_geometry.md: bone and cartilage meshes, per-vertex
+         cartilage thickness, landmarks (incl. hip and ankle centres from
+         Winter's segment-length fractions of the 1.65 m stature [S02]).
+
+Parameters that are not written to the file take the loader's defaults,
+which carry their own sources: transition strain e_t = 0.06 [B91]
+(musculoskeletal/ligament.h) and the contact ray length factor
+max_overlap_factor = 1 (rays as long as the combined thickness; a modelling
+choice, musculoskeletal/contact.h).
+
+Values without a physical source, stated as such:
+  - inertia tensors are written as zero: the statics (settle, COMAK) use
+    neither mass nor inertia, no dynamics runs on this model;
+  - the patella mass 0.02 kg (order of magnitude only; unused by statics);
+  - the joint <limit>s are wide bounds chosen by hand (flexion -20..140 deg,
+    other rotations +-20..45 deg, translations +-30 mm tibia / +-50 mm
+    patella); URDF requires them for revolute/prismatic joints; COMAK uses
+    them as the bounds of the secondary coordinates in its NLP, the passive
+    settle ignores them. They are generous bounds, not physiological limits;
+  - the pelvis and calcaneus points of the hip/knee-crossing and gastrocnemius
+    paths (ischial tuberosity, AIIS, ASIS, iliac crest, pubic ramus,
+    calcaneal tuberosity) are offsets from the hip and ankle centres placed
+    by anatomical description [ANAT], as are all via points.
 """
 import math
 import os
@@ -216,13 +242,16 @@ def write(res, out_name):
         o.append("  </link>")
 
     # Segment masses [W09] (thigh 0.100, leg 0.0465 of 61 kg); patella 0.02 kg (small,
-    # order of magnitude of a patella); statics do not use them.
+    # order of magnitude of a patella); statics do not use them. Inertia is
+    # written as zero (URDF's <inertial> requires it; unused by the statics).
     link("femur", 0.100 * body_mass, "femur_bone")
     link("tibia", 0.0465 * body_mass, "tibia_bone")
     link("patella", 0.02, "patella_bone")
     link("pelvis", None)
     link("calcaneus", None)
     rad = math.radians
+    # Joint limits: wide hand-chosen bounds (COMAK's variable bounds), not
+    # physiological limits (see the module docstring).
     # Tibiofemoral: flexion about -Z (positive = flexion), adduction about +X
     # (positive = varus of this right knee), internal rotation about +Y, then
     # translations along X (anterior), Y (superior), Z (lateral); all at the
@@ -276,6 +305,7 @@ def write(res, out_name):
         o.append('  <arthrosim:contact name="%s" casting="%s" target="femur_cartilage" '
                  'youngs_modulus_mpa="10" poisson_ratio="0.45" law="linear"/>' % (name, cast))
 
+    # Damping 0.003 N s per unit strain rate [OS]; e_t not written (loader default 0.06 [B91]).
     o.append("  <!-- ligaments: 14 groups of lenhart2015 (stiffness per bundle [N/strain]),")
     o.append("       slack lengths from the reference strain at full extension (q = 0) -->")
     for name, k, e_ref, bundles, wrap in ligaments(L):
