@@ -85,6 +85,9 @@ const std::vector<OptionSpec>& schema_table() {
       {"comak", "ankle_equilibrium", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
        "add the ankle moment balance (gastrocnemii plus soleus and tibialis anterior stand-ins) "
        "as a constraint (docs/comak.md)"},
+      {"comak", "body_inertia", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
+       "add the weight and d'Alembert forces of the tibia and patella bodies (URDF inertials, "
+       "moving with the model; the shank's terms leave the external load) (docs/comak.md)"},
       {"comak", "lowpass_cutoff_hz", T::kNumber, U::kHertz, "6", false, 0.1, 1000, "", false,
        "low-pass filter of trial kinematics and ground reactions"},
       // --- surface (defaults for every scenario; "overridable" ones may be set

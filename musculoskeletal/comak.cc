@@ -106,6 +106,9 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
   ankle_ = require_coordinate(model, "ankle_flexion");
   tibia_ = model.tree.body_index("tibia");
   if (tibia_ < 0) throw common::InputError(model.source + ": error: COMAK needs a body 'tibia'");
+  inertial_bodies_ = {tibia_};
+  if (const int patella = model.tree.body_index("patella"); patella >= 0)
+    inertial_bodies_.push_back(patella);
   free_ = model.free_coordinates;
   if (std::find(free_.begin(), free_.end(), flexion_) == free_.end())
     throw common::InputError(model.source + ": error: knee_flexion must be a free coordinate");
@@ -184,9 +187,29 @@ Eigen::VectorXd ComakProblem::external_generalized_force(const ModelData& data,
   Eigen::VectorXd Q = Eigen::VectorXd::Zero(model_.num_coordinates());
   const Pose& X_WT = data.kinematics.X_WB[tibia_];
   const Eigen::Matrix3d R_WT = X_WT.linear();
-  add_point_force(model_.tree, data.kinematics, tibia_, X_WT.translation(), R_WT * in.F_ext_T, Q);
-  add_body_couple(model_.tree, data.kinematics, tibia_, R_WT * in.M_ext_T, Q);
+  // With body_inertia the shank's weight and d'Alembert terms of the inverse
+  // dynamics are left out: the load is the foot's, moved from the ankle
+  // centre to the knee centre (the tibia origin); the tibia body's own terms
+  // come from inertial_generalized_force.
+  const Vec3 F_T = options_.body_inertia ? Vec3(in.F_foot_T) : Vec3(in.F_ext_T);
+  const Vec3 M_T = options_.body_inertia ? Vec3(in.M_foot_T + in.ankle_centre_T.cross(in.F_foot_T))
+                                         : Vec3(in.M_ext_T);
+  add_point_force(model_.tree, data.kinematics, tibia_, X_WT.translation(), R_WT * F_T, Q);
+  add_body_couple(model_.tree, data.kinematics, tibia_, R_WT * M_T, Q);
   if (options_.ankle_equilibrium) Q[ankle_] += external_ankle_moment(in);
+  return Q;
+}
+
+Eigen::VectorXd ComakProblem::inertial_generalized_force(const Eigen::VectorXd& q,
+                                                         const ComakFrameInput& in) const {
+  Eigen::VectorXd Q = Eigen::VectorXd::Zero(model_.num_coordinates());
+  if (!options_.body_inertia) return Q;
+  if (!in.has_femur_motion)
+    throw common::InputError(frame_name(in) + ": COMAK body inertia needs the femur's lab motion "
+                             "(comak_frame_inputs with the leg model of the inverse dynamics)");
+  RootMotion m = in.femur_motion;
+  m.coordinate = flexion_;
+  add_inertial_forces(model_.tree, q, inertial_bodies_, m, Q);
   return Q;
 }
 
@@ -202,7 +225,8 @@ Eigen::VectorXd ComakProblem::residual(ModelData& data, const ComakFrameInput& i
                                        const Eigen::VectorXd& q, const Eigen::VectorXd& a,
                                        const Eigen::VectorXd& e) const {
   evaluate_forces(model_, data, q, Eigen::VectorXd(), a, options_.forces);
-  const Eigen::VectorXd Qe = external_generalized_force(data, in);
+  Eigen::VectorXd Qe = external_generalized_force(data, in);
+  if (options_.body_inertia) Qe += inertial_generalized_force(q, in);
   const int nr = num_rows();
   Eigen::VectorXd r(nr);
   for (int k = 0; k < nr; ++k)
@@ -236,9 +260,13 @@ Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFram
     qp[secondary_[c]] += h;
     qm[secondary_[c]] -= h;
     forward_kinematics(model_.tree, qp, work.kinematics);
-    const Eigen::VectorXd Qp = external_generalized_force(work, in);
+    Eigen::VectorXd Qp = external_generalized_force(work, in);
     forward_kinematics(model_.tree, qm, work.kinematics);
-    const Eigen::VectorXd Qm = external_generalized_force(work, in);
+    Eigen::VectorXd Qm = external_generalized_force(work, in);
+    if (options_.body_inertia) {
+      Qp += inertial_generalized_force(qp, in);
+      Qm += inertial_generalized_force(qm, in);
+    }
     for (int k = 0; k < nf; ++k)
       J(k, nm + c) = data.dQ_dq(rows_[k], secondary_[c]) + (Qp[rows_[k]] - Qm[rows_[k]]) / (2 * h);
   }
@@ -520,6 +548,13 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     throw common::InputError(frame_name(in) + ": COMAK ankle equilibrium needs the load on the foot "
                              "from the inverse dynamics (a trial with pelvis and ground-reaction "
                              "columns); this frame has none (knee loads given by the trial?)");
+  if (o.body_inertia && (!in.has_foot_load || !in.has_femur_motion))
+    throw common::InputError(frame_name(in) + ": COMAK body inertia needs the load on the foot and "
+                             "the femur's lab motion from the inverse dynamics (a trial with "
+                             "pelvis and ground-reaction columns, frames from comak_frame_inputs "
+                             "with its leg model); this frame has " +
+                             std::string(in.has_foot_load ? "no femur motion" : "no foot load") +
+                             " (knee loads given by the trial?)");
   if (a_start.size() != nm)
     throw common::InputError("COMAK: expected " + std::to_string(nm) + " start activations");
 
@@ -602,7 +637,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
 }
 
 std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
-                                                int stride) {
+                                                int stride, const LegModel* leg) {
   const int n = loads.num_samples();
   // A truncated trial: the selection refers to the whole trial's frames.
   const int n_trial = loads.truncated ? loads.truncated->full_samples : n;
@@ -642,6 +677,31 @@ std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int firs
       f.F_foot_T = loads.F_foot_T.row(i).transpose();
       f.M_foot_T = loads.M_foot_T.row(i).transpose();
       f.ankle_centre_T = loads.ankle_centre_T;
+    }
+    if (leg && loads.source == KneeLoadSource::kInverseDynamics) {
+      // The femur frame of the knee model in the lab: the thigh frame's axes
+      // and the leg chain's knee centre, along the local Taylor path of the
+      // coordinates (the same path and step as the inverse dynamics).
+      using Coords = Eigen::Matrix<double, kNumTrialCoordinates, 1>;
+      const Coords q = loads.q.row(i).transpose(), qd = loads.qd.row(i).transpose(),
+                   qdd = loads.qdd.row(i).transpose();
+      RootMotion& m = f.femur_motion;
+      m.step = 1e-4;
+      for (int k = 0; k < 3; ++k) {
+        const double s = (k - 1) * m.step;
+        const LegPoses P = leg_poses(*leg, q + s * qd + 0.5 * s * s * qdd);
+        m.X_LR[k].setIdentity();
+        m.X_LR[k].linear() = P.X_WF.linear();
+        m.X_LR[k].translation() = P.X_WT.translation();
+        if (k == 1 && !loads.X_WT.empty() &&
+            !P.X_WT.matrix().isApprox(loads.X_WT[i].matrix(), 1e-9))
+          throw common::InputError(
+              "COMAK: frame " + std::to_string(i) + ": the leg chain's tibia pose differs from "
+              "the knee loads' (another leg model, or a left leg, which COMAK does not take)");
+      }
+      m.velocity = loads.qd(i, kKneeFlexion);
+      m.acceleration = loads.qdd(i, kKneeFlexion);
+      f.has_femur_motion = true;
     }
     out.push_back(f);
   }

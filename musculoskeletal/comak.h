@@ -54,10 +54,18 @@
 // ankle moment is internal to the shank+foot load and nothing asks the
 // gastrocnemii for ankle work (docs/comak.md).
 //
-// Inertia: the tibia belongs to the shank of the inverse dynamics
-// (knee_loads.h), so its weight and d'Alembert force are already in
-// F_ext/M_ext; the patella's (20 g) are neglected. No separate inertial
-// option exists.
+// Body inertia (ComakOptions::body_inertia, off by default): without it the
+// tibia's weight and d'Alembert force are those of the shank segment of the
+// inverse dynamics (knee_loads.h; anthropometric COM and inertia, tibia
+// moving with the trial's rigid leg chain), inside F_ext/M_ext, and the
+// patella's are neglected. With it, the external load is the FOOT's load
+// moved to the knee centre (the shank's terms taken out, so nothing counts
+// twice) and the tibia and patella bodies of the knee model get their own
+// weight and d'Alembert forces from their URDF masses, centres of mass and
+// inertias, moving with the model's kinematics: the femur frame's lab motion
+// from the trial's leg chain, the prescribed flexion's velocity and
+// acceleration from the trial, the secondary coordinates at zero rate
+// (add_inertial_forces, kinematics.h; docs/comak.md).
 //
 // Never silently: each frame reports Ipopt's status, iterations, objective,
 // equilibrium residuals (N, N m) and wall time. A frame counts as converged
@@ -126,6 +134,11 @@ struct ComakOptions {
   /// the foot (knee_loads.h), so a trial that gives knee loads directly
   /// cannot be used. The row is scaled like the other moment rows.
   bool ankle_equilibrium = false;
+  /// Weight and d'Alembert forces of the tibia and patella bodies (off by
+  /// default; see the header): needs the foot load and the femur's lab motion
+  /// of the inverse dynamics (ComakFrameInput::has_foot_load and
+  /// has_femur_motion; comak_frame_inputs with a LegModel gives both).
+  bool body_inertia = false;
   /// Warm-start attempt 1 of each frame with the previous converged frame's
   /// multipliers too (Ipopt warm_start_init_point), not only its point.
   bool warm_start_multipliers = true;
@@ -155,6 +168,14 @@ struct ComakFrameInput {
   Eigen::Vector3d F_foot_T = Eigen::Vector3d::Zero();  ///< [N]
   Eigen::Vector3d M_foot_T = Eigen::Vector3d::Zero();  ///< [N m]
   Eigen::Vector3d ankle_centre_T = Eigen::Vector3d::Zero();  ///< [m]
+  /// Lab motion of the femur frame (the model's world; origin at the knee
+  /// centre of the trial's leg chain, axes of its thigh frame) at t - step,
+  /// t, t + step along the trial's local Taylor path, and the knee flexion's
+  /// velocity and acceleration [rad/s, rad/s^2] in velocity/acceleration
+  /// (its `coordinate` is set by the problem). Used only with
+  /// ComakOptions::body_inertia, which needs has_femur_motion.
+  bool has_femur_motion = false;
+  RootMotion femur_motion;
   /// Why this frame has no finite input, naming the trial file, line and
   /// column (set by comak_frame_inputs for the first frame after a trial
   /// that ended early at a non-finite value; its values are then NaN).
@@ -217,7 +238,13 @@ class ComakProblem {
   Eigen::VectorXd coordinates(const ComakFrameInput& in, const Eigen::VectorXd& q_source) const;
   /// Q_ext (all coordinates) at the kinematics in data.
   Eigen::VectorXd external_generalized_force(const ModelData& data, const ComakFrameInput& in) const;
-  /// Unscaled residual Q + Q_ext + e over the equilibrium rows [N, N m]
+  /// Weight and d'Alembert generalized forces of the tibia and patella at q
+  /// (all coordinates; zero without options().body_inertia).
+  Eigen::VectorXd inertial_generalized_force(const Eigen::VectorXd& q,
+                                             const ComakFrameInput& in) const;
+  /// Bodies whose inertial forces are added (tibia, and patella if present).
+  const std::vector<int>& inertial_bodies() const { return inertial_bodies_; }
+  /// Unscaled residual Q + Q_ext (+ Q_inertia) + e over the equilibrium rows [N, N m]
   /// (e: one per free coordinate, or empty; the ankle row has none).
   Eigen::VectorXd residual(ModelData& data, const ComakFrameInput& in, const Eigen::VectorXd& q,
                            const Eigen::VectorXd& a, const Eigen::VectorXd& e) const;
@@ -233,7 +260,7 @@ class ComakProblem {
  private:
   const Model& model_;
   ComakOptions options_;
-  std::vector<int> free_, secondary_, rows_;
+  std::vector<int> free_, secondary_, rows_, inertial_bodies_;
   Vec3 ankle_axis_T_ = Vec3::UnitZ(), ankle_origin_T_ = Vec3::Zero();
   std::vector<bool> revolute_;
   int flexion_ = -1, tibia_ = -1;
@@ -261,8 +288,13 @@ ComakFrameResult solve_comak_frame(const ComakProblem& problem, ModelData& data,
 /// the frames before the cut are returned, followed by the first selected
 /// frame after it with NaN values and invalid_input set, so run_comak solves
 /// the frames it can and then stops naming the frame, file, line and column.
+/// With `leg` (the leg model of the inverse dynamics, knee_loads.h) and
+/// loads from the inverse dynamics, each frame also gets the femur's lab
+/// motion and the flexion rate (has_femur_motion, for
+/// ComakOptions::body_inertia); the leg chain's tibia pose must then match
+/// the loads' X_WT (InputError otherwise: another leg model, or a left leg).
 std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
-                                                int stride);
+                                                int stride, const LegModel* leg = nullptr);
 
 struct ComakRunSummary {
   int frames = 0, converged = 0, failed = 0;

@@ -114,3 +114,63 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> point_jacobian(const KinematicTree& tre
 }
 
 }  // namespace arthrosim::musculoskeletal
+
+namespace arthrosim::musculoskeletal {
+
+namespace {
+Vec3 axial(const Eigen::Matrix3d& S) {
+  // Axial vector of the skew part of S (mean of each antisymmetric pair).
+  return 0.5 * Vec3(S(2, 1) - S(1, 2), S(0, 2) - S(2, 0), S(1, 0) - S(0, 1));
+}
+Eigen::Matrix3d skew(const Vec3& w) {
+  Eigen::Matrix3d S;
+  S << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  return S;
+}
+}  // namespace
+
+void add_inertial_forces(const KinematicTree& tree, const Eigen::VectorXd& q,
+                         const std::vector<int>& bodies, const RootMotion& motion,
+                         Eigen::VectorXd& Q) {
+  if (!(motion.step > 0))
+    throw common::InputError("add_inertial_forces: expected a time step > 0");
+  if (motion.coordinate >= tree.num_coordinates())
+    throw common::InputError("add_inertial_forces: coordinate index out of range");
+  KinematicsData k[3];
+  for (int s = 0; s < 3; ++s) {
+    const double tau = (s - 1) * motion.step;
+    Eigen::VectorXd qs = q;
+    if (motion.coordinate >= 0)
+      qs[motion.coordinate] += tau * motion.velocity + 0.5 * tau * tau * motion.acceleration;
+    forward_kinematics(tree, qs, k[s]);
+  }
+  const double e2 = motion.step * motion.step;
+  // Lab positions relative to the root origin at tau = 0 (smaller numbers,
+  // same accelerations).
+  const Vec3 o = motion.X_LR[1].translation();
+  const Eigen::Matrix3d R_LR = motion.X_LR[1].linear();
+  const Eigen::Matrix3d R_RL = R_LR.transpose();
+  const Vec3 g_R = R_RL * motion.gravity_L;
+  for (int b : bodies) {
+    const Body& B = tree.bodies.at(b);
+    if (B.mass == 0.0 && B.inertia.isZero(0.0)) continue;
+    Vec3 p[3];
+    Eigen::Matrix3d R[3];
+    for (int s = 0; s < 3; ++s) {
+      const Pose X_LB = motion.X_LR[s] * k[s].X_WB[b];
+      p[s] = X_LB * B.com - o;
+      R[s] = X_LB.linear();
+    }
+    const Vec3 a_L = (p[2] - 2.0 * p[1] + p[0]) / e2;
+    const Eigen::Matrix3d Rt = R[1].transpose();
+    const Vec3 w_L = axial((R[2] - R[0]) / (2.0 * motion.step) * Rt);
+    const Vec3 alpha_L = axial((R[2] - 2.0 * R[1] + R[0]) / e2 * Rt - skew(w_L) * skew(w_L));
+    const Eigen::Matrix3d I_L = R[1] * B.inertia * Rt;
+    const Vec3 f_R = B.mass * (g_R - R_RL * a_L);
+    const Vec3 tau_R = -(R_RL * (I_L * alpha_L + w_L.cross(I_L * w_L)));
+    add_point_force(tree, k[1], b, k[1].X_WB[b] * B.com, f_R, Q);
+    add_body_couple(tree, k[1], b, tau_R, Q);
+  }
+}
+
+}  // namespace arthrosim::musculoskeletal

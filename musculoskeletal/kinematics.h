@@ -12,6 +12,7 @@
 // with o_j, a_j the world origin and unit axis of joint j. A force f at x on b
 // contributes Q_j += J_j(x) . f to the generalized forces.
 #include <Eigen/Geometry>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,11 @@ struct Body {
   std::string name;
   int parent_joint = -1;  ///< -1 for the root
   double mass = 0.0;      ///< [kg]
+  /// Centre of mass in the body frame [m] (URDF <inertial><origin xyz>).
+  Vec3 com = Vec3::Zero();
+  /// Inertia tensor about the centre of mass, body-frame axes [kg m^2]
+  /// (URDF <inertia>, rotated from the <inertial> frame).
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
 };
 
 /// Constant description of the tree. Bodies are stored so that a parent always
@@ -74,6 +80,33 @@ void add_point_force(const KinematicTree& tree, const KinematicsData& data, int 
 /// Q += J_rot(body)^T tau_W (a pure couple on the body).
 void add_body_couple(const KinematicTree& tree, const KinematicsData& data, int body,
                      const Vec3& tau_W, Eigen::VectorXd& Q);
+
+/// Motion of the root frame R in an inertial (lab) frame L, for the
+/// d'Alembert forces of add_inertial_forces: the root pose at t - step, t and
+/// t + step (along the trial's local Taylor path), gravity in L and, when
+/// `coordinate` >= 0, that coordinate's prescribed velocity and acceleration
+/// (every other coordinate is held at its value: zero rate).
+struct RootMotion {
+  std::array<Pose, 3> X_LR = {Pose::Identity(), Pose::Identity(), Pose::Identity()};
+  double step = 1e-4;                          ///< [s]
+  Vec3 gravity_L = Vec3(0.0, -9.80665, 0.0);   ///< [m/s^2]
+  int coordinate = -1;
+  double velocity = 0.0, acceleration = 0.0;   ///< [rad/s, rad/s^2 or m/s, m/s^2]
+};
+
+/// Q += sum over `bodies` of the weight and d'Alembert force of each body,
+///   J_b(x_b)^T m_b (g - a_b)  +  J_rot,b^T [-(I_b alpha_b + w_b x I_b w_b)],
+/// with x_b the body's centre of mass and a_b, w_b, alpha_b its absolute
+/// (lab) acceleration, angular velocity and angular acceleration, all
+/// expressed in the root frame (= the tree's world, root pose identity). The
+/// lab motion of each body is X_LR(tau) X_RB(q(tau)) at tau = -step, 0, step
+/// with q(tau) = q + (tau v + tau^2/2 a) e_coordinate; a, w and alpha come
+/// from central differences in tau (second order; for the body's lab
+/// position ~1 m and step 1e-4 s the rounding error is ~1e-8 m/s^2).
+/// Bodies with zero mass and zero inertia contribute nothing.
+void add_inertial_forces(const KinematicTree& tree, const Eigen::VectorXd& q,
+                         const std::vector<int>& bodies, const RootMotion& motion,
+                         Eigen::VectorXd& Q);
 
 /// 3 x n point Jacobian.
 Eigen::Matrix<double, 3, Eigen::Dynamic> point_jacobian(const KinematicTree& tree,

@@ -137,7 +137,23 @@ void build_tree(const Reader& rd, const urdf::ModelInterface& urdf, Model& model
   const auto mass_of = [](const urdf::LinkConstSharedPtr& l) {
     return l->inertial ? l->inertial->mass : 0.0;
   };
+  // Centre of mass and inertia tensor (about the COM, body axes) from the
+  // link's <inertial> (origin and <inertia> in the inertial frame).
+  const auto set_inertia = [&](const urdf::LinkConstSharedPtr& l, int b) {
+    if (!l->inertial) return;
+    const auto& o = l->inertial->origin;
+    double x, y, z, w;
+    o.rotation.getQuaternion(x, y, z, w);
+    const Eigen::Matrix3d R = Eigen::Quaterniond(w, x, y, z).normalized().toRotationMatrix();
+    const auto& in = *l->inertial;
+    Eigen::Matrix3d I;
+    I << in.ixx, in.ixy, in.ixz, in.ixy, in.iyy, in.iyz, in.ixz, in.iyz, in.izz;
+    Body& body = model.tree.bodies[b];
+    body.com = Vec3(o.position.x, o.position.y, o.position.z);
+    body.inertia = R * I * R.transpose();
+  };
   model.tree.add_root(root->name, mass_of(root));
+  set_inertia(root, 0);
   std::vector<urdf::LinkConstSharedPtr> queue{root};
   for (size_t qi = 0; qi < queue.size(); ++qi) {
     const auto link = queue[qi];
@@ -163,7 +179,7 @@ void build_tree(const Reader& rd, const urdf::ModelInterface& urdf, Model& model
         j.upper = uj->limits->upper;
       }
       const auto child = urdf.getLink(uj->child_link_name);
-      model.tree.add_body(child->name, mass_of(child), j);
+      set_inertia(child, model.tree.add_body(child->name, mass_of(child), j));
       queue.push_back(child);
     }
   }

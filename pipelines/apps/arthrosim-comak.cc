@@ -104,6 +104,10 @@ int main(int argc, char** argv) {
   app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
                "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
                "anterior stand-in to the model (docs/comak.md)");
+  app.add_flag("--body-inertia", o.body_inertia,
+               "weight and d'Alembert forces of the tibia and patella bodies from their URDF "
+               "inertials, moving with the model (the shank's terms leave the external load; "
+               "docs/comak.md)");
   app.add_flag("--force-length", o.forces.force_length,
                "muscle force a F_max f_L(l~) (Thelen 2003 active force-length; every muscle of the "
                "model must give optimal_fiber_length and tendon_slack_length, docs/model_format.md)");
@@ -147,6 +151,7 @@ int main(int argc, char** argv) {
         if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
         if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
         if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.flag("ankle_equilibrium");
+        if (!app.count("--body-inertia")) o.body_inertia = c.flag("body_inertia");
         if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
       }
     }
@@ -189,8 +194,9 @@ int main(int argc, char** argv) {
     if (trial.side != msk::Side::kRight)
       throw common::InputError(trial_path + ": error: the bundled knee models are right knees; "
                                "this trial is of the left leg");
-    const msk::KneeLoads loads = msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
-    const auto frames = msk::comak_frame_inputs(loads, first, last, stride);
+    const msk::LegModel leg = msk::leg_model_for_trial(trial);
+    const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
+    const auto frames = msk::comak_frame_inputs(loads, first, last, stride, &leg);
     msk::ComakProblem problem(model, o);
 
     std::ostringstream opts;
@@ -202,6 +208,7 @@ int main(int argc, char** argv) {
          << "\nactivation_min: " << o.activation_min
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
          << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
+         << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
          << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
          << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
