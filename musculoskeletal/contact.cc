@@ -114,6 +114,8 @@ ContactPair& ContactPair::operator=(ContactPair&&) noexcept = default;
 void ContactPairData::reset() {
   last_hit.clear();
   clearance.clear();
+  has_candidates.clear();
+  candidates.clear();
 }
 
 void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_WB,
@@ -123,6 +125,10 @@ void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_W
     data.last_hit.assign(n, -1);
     data.clearance.assign(n, std::numeric_limits<double>::quiet_NaN());
     data.clearance_centre_B.setZero(n, 3);
+    data.has_candidates.assign(n, 0);
+    data.candidates.assign(n, {});
+    data.candidate_start_B.setZero(n, 3);
+    data.candidate_end_B.setZero(n, 3);
   }
   ContactResult& r = data.result;
   r = ContactResult();
@@ -139,6 +145,7 @@ void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_W
   const auto& tA = pair.casting().thickness;
   const double d_max = pair.max_overlap(), K = pair.modulus();
   const bool nonlinear = pair.material().law == FoundationLaw::kNonlinear;
+  const double mu = 0.05 * d_max;  // box margin of step 3 (see header)
 
   // Accumulated in the target frame B, then rotated to the world.
   Vec3 F_B = Vec3::Zero(), M_B = Vec3::Zero(), cop_B = Vec3::Zero();
@@ -175,16 +182,45 @@ void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_W
         data.last_hit[i] = -1;
         continue;
       }
-      // 3. full query.
-      ++data.stats.tree_queries;
-      auto h = tree.first_hit(c, dir, d_max);
-      if (accept(h)) {
-        hit = h;
+      const Vec3 end = c + d_max * dir;
+      // 3. cached box candidates (the segment stayed inside their box).
+      if (data.has_candidates[i] &&
+          (c - Vec3(data.candidate_start_B.row(i).transpose())).norm() < mu &&
+          (end - Vec3(data.candidate_end_B.row(i).transpose())).norm() < mu) {
+        ++data.stats.candidate_tests;
+        std::optional<common::RayHit> first;
+        for (int t : data.candidates[i]) {  // ascending: ties keep the lower index
+          auto h = tree.hit_triangle(t, c, dir, d_max);
+          if (h && (!first || h->distance < first->distance)) first = h;
+        }
+        if (accept(first)) {
+          hit = first;
+        } else {
+          data.last_hit[i] = -1;
+          continue;
+        }
       } else {
-        data.last_hit[i] = -1;
-        data.clearance[i] = tree.closest_point(mid).distance;
-        data.clearance_centre_B.row(i) = mid.transpose();
-        continue;
+        // 4. full query.
+        ++data.stats.tree_queries;
+        auto h = tree.first_hit(c, dir, d_max);
+        if (accept(h)) {
+          hit = h;
+        } else {
+          data.last_hit[i] = -1;
+          const double D = tree.closest_point(mid).distance;
+          data.clearance[i] = D;
+          data.clearance_centre_B.row(i) = mid.transpose();
+          if (D - 0.5 * d_max < mu) {
+            // Weak distance bound: cache the box candidates (step 3).
+            const Vec3 lo = c.cwiseMin(end) - Vec3::Constant(mu);
+            const Vec3 hi = c.cwiseMax(end) + Vec3::Constant(mu);
+            data.candidates[i] = tree.triangles_in_box(lo, hi);
+            data.candidate_start_B.row(i) = c.transpose();
+            data.candidate_end_B.row(i) = end.transpose();
+            data.has_candidates[i] = 1;
+          }
+          continue;
+        }
       }
     }
     data.last_hit[i] = hit->triangle;

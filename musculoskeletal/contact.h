@@ -25,7 +25,17 @@
 //     whole segment lies inside the target-free ball of radius D about m0, so
 //     the ray cannot hit and the query is skipped (rigorous; it also skips
 //     triangles separated from the target by a gap, not only distant ones).
-//  3. otherwise a full first_hit query (and a closest-point refresh on a miss).
+//  3. for a triangle whose last full query missed with a weak distance bound
+//     (D - d_max/2 < mu, mu = 0.05 d_max: typically the ring around a contact
+//     patch, where the target passes within d_max/2 of the ray's midpoint
+//     sideways), the target triangles meeting the ray segment's bounding box
+//     grown by mu were cached with the segment's end points; while both end
+//     points stay within mu of the cached ones, the new segment lies in that
+//     box, so only those triangles can be hit: they are tested with the same
+//     exact ray/triangle test as the tree query (first hit, ties to the lower
+//     index, as first_hit), which gives the tree query's result;
+//  4. otherwise a full first_hit query (and on a miss a closest-point
+//     refresh, and the box candidates of 3 when the bound is weak).
 #include <Eigen/Geometry>
 #include <memory>
 #include <string>
@@ -130,6 +140,7 @@ struct ContactSearchStats {
   int guess_hits = 0;       ///< found via the cached triangle or its neighbours
   int skipped = 0;          ///< proven clear by the distance bound
   int tree_queries = 0;     ///< full ray queries
+  int candidate_tests = 0;  ///< decided by the cached box candidates (step 3)
 };
 
 /// Workspace of one pair (cached guesses and results).
@@ -137,6 +148,12 @@ struct ContactPairData {
   std::vector<int> last_hit;           ///< per casting triangle, -1 none
   std::vector<double> clearance;       ///< cached distance D (NaN = unknown)
   common::Points3 clearance_centre_B;  ///< ray midpoint m0 of the cached distance
+  /// Step 3: per casting triangle, whether box candidates are cached, the
+  /// target triangles meeting the segment's box grown by mu, and the
+  /// segment's end points (target frame) they were found for.
+  std::vector<char> has_candidates;
+  std::vector<std::vector<int>> candidates;
+  common::Points3 candidate_start_B, candidate_end_B;
   ContactResult result;
   ContactSearchStats stats;
   /// Forget cached guesses (results are unchanged by this; only speed).

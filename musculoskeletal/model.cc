@@ -63,20 +63,20 @@ void check_finite(const Eigen::VectorXd& v, const std::string& what) {
 }
 }  // namespace
 
-void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
-                     const Eigen::VectorXd& qdot, const Eigen::VectorXd& activations,
-                     const ForceOptions& opt) {
+namespace {
+
+// Which force terms to evaluate (flattened bundles, muscles, contact pairs);
+// a null mask means all of them.
+struct TermMask {
+  std::vector<char> bundle, muscle, pair;
+};
+
+// Forward kinematics at q, then the generalized forces of the terms in
+// `mask` (inputs already checked by the caller).
+void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
+                    const Eigen::VectorXd& qdot, const Eigen::VectorXd& activations,
+                    const ForceOptions& opt, const TermMask* mask) {
   const int n = model.num_coordinates();
-  if (q.size() != n || (qdot.size() != 0 && qdot.size() != n))
-    throw common::InputError("evaluate_forces: expected q (and qdot, or empty) of size " +
-                             std::to_string(n));
-  if (activations.size() != 0 && activations.size() != static_cast<int>(model.muscles.size()))
-    throw common::InputError("evaluate_forces: expected " + std::to_string(model.muscles.size()) +
-                             " activations (or none), found " +
-                             std::to_string(activations.size()));
-  check_finite(q, "coordinates q");
-  if (d.ligaments.size() != model.ligaments.size() || d.contacts.size() != model.contacts.size())
-    d = make_data(model);
   forward_kinematics(model.tree, q, d.kinematics);
   const auto& X = d.kinematics.X_WB;
   d.Q_ligaments.setZero(n);
@@ -84,9 +84,11 @@ void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
   d.Q_contact.setZero(n);
 
   if (opt.ligaments) {
+    int flat = 0;
     for (size_t li = 0; li < model.ligaments.size(); ++li) {
       const Ligament& lig = model.ligaments[li];
-      for (size_t bi = 0; bi < lig.bundles.size(); ++bi) {
+      for (size_t bi = 0; bi < lig.bundles.size(); ++bi, ++flat) {
+        if (mask && !mask->bundle[flat]) continue;
         BundleResult& br = d.ligaments[li][bi];
         br.path = evaluate_path(lig.bundles[bi].path, X);
         const Eigen::VectorXd r = moment_arms(model, d, br.path);
@@ -99,6 +101,7 @@ void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
   }
   if (opt.muscles) {
     for (size_t mi = 0; mi < model.muscles.size(); ++mi) {
+      if (mask && !mask->muscle[mi]) continue;
       const Muscle& m = model.muscles[mi];
       const double a = activations.size() ? activations[mi] : 0.0;
       d.muscle_paths[mi] = evaluate_path(m.path, X);
@@ -120,6 +123,7 @@ void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
   }
   if (opt.contact) {
     for (size_t ci = 0; ci < model.contacts.size(); ++ci) {
+      if (mask && !mask->pair[ci]) continue;
       const ContactPair& pair = model.contacts[ci];
       const int A = pair.casting().body, B = pair.target().body;
       evaluate_contact(pair, X[A], X[B], d.contacts[ci]);
@@ -135,6 +139,56 @@ void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
   d.Q = d.Q_ligaments + d.Q_muscles + d.Q_contact;
 }
 
+// moved[b]: body b moves when coordinate c changes (b lies below c's joint).
+std::vector<char> bodies_moved_by(const KinematicTree& tree, int c) {
+  std::vector<char> moved(tree.bodies.size(), 0);
+  for (size_t b = 1; b < tree.bodies.size(); ++b) {
+    const Joint& j = tree.joints[tree.bodies[b].parent_joint];
+    moved[b] = j.coordinate == c || moved[j.parent];  // parents precede children
+  }
+  return moved;
+}
+
+bool path_moves(const Path& p, const std::vector<char>& moved) {
+  for (const PathPoint& pt : p.points)
+    if (moved[pt.body]) return true;
+  return p.cylinder && moved[p.cylinder->body];
+}
+
+// The terms whose forces or moment arms change with coordinate c: those
+// attached to a body that c moves. The others give the same generalized
+// force at q +- h e_c (their bodies, and the joint axes between those bodies
+// and the root, do not move), so their difference quotient is exactly zero.
+TermMask terms_moved_by(const Model& model, int c) {
+  const std::vector<char> moved = bodies_moved_by(model.tree, c);
+  TermMask m;
+  for (const Ligament& l : model.ligaments)
+    for (const LigamentBundle& b : l.bundles) m.bundle.push_back(path_moves(b.path, moved));
+  for (const Muscle& mu : model.muscles) m.muscle.push_back(path_moves(mu.path, moved));
+  for (const ContactPair& p : model.contacts)
+    m.pair.push_back(moved[p.casting().body] || moved[p.target().body]);
+  return m;
+}
+
+}  // namespace
+
+void evaluate_forces(const Model& model, ModelData& d, const Eigen::VectorXd& q,
+                     const Eigen::VectorXd& qdot, const Eigen::VectorXd& activations,
+                     const ForceOptions& opt) {
+  const int n = model.num_coordinates();
+  if (q.size() != n || (qdot.size() != 0 && qdot.size() != n))
+    throw common::InputError("evaluate_forces: expected q (and qdot, or empty) of size " +
+                             std::to_string(n));
+  if (activations.size() != 0 && activations.size() != static_cast<int>(model.muscles.size()))
+    throw common::InputError("evaluate_forces: expected " + std::to_string(model.muscles.size()) +
+                             " activations (or none), found " +
+                             std::to_string(activations.size()));
+  check_finite(q, "coordinates q");
+  if (d.ligaments.size() != model.ligaments.size() || d.contacts.size() != model.contacts.size())
+    d = make_data(model);
+  evaluate_terms(model, d, q, qdot, activations, opt, nullptr);
+}
+
 void evaluate_jacobian(const Model& model, ModelData& d, const Eigen::VectorXd& q,
                        const Eigen::VectorXd& qdot, const Eigen::VectorXd& activations,
                        const ForceOptions& opt, const std::vector<int>& columns) {
@@ -142,6 +196,8 @@ void evaluate_jacobian(const Model& model, ModelData& d, const Eigen::VectorXd& 
   std::vector<int> cols = columns;
   if (cols.empty())
     for (int i = 0; i < n; ++i) cols.push_back(i);
+  // The centre first: checks the inputs and leaves its results in d.
+  evaluate_forces(model, d, q, qdot, activations, opt);
   ModelData work = make_data(model);
   work.contacts = d.contacts;  // warm search caches
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(n, n);
@@ -150,12 +206,13 @@ void evaluate_jacobian(const Model& model, ModelData& d, const Eigen::VectorXd& 
     Eigen::VectorXd qp = q, qm = q;
     qp[c] += h;
     qm[c] -= h;
-    evaluate_forces(model, work, qp, qdot, activations, opt);
+    const TermMask mask = terms_moved_by(model, c);
+    const TermMask* m = opt.jacobian_skip_unmoved_terms ? &mask : nullptr;
+    evaluate_terms(model, work, qp, qdot, activations, opt, m);
     const Eigen::VectorXd Qp = work.Q;
-    evaluate_forces(model, work, qm, qdot, activations, opt);
+    evaluate_terms(model, work, qm, qdot, activations, opt, m);
     J.col(c) = (Qp - work.Q) / (2 * h);
   }
-  evaluate_forces(model, d, q, qdot, activations, opt);
   d.dQ_dq = J;
 }
 

@@ -12,7 +12,19 @@
 // also print the mean activations of the quadriceps, gastrocnemii, soleus
 // and tibialis anterior per phase of the cycle.
 //
-// Optional: ARTHROSIM_COMAK_BENCH_STRIDE=k uses every k-th frame.
+// The *Inertia variants switch on the body inertia (ComakOptions::
+// body_inertia: the tibia's and patella's own weight and d'Alembert forces
+// from the URDF inertials, the shank's terms out of the external load);
+// *InertiaShank also gives the tibia link the inverse dynamics' shank
+// centre of mass and inertia (the bundled URDF has the mass at the knee
+// centre and zero inertia), so its difference to the plain run is the
+// patella and the tibia's displacement by the secondary coordinates.
+//
+// Optional: ARTHROSIM_COMAK_BENCH_STRIDE=k uses every k-th frame;
+// ARTHROSIM_COMAK_BENCH_DENSE_JACOBIAN=1 re-evaluates every force term in
+// every finite-difference column of dQ/dq (ForceOptions::
+// jacobian_skip_unmoved_terms = false; the behaviour before 2026-12-02) to
+// compare timings.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -37,7 +49,10 @@ namespace pl = arthrosim::pipelines;
 
 namespace {
 
-void run_trial(benchmark::State& state, const char* model_file, bool ankle, bool fine = false) {
+enum class Inertia { kOff, kUrdf, kShank };
+
+void run_trial(benchmark::State& state, const char* model_file, bool ankle, bool fine = false,
+               Inertia inertia = Inertia::kOff) {
   const std::string root = ARTHROSIM_SOURCE_DIR;
   msk::Model model = msk::load_model(root + "/data/models/knee_parametric/" + model_file);
   if (fine) {
@@ -55,11 +70,23 @@ void run_trial(benchmark::State& state, const char* model_file, bool ankle, bool
     msk::add_ankle_muscles(model);
     options.ankle_equilibrium = true;
   }
+  if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_DENSE_JACOBIAN"); s && std::atoi(s)) {
+    options.forces.jacobian_skip_unmoved_terms = false;
+    std::printf("  dense finite-difference Jacobian (every term in every column)\n");
+  }
   const auto trial = msk::load_gait_trial(root + "/data/trials/synthetic_gait");
-  const auto loads = msk::compute_knee_loads(trial, msk::leg_model_for_trial(trial));
+  const msk::LegModel leg = msk::leg_model_for_trial(trial);
+  const auto loads = msk::compute_knee_loads(trial, leg);
   int stride = 1;
   if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_STRIDE")) stride = std::max(1, std::atoi(s));
-  const auto frames = msk::comak_frame_inputs(loads, 0, -1, stride);
+  const auto frames = msk::comak_frame_inputs(loads, 0, -1, stride, &leg);
+  if (inertia != Inertia::kOff) options.body_inertia = true;
+  if (inertia == Inertia::kShank) {
+    msk::Body& tibia = model.tree.bodies[model.tree.body_index("tibia")];
+    tibia.mass = leg.shank.mass_kg;
+    tibia.com = leg.shank.p_com;
+    tibia.inertia = leg.shank.inertia_about_com();
+  }
   msk::ComakProblem problem(model, options);
   const int nm = static_cast<int>(model.muscles.size());
   const double bw = trial.body_mass_kg * 9.80665;
@@ -164,11 +191,27 @@ void BM_ComakTrialMediumAnkle(benchmark::State& s) { run_trial(s, "knee.urdf", t
 // generated cartilage (use_contact_meshes); the knee generation (~35 s) is
 // not timed.
 void BM_ComakTrialFine(benchmark::State& s) { run_trial(s, "knee.urdf", false, true); }
+void BM_ComakTrialCoarseInertia(benchmark::State& s) {
+  run_trial(s, "knee_coarse.urdf", false, false, Inertia::kUrdf);
+}
+void BM_ComakTrialMediumInertia(benchmark::State& s) {
+  run_trial(s, "knee.urdf", false, false, Inertia::kUrdf);
+}
+void BM_ComakTrialCoarseInertiaShank(benchmark::State& s) {
+  run_trial(s, "knee_coarse.urdf", false, false, Inertia::kShank);
+}
+void BM_ComakTrialMediumInertiaShank(benchmark::State& s) {
+  run_trial(s, "knee.urdf", false, false, Inertia::kShank);
+}
 BENCHMARK(BM_ComakTrialCoarse)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialMedium)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialCoarseAnkle)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialMediumAnkle)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_ComakTrialFine)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialCoarseInertia)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialMediumInertia)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialCoarseInertiaShank)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ComakTrialMediumInertiaShank)->Iterations(1)->Unit(benchmark::kSecond);
 
 }  // namespace
 

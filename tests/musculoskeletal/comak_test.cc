@@ -119,6 +119,56 @@ TEST(Comak, ResidualJacobianMatchesFiniteDifferencesWithAnkleRow) {
   check_jacobian(true, 5e-7, 1e-2, true);
 }
 
+// evaluate_jacobian re-evaluates in each column only the terms on bodies
+// that column moves (ForceOptions::jacobian_skip_unmoved_terms). The skipped
+// terms give bit-identical forces at q +- h, so the Jacobian equals the one
+// that re-evaluates everything up to the rounding of the sums: 1e-16 |Q|
+// (~1e3 N) / 2h (2e-6) = 1e-7 N per unit, bound 1e-6 absolute (entries
+// ~1e3-1e6). All free coordinates, with contact, at a loaded pose.
+TEST(Comak, ModelJacobianSkippingUnmovedTermsEqualsTheFullOne) {
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  const Eigen::VectorXd q = settled_pose(p, deg(25), 0.1);
+  const Eigen::VectorXd a = Eigen::VectorXd::Constant(m.muscles.size(), 0.1);
+  msk::ForceOptions skip, full;
+  full.jacobian_skip_unmoved_terms = false;
+  auto d1 = msk::make_data(m), d2 = msk::make_data(m);
+  msk::evaluate_jacobian(m, d1, q, {}, a, skip, m.free_coordinates);
+  msk::evaluate_jacobian(m, d2, q, {}, a, full, m.free_coordinates);
+  const double diff = (d1.dQ_dq - d2.dQ_dq).cwiseAbs().maxCoeff();
+  std::printf("max |dJ| %.3g of max |J| %.3g\n", diff, d2.dQ_dq.cwiseAbs().maxCoeff());
+  EXPECT_GT(d2.dQ_dq.cwiseAbs().maxCoeff(), 1e3);
+  EXPECT_LE(diff, 1e-6);
+  EXPECT_EQ((d1.Q - d2.Q).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// The contact search with warm caches (guess, distance bound, box candidates:
+// contact.h) gives the same result as a cold search, bit for bit, along a
+// sequence of small moves of the tibia and patella around a loaded pose, and
+// the box candidates do get used (the ring of triangles around the contact
+// patches).
+TEST(Comak, ContactSearchWithBoxCandidatesEqualsColdSearch) {
+  const auto& m = coarse_model();
+  msk::ComakProblem p(m, {});
+  Eigen::VectorXd q = settled_pose(p, deg(25), 0.1);
+  auto warm = msk::make_data(m);
+  int candidate_tests = 0;
+  for (int step = 0; step < 8; ++step) {
+    for (int c : p.secondary_coordinates()) q[c] += (step % 2 ? 1 : -1) * 2e-5 * (1 + c % 3);
+    msk::evaluate_forces(m, warm, q, {}, {});
+    auto cold = msk::make_data(m);
+    msk::evaluate_forces(m, cold, q, {}, {});
+    for (size_t ci = 0; ci < m.contacts.size(); ++ci) {
+      EXPECT_EQ((warm.contacts[ci].result.pressure - cold.contacts[ci].result.pressure)
+                    .cwiseAbs().maxCoeff(), 0.0) << "pair " << ci << " step " << step;
+      if (step > 0) candidate_tests += warm.contacts[ci].stats.candidate_tests;
+    }
+    EXPECT_EQ((warm.Q - cold.Q).cwiseAbs().maxCoeff(), 0.0);
+  }
+  std::printf("box-candidate decisions over 7 warm evaluations: %d\n", candidate_tests);
+  EXPECT_GT(candidate_tests, 0);
+}
+
 // Q_ext: a pure force through the tibia origin along the flexion axis makes
 // no flexion moment; a couple about the tibia's Z moves only rotations.
 // Closed form at q = 0 (tibia frame = femur frame): the flexion axis is -Z,
