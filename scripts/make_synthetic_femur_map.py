@@ -33,6 +33,8 @@ from collections import defaultdict
 
 import numpy as np
 
+from make_synthetic_splitlines import fmt, trace_dash  # same folder
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STL = os.path.join(ROOT, "data", "models", "knee_parametric", "coarse", "femur_cartilage.stl")
 
@@ -127,31 +129,6 @@ def distance_to_polygon(p, poly):
     return float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
 
 
-def trace_dash(seed, half_length=3.0, step=0.5):
-    """Streamline of the axial field through seed, half_length mm each way (RK2)."""
-    pts = [np.array(seed)]
-    for sign in (1.0, -1.0):
-        p, prev, line = np.array(seed), None, []
-        for _ in range(int(round(half_length / step))):
-            t = theta(p)
-            d = np.array([math.cos(t), math.sin(t)]) * sign
-            if prev is not None and d @ prev < 0:
-                d = -d
-            tm = theta(p + 0.5 * step * d)
-            dm = np.array([math.cos(tm), math.sin(tm)])
-            if dm @ d < 0:
-                dm = -dm
-            p = p + step * dm
-            prev = dm
-            line.append(p.copy())
-        pts = pts + line if sign > 0 else list(reversed(line)) + pts
-    return np.array(pts)
-
-
-def fmt(v):
-    return f"{v:.4f}".rstrip("0").rstrip(".")
-
-
 def main():
     out_dir = os.path.join(ROOT, "data", "splitlines") if len(sys.argv) < 2 else sys.argv[1]
     os.makedirs(out_dir, exist_ok=True)
@@ -163,7 +140,7 @@ def main():
             seed = np.array([gx + 2.0 * (round((gy - lo[1]) / 4.0) % 2), gy])
             if not inside(seed, outline) or distance_to_polygon(seed, outline) < 3.5:
                 continue
-            dash = trace_dash(seed)
+            dash = trace_dash(seed, field=theta)
             if all(inside(q, outline) and distance_to_polygon(q, outline) > 1.0 for q in dash):
                 dashes.append(dash)
     map_outline = np.array([warp(p) for p in outline[::4]])

@@ -64,21 +64,22 @@ def warp_jacobian(p):
     return LIN @ jb
 
 
-def trace_dash(seed, half_length=3.0, step=0.5):
-    """Streamline of the axial field through seed, half_length mm each way."""
+def trace_dash(seed, half_length=3.0, step=0.5, field=None):
+    """Streamline of the axial field (theta, or `field`) through seed, half_length mm each way."""
+    field = theta if field is None else field
     pts = [np.array(seed)]
     for sign in (1.0, -1.0):
         p = np.array(seed)
         prev = None
         line = []
         for _ in range(int(round(half_length / step))):
-            t = theta(p)
+            t = field(p)
             d = np.array([math.cos(t), math.sin(t)]) * sign
             if prev is not None and d @ prev < 0:
                 d = -d
             # midpoint (RK2) step keeping the orientation consistent
             pm = p + 0.5 * step * d
-            tm = theta(pm)
+            tm = field(pm)
             dm = np.array([math.cos(tm), math.sin(tm)])
             if dm @ d < 0:
                 dm = -dm

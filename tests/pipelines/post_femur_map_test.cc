@@ -13,13 +13,12 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
-#include <random>
 
-#include "common/hdf5.h"
 #include "common/mesh.h"
 #include "common/mesh_io.h"
 #include "pipelines/post_compare.h"
 #include "pipelines/splitline.h"
+#include "tests/pipelines/post_test_helpers.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -44,63 +43,29 @@ ViewOptions distal_view() {
 // Writes the femoral cartilage with the lifted field (3 frames, random signs and
 // magnitudes, seeded) in the surface-output layout and returns the path.
 std::string write_femur_field() {
-  const std::string path = std::string(ARTHROSIM_BINARY_DIR) + "/post_femur_map_model.h5";
   const common::TriangleMesh tri =
       common::read_mesh(kSource + "/data/models/knee_parametric/coarse/femur_cartilage.stl");
   common::QuadMesh m = common::split_triangles_to_quads(tri);
   m.name = "femur";
   const common::Points3 n = common::vertex_normals(common::triangulate(m));
   const Eigen::Vector3d r(0, 0, -1), u(1, 0, 0), v(0, 1, 0);
-  const int T = 3;
-  const Eigen::Index N = m.V.rows();
-  std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> mag(0.005, 0.03);
-  Eigen::MatrixXd e1(T, N);
-  common::Tensor3d dir;
-  dir.dims = {T, N, 3};
-  dir.data.resize(T * N * 3);
-  for (Eigen::Index i = 0; i < N; ++i) {
+  const auto line = [&](Eigen::Index i) {
     const Eigen::Vector3d p = m.V.row(i).transpose() * 1e3;
     const double th = theta_view_mm(-p.z(), p.x());
     const Eigen::Vector3d t3 = std::cos(th) * r + std::sin(th) * u;
     const Eigen::Vector3d ni = n.row(i).transpose();
     // Tangent line whose projection along v is t3: d = t3 - (t3.n / v.n) v (defined where
     // the node faces the view; elsewhere the node is not visible and not used).
-    Eigen::Vector3d d = std::abs(v.dot(ni)) > 1e-3 ? Eigen::Vector3d(t3 - t3.dot(ni) / v.dot(ni) * v) : t3;
-    d.normalize();
-    for (int t = 0; t < T; ++t) {
-      const double s = (rng() & 1) ? 1.0 : -1.0;
-      e1(t, i) = mag(rng);
-      for (int k = 0; k < 3; ++k) dir(t, i, k) = s * d(k);
-    }
-  }
-  common::H5File f(path, common::H5File::Mode::kTruncate);
-  f.write("/time", Eigen::VectorXd::LinSpaced(T, 0.0, 0.2));
-  f.write("/surfaces/femur/nodes", Eigen::MatrixXd(m.V));
-  f.write("/surfaces/femur/quads", Eigen::MatrixXi(m.Q));
-  f.write("/surfaces/femur/strain/e1", e1);
-  f.write_tensor3("/surfaces/femur/strain/e1_dir", dir);
-  return path;
+    const Eigen::Vector3d d = std::abs(v.dot(ni)) > 1e-3 ? Eigen::Vector3d(t3 - t3.dot(ni) / v.dot(ni) * v) : t3;
+    return Eigen::Vector3d(d.normalized());
+  };
+  return test::write_surface_field(std::string(ARTHROSIM_BINARY_DIR) + "/post_femur_map_model.h5", m, 3, line, 11,
+                                   0.005, 0.03, 0.2);
 }
 
-struct Result {
-  Comparison c;
-  Registration reg;
-};
-
-Result compare(const SplitLineMap& map) {
+test::MapComparison compare(const SplitLineMap& map) {
   static const std::string model = write_femur_field();
-  const SurfaceField field = read_surface_field(model, "femur");
-  const NodeDirections nd = average_node_directions(field);
-  const ProjectedView view = project_view(field.mesh, distal_view());
-  Eigen::VectorXd ang, len;
-  project_directions(view, nd.direction, ang, len);
-  std::vector<bool> usable(view.nodes.rows());
-  for (Eigen::Index i = 0; i < view.nodes.rows(); ++i) usable[i] = nd.defined[i] && view.visible[i] && len(i) > 0.3;
-  Result res;
-  res.reg = register_map(map.outline, view.outline, RegistrationOptions{});
-  res.c = compare_with_map(map, res.reg, view, ang, nd.magnitude, usable, ComparisonOptions{});
-  return res;
+  return test::compare_model_with_map(model, map, distal_view());
 }
 
 const std::string kSvg = kSource + "/data/splitlines/synthetic_distal_femur.svg";
@@ -110,7 +75,7 @@ TEST(PostFemurMap, BothFormatsAgreeWithTheKnownFieldOnTheBundledFemur) {
   for (const std::string& path : {kSvg, kCsv}) {
     const SplitLineMap map = read_splitline_map(path);
     ASSERT_TRUE(map.synthetic) << path;
-    const Result r = compare(map);
+    const test::MapComparison r = compare(map);
     const RegionStatistics& all = r.c.stats.front();
     std::printf("%s: %d samples, %d covered, radius %.2f mm, mean %.2f deg, median %.2f deg, within 20 deg "
                 "%.3f; outline mean/max distance %.2f/%.2f mm\n",
@@ -133,10 +98,7 @@ TEST(PostFemurMap, BothFormatsAgreeWithTheKnownFieldOnTheBundledFemur) {
 TEST(PostFemurMap, TurningTheMapLinesShowsUpAsThatAngle) {
   const SplitLineMap map = read_splitline_csv(kCsv);
   const double base = compare(map).c.stats.front().mean_deg;
-  SplitLineMap turned = map;
-  const double alpha = 30.0 * kPi / 180.0;
-  for (Eigen::Index s = 0; s < turned.angle_rad.size(); ++s) turned.angle_rad(s) = wrap_axial(map.angle_rad(s) + alpha);
-  const double mean = compare(turned).c.stats.front().mean_deg;
+  const double mean = compare(test::rotated_lines(map, 30.0 * kPi / 180.0)).c.stats.front().mean_deg;
   std::printf("lines turned by 30 deg: mean %.2f deg (base %.2f)\n", mean, base);
   // Triangle inequality on line angles, per sample: |acute(x + a) - a| <= |x|.
   EXPECT_NEAR(mean, 30.0, base + 1e-9);

@@ -19,6 +19,7 @@
 #include "common/orientation.h"
 #include "pipelines/post_compare.h"
 #include "pipelines/splitline.h"
+#include "tests/pipelines/post_test_helpers.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -54,56 +55,22 @@ common::QuadMesh synthetic_mesh(int n) {
 // Writes the mesh and the field (4 frames, random sign flips and magnitudes) in the
 // surface-output layout.
 std::string write_model(const std::string& name, const Eigen::Matrix3d& R_WM = Eigen::Matrix3d::Identity()) {
-  const std::string path = std::string(ARTHROSIM_BINARY_DIR) + "/" + name;
   const common::QuadMesh m = synthetic_mesh(48);
-  const int T = 4;
-  const auto N = m.V.rows();
-  std::mt19937_64 rng(7);
-  std::uniform_real_distribution<double> mag(0.005, 0.02);
-  Eigen::MatrixXd e1(T, N);
-  common::Tensor3d dir;
-  dir.dims = {T, N, 3};
-  dir.data.resize(T * N * 3);
-  for (int t = 0; t < T; ++t)
-    for (Eigen::Index i = 0; i < N; ++i) {
-      const double th = theta_mm(m.V(i, 0) * 1e3, m.V(i, 1) * 1e3);
-      const double s = (rng() & 1) ? 1.0 : -1.0;
-      e1(t, i) = mag(rng);
-      const Eigen::Vector3d d_W = R_WM * Eigen::Vector3d(s * std::cos(th), s * std::sin(th), 0.0);
-      dir(t, i, 0) = d_W.x(), dir(t, i, 1) = d_W.y(), dir(t, i, 2) = d_W.z();
-    }
-  common::H5File f(path, common::H5File::Mode::kTruncate);
-  f.write("/time", Eigen::VectorXd::LinSpaced(T, 0.0, 0.3));
-  f.write("/surfaces/femur/nodes", Eigen::MatrixXd(m.V * R_WM.transpose()));
-  f.write("/surfaces/femur/quads", Eigen::MatrixXi(m.Q));
-  f.write("/surfaces/femur/strain/e1", e1);
-  f.write_tensor3("/surfaces/femur/strain/e1_dir", dir);
-  return path;
+  return test::write_surface_field(
+      std::string(ARTHROSIM_BINARY_DIR) + "/" + name, m, 4,
+      [&](Eigen::Index i) {
+        const double th = theta_mm(m.V(i, 0) * 1e3, m.V(i, 1) * 1e3);
+        return Eigen::Vector3d(std::cos(th), std::sin(th), 0.0);
+      },
+      7, 0.005, 0.02, 0.3, R_WM);
 }
 
-struct Result {
-  Comparison c;
-  Registration reg;
-};
+using Result = test::MapComparison;
+using test::rotated_lines;
 
 Result run(const SplitLineMap& map, const std::string& model = "", const ViewOptions& view_options = {}) {
   static const std::string default_path = write_model("post_synthetic_model.h5");
-  const SurfaceField field = read_surface_field(model.empty() ? default_path : model, "femur");
-  const NodeDirections nd = average_node_directions(field);
-  const ProjectedView view = project_view(field.mesh, view_options);
-  Eigen::VectorXd ang, len;
-  project_directions(view, nd.direction, ang, len);
-  std::vector<bool> usable(view.nodes.rows());
-  for (Eigen::Index i = 0; i < view.nodes.rows(); ++i) usable[i] = nd.defined[i] && view.visible[i] && len(i) > 0.3;
-  Result r;
-  r.reg = register_map(map.outline, view.outline, RegistrationOptions{});
-  r.c = compare_with_map(map, r.reg, view, ang, nd.magnitude, usable, ComparisonOptions{});
-  return r;
-}
-
-SplitLineMap rotated_lines(SplitLineMap m, double alpha) {
-  for (Eigen::Index s = 0; s < m.angle_rad.size(); ++s) m.angle_rad(s) = wrap_axial(m.angle_rad(s) + alpha);
-  return m;
+  return test::compare_model_with_map(model.empty() ? default_path : model, map, view_options);
 }
 
 SplitLineMap rotated_whole(SplitLineMap m, double alpha) {
