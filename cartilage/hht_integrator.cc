@@ -368,4 +368,20 @@ void HhtIntegrator::advance_to(double t_end) {
   stats_.total_s += since(t0);
 }
 
+bool HhtIntegrator::advance_to_steady_state(double change_tol_m, double t_max, double* last_change_m) {
+  if (!(change_tol_m > 0)) throw common::InputError("HHT: steady-state change tolerance must be > 0 m");
+  const Eigen::VectorXd& w = sys_.increment_weights();
+  double change = std::numeric_limits<double>::infinity();
+  while (t_max - t_ > 1e-9 * opts_.dt_s) {
+    const Eigen::VectorXd q_before = q_;
+    const double h = std::min(opts_.dt_s, t_max - t_);
+    advance_to(t_ + h);
+    change = weighted_max(q_ - q_before, w);
+    if (last_change_m) *last_change_m = change;
+    // Only a whole step of dt_s measures the change per step.
+    if (change <= change_tol_m && h >= (1 - 1e-9) * opts_.dt_s) return true;
+  }
+  return false;
+}
+
 }  // namespace arthrosim::cartilage

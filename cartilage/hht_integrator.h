@@ -135,6 +135,17 @@ class HhtIntegrator {
   void initialize(double t0, const Eigen::VectorXd& q0, const Eigen::VectorXd& v0 = Eigen::VectorXd());
   /// Advances to t_end in steps of at most dt_s (halving when needed).
   void advance_to(double t_end);
+  /// Dynamic path to a steady state (e.g. the osmotic swelling from rest):
+  /// advances by dt_s at a time (advance_to, so with the same halving and
+  /// failure rules) until the largest weighted change of the coordinates over
+  /// one such step, max_i w_i |q_i(t + dt_s) - q_i(t)| with the increment
+  /// weights (m; it bounds every node's deflection change), is at most
+  /// change_tol_m, or until t_max. Returns true when the steady state was
+  /// reached, false when t_max came first; last_change_m (if given) receives
+  /// the last step's change. With a geometric decay of the transient by a
+  /// factor rho per step, the remaining distance to the steady state is about
+  /// change x rho / (1 - rho) (docs/shell_element.md, section 4).
+  bool advance_to_steady_state(double change_tol_m, double t_max, double* last_change_m = nullptr);
 
   double time() const { return t_; }
   const Eigen::VectorXd& q() const { return q_; }

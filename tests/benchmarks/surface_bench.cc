@@ -8,6 +8,29 @@
 // iterations, factorizations and time per factorization, max deflection and
 // the e1 range.
 //
+// Anchor resolution (issue 5's "femoral mesh of about 3,600 elements"): the
+// coarse knee prepared with prepare.surface_edge_length_mm [femur=4.2] (3 mm
+// elsewhere) gives 3,579 femoral shells.
+//  - BM_OsmoticAnchorStatic/<solver>: data/scenes/osmotic.yaml as bundled
+//    (steady_state: true, the direct static solve) through run_surface_stage;
+//    solver 0 = as bundled (linear_solver auto: UMFPACK, exact tangent),
+//    1 = linear_solver cholmod.
+//  - BM_OsmoticAnchorDynamic/<dt_us>/<solver>/<reuse>/<ramp_ms>/<c>: the same
+//    femur and effects (cartilage::build_surface_model with the scenario's
+//    list and the scene defaults, which are the seed's values) integrated by
+//    HHT (alpha -0.2) from rest until the largest weighted change of the
+//    coordinates over one step is below 1e-9 m (as
+//    HhtIntegrator::advance_to_steady_state; 1e-6 of the 1.2 mm deflection);
+//    dt in microseconds, solver 0 = UMFPACK (exact tangent) / 1 = CHOLMOD on
+//    (K + K^T)/2, reuse 1 = modified Newton (factorisation kept while the
+//    residual contracts), the osmotic pressure ramped over ramp_ms (0: full
+//    pressure at t = 0), c 0 = the seed's foundation damping 7e6 N s/mm^3,
+//    1 = 7e6 N s/m^3 (docs/shell_element.md, section 4, why). The static
+//    equilibrium is solved first (untimed) and the end state compared with
+//    it. SURFACE_BENCH_EVERY=n prints a progress line every n steps.
+// Both print wall and process CPU time, steps, Newton iterations per step,
+// factorisations and the time per factorisation.
+//
 // BM_GaitCycle (issue 6 performance target: one gait cycle at the anchor
 // resolution in <= 10 minutes on the 2-core machine): data/scenes/gait.yaml
 // as bundled (coarse knee prepared at 3 mm: femoral 5,568 quads, 1.5 x the
@@ -21,12 +44,15 @@
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
+#include "cartilage/hht_integrator.h"
+#include "cartilage/surface_model.h"
 #include "common/metadata.h"
 #include "common/scene.h"
 #include "pipelines/prepare.h"
@@ -107,6 +133,168 @@ struct GaitInputs {
   std::string prepared, kinematics;
   double comak_wall_s = 0;
 };
+/// The coarse knee prepared at the anchor resolution: femur 4.2 mm (3,579
+/// quads), the other surfaces 3 mm; written once to the bench folder.
+struct AnchorModel {
+  PreparedModel model;
+  std::string path;
+};
+const AnchorModel& anchor_model() {
+  static const AnchorModel a = [] {
+    AnchorModel m;
+    PrepareOptions o;
+    o.edge_length = 3e-3;
+    o.surface_edge_length["femur"] = 4.2e-3;
+    m.model =
+        prepare_model(find_model_files(std::string(ARTHROSIM_SOURCE_DIR) + "/data/models/knee_parametric/coarse"), o);
+    m.path = (bench_dir() / "prepared_coarse_femur4.2.h5").string();
+    common::RunMetadata md;
+    md.program = "surface_bench";
+    write_prepared_model(m.model, o, md, m.path);
+    return m;
+  }();
+  return a;
+}
+
+double cpu_seconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+void BM_OsmoticAnchorStatic(benchmark::State& state) {
+  const std::string solver = state.range(0) == 1 ? "cholmod" : "auto";
+  std::string scene = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/osmotic.yaml";
+  if (solver != "auto") {
+    std::ifstream in(scene);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string anchor = "      steady_state: true\n";
+    text.replace(text.find(anchor), anchor.size(), anchor + "      linear_solver: " + solver + "\n");
+    text.replace(text.find("model: ../models"), 16, "model: " + std::string(ARTHROSIM_SOURCE_DIR) + "/data/models");
+    scene = (bench_dir() / ("osmotic_anchor_" + solver + ".yaml")).string();
+    std::ofstream(scene) << text;
+  }
+  SurfaceStageOptions o;
+  o.prepared = anchor_model().path;
+  o.scene = scene;
+  o.scenario = "osmotic";
+  o.out = (bench_dir() / ("surface_osmotic_anchor_" + solver + ".h5")).string();
+  o.progress = false;
+  o.argv = {"surface_bench"};
+  for (auto _ : state) {
+    const double c0 = cpu_seconds();
+    const SurfaceStageResult r = run_surface_stage(o);
+    const double cpu = cpu_seconds() - c0;
+    const SurfaceSummary& s = r.surfaces.at(0);
+    std::printf(
+        "osmotic anchor static (%s): %s %d nodes %d elements: wall %.2f s (process CPU %.2f s), %ld steps, "
+        "%ld Newton iterations, %ld factorizations, %.3f s per factorization (assembly %.2f s, factorization "
+        "%.2f s, solve %.2f s), max deflection %.4f mm, e1 %.4g .. %.4g\n",
+        solver.c_str(), s.name.c_str(), s.nodes, s.elements, r.wall_s, cpu, r.steps, r.newton_iterations,
+        r.factorizations, r.factorizations ? r.factorization_s / r.factorizations : 0.0, r.assembly_s,
+        r.factorization_s, r.solve_s, s.max_deflection_m * 1e3, s.e1_min, s.e1_max);
+    std::fflush(stdout);
+    state.counters["wall_s"] = r.wall_s;
+    state.counters["cpu_s"] = cpu;
+    state.counters["newton_iterations"] = static_cast<double>(r.newton_iterations);
+  }
+}
+BENCHMARK(BM_OsmoticAnchorStatic)->Arg(0)->Arg(1)->Unit(benchmark::kSecond)->Iterations(1);
+
+void BM_OsmoticAnchorDynamic(benchmark::State& state) {
+  const double dt = 1e-6 * static_cast<double>(state.range(0));
+  const bool cholmod = state.range(1) == 1, reuse = state.range(2) == 1;
+  const double ramp = 1e-3 * static_cast<double>(state.range(3));
+  const PreparedSurface* femur = nullptr;
+  for (const PreparedSurface& s : anchor_model().model.surfaces)
+    if (s.name == "femur") femur = &s;
+  if (!femur) {
+    state.SkipWithError("the prepared anchor model has no femur");
+    return;
+  }
+  cartilage::SurfaceInput in;
+  in.name = "femur";
+  in.mesh = femur->quads;
+  in.mesh.name = "femur";
+  in.normals = femur->node_normals;
+  in.periphery = femur->periphery_nodes;
+  // osmotic.yaml's effects; SurfaceParameters' defaults are the scene
+  // defaults (seed values: 1 mm shells, 400 MPa, 0.3, 1000 kg/m^3, k 0.7
+  // N/mm^3, c 7e6 N s/mm^3, 0.2 MPa).
+  const std::vector<std::string> effects = {"foundation_springs", "foundation_damping", "osmotic_pressure",
+                                            "periphery_fixed", "inertia"};
+  const cartilage::SurfaceParameters par;
+  cartilage::SurfaceParameters par_dyn;
+  par_dyn.osmotic_ramp_s = ramp;  // 0: the full pressure from t = 0
+  // Foundation damping: 0 = the seed's printed 7e6 N s/mm^3 (c/k = 1e7 s),
+  // 1 = 7e6 N s/m^3 (c/k = 0.01 s, docs/shell_element.md section 5).
+  const bool plausible_c = state.range(4) == 1;
+  if (plausible_c) par_dyn.foundation_damping_N_s_m3 = 7e6;
+  auto stat_model = cartilage::build_surface_model(in, par, effects, cartilage::BoneMotion::fixed(), nullptr);
+  cartilage::IntegratorOptions so;
+  so.quasi_static = true;
+  so.dt_s = 1.0;
+  so.max_newton_iterations = 30;
+  so.solver = cartilage::LinearSolverChoice::kCholmod;
+  cartilage::HhtIntegrator stat(*stat_model, so);
+  stat.initialize(0, stat_model->reference_state());
+  stat.advance_to(1.0);
+  const double w_static = cartilage::nodal_deflection(*stat_model, stat.q()).maxCoeff();
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const double c0 = cpu_seconds();
+    auto model = cartilage::build_surface_model(in, par_dyn, effects, cartilage::BoneMotion::fixed(), nullptr);
+    cartilage::IntegratorOptions o;  // alpha -0.2 (seed)
+    o.dt_s = dt;
+    o.reuse_factorization = reuse;
+    o.solver = cholmod ? cartilage::LinearSolverChoice::kCholmod : cartilage::LinearSolverChoice::kUmfpack;
+    o.keep_step_log = false;
+    cartilage::HhtIntegrator hht(*model, o);
+    hht.initialize(0, model->reference_state());
+    const double tol = 1e-9;
+    double change = 0;
+    bool steady = false;
+    // Steps as HhtIntegrator::advance_to_steady_state takes them, with a
+    // progress line every `every` steps (environment SURFACE_BENCH_EVERY).
+    const char* every_env = std::getenv("SURFACE_BENCH_EVERY");
+    const long every = every_env ? std::atol(every_env) : 0;
+    while (!steady && hht.time() < 4000 * dt * (1 - 1e-12)) {
+      steady = hht.advance_to_steady_state(tol, hht.time() + dt, &change);
+      const auto& st = hht.statistics();
+      if (every > 0 && st.steps % every == 0)
+        std::printf("  t = %.4f s: change %.2e m, %ld steps, %ld Newton iterations, %ld factorizations, %ld rejected, "
+                    "%s, process CPU %.1f s\n",
+                    hht.time(), change, st.steps, st.newton_iterations, st.factorizations, st.rejected_steps,
+                    st.linear_solver.c_str(), cpu_seconds() - c0);
+      std::fflush(stdout);
+    }
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double cpu = cpu_seconds() - c0;
+    const auto& st = hht.statistics();
+    const double w_dyn = cartilage::nodal_deflection(*model, hht.q()).maxCoeff();
+    const double diff = (hht.q() - stat.q()).cwiseAbs().cwiseProduct(model->increment_weights()).maxCoeff();
+    std::printf(
+        "osmotic anchor dynamic (HHT alpha -0.2, dt %g s, pressure ramp %g s, damping c %g N s/m^3, %s, %s): %d "
+        "elements: %s after %ld steps (t = %.4f s, "
+        "last change %.2e m); wall %.2f s (process CPU %.2f s); %.2f Newton iterations per step; %ld "
+        "factorizations, %.3f s each; assembly %.2f s, factorization %.2f s, solve %.2f s; %ld rejected; max "
+        "deflection %.6f mm (static %.6f mm), max weighted difference to the static state %.2e m; solver in "
+        "use %s (%ld switches)\n",
+        dt, ramp, par_dyn.foundation_damping_N_s_m3, cholmod ? "CHOLMOD on (K + K^T)/2" : "UMFPACK", reuse ? "factorisation reuse" : "full Newton",
+        model->num_elements(), steady ? "steady" : "NOT steady", st.steps, hht.time(), change, wall, cpu,
+        st.steps ? static_cast<double>(st.newton_iterations) / st.steps : 0.0, st.factorizations,
+        st.factorizations ? st.factorization_s / st.factorizations : 0.0, st.assembly_s, st.factorization_s,
+        st.solve_s, st.rejected_steps, w_dyn * 1e3, w_static * 1e3, diff, st.linear_solver.c_str(),
+        st.solver_switches);
+    std::fflush(stdout);
+    state.counters["wall_s"] = wall;
+    state.counters["cpu_s"] = cpu;
+    state.counters["steps"] = static_cast<double>(st.steps);
+  }
+}
+BENCHMARK(BM_OsmoticAnchorDynamic)
+    ->Args({1000, 1, 1, 10, 1})
+    ->Args({100, 1, 1, 10, 1})
+    ->Args({1000, 1, 1, 10, 0})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1);
+
 const GaitInputs& gait_inputs() {
   static const GaitInputs in = [] {
     GaitInputs g;

@@ -315,6 +315,51 @@ TEST(Hht, FactorizationReuseSameSolutionFewerFactorizations) {
   EXPECT_LT(b.statistics().factorizations, a.statistics().factorizations / 2);
 }
 
+// advance_to_steady_state on the linear oscillator u'' + omega^2 u = 0 from
+// u = 1 with Omega = omega h = pi and alpha = -0.2 (steady state u = 0). It
+// must stop exactly at the first whole step whose change |u_n+1 - u_n| is
+// <= tol (reference: the same integration stepped by hand), and the state it
+// leaves follows the spectral envelope of the free decay, |u_n| <= 2 |lambda|^n
+// (lambda: the principal eigenvalue of the HHT step, principal_eigenvalue
+// above; the other eigenvalue's component decays faster, factor 2 for it and
+// round-off). A run whose t_max comes first returns false at t_max; a
+// tolerance <= 0 throws.
+TEST(Hht, AdvanceToSteadyStateStopsAtTheStatedChangePerStep) {
+  const double omega = 2 * M_PI, h = 0.5;  // Omega = pi
+  Oscillator osc(1.0, omega * omega);
+  IntegratorOptions o;
+  o.alpha = -0.2;
+  o.dt_s = h;
+  const double tol = 1e-10;
+  HhtIntegrator ref(osc, o);
+  ref.initialize(0, Eigen::VectorXd::Ones(1));
+  long n_ref = 0;
+  for (double change = 1; change > tol; ++n_ref) {
+    const double u = ref.q()(0);
+    ref.advance_to((n_ref + 1) * h);
+    change = std::abs(ref.q()(0) - u);
+  }
+  HhtIntegrator hht(osc, o);
+  hht.initialize(0, Eigen::VectorXd::Ones(1));
+  double change = 0;
+  ASSERT_TRUE(hht.advance_to_steady_state(tol, 1000.0, &change));
+  const double rho = std::abs(principal_eigenvalue(o.alpha, omega * h));
+  const long n = hht.statistics().steps;
+  std::printf("steady after %ld steps (by hand: %ld; |lambda| %.4f), last change %.3e, |u| = %.3e, envelope %.3e\n",
+              n, n_ref, rho, change, std::abs(hht.q()(0)), std::pow(rho, n));
+  EXPECT_EQ(n, n_ref);
+  EXPECT_LE(change, tol);
+  EXPECT_NEAR(hht.time(), n * h, 1e-12);
+  EXPECT_EQ(hht.q()(0), ref.q()(0));
+  EXPECT_LE(std::abs(hht.q()(0)), 2 * std::pow(rho, static_cast<double>(n)));
+
+  HhtIntegrator short_run(osc, o);
+  short_run.initialize(0, Eigen::VectorXd::Ones(1));
+  EXPECT_FALSE(short_run.advance_to_steady_state(tol, 3.0));
+  EXPECT_NEAR(short_run.time(), 3.0, 1e-12);
+  EXPECT_THROW(short_run.advance_to_steady_state(0.0, 10.0), common::InputError);
+}
+
 // A one-element shell (all four nodes' positions free, transverse gradients
 // free, one edge clamped) released from a prescribed initial velocity: with
 // alpha = 0 and no external work, the total energy (kinetic + strain) is

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "cartilage/hht_integrator.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
@@ -149,6 +150,80 @@ TEST(SurfaceModel, EffectsItCannotBuildAreErrorsNotOmissions) {
     }
   }
   EXPECT_TRUE(ledger.records().empty());  // nothing was built before the error
+}
+
+// The osmotic scenario's two paths to its steady state (docs/surface_output.md,
+// "How the scenario is solved"): the direct static solve (steady_state: true)
+// and the dynamic HHT path from rest (inertia, foundation springs and the
+// seed's compressive-only dampers, osmotic pressure applied at t = 0,
+// periphery fixed) stepped until the change per step is below a tolerance.
+// Model: a 12 x 12 spherical patch (24 mm across, R = 25 mm, seed material and
+// effect values, SurfaceParameters defaults; the full pressure from t = 0). The rest state of the dynamic
+// problem is the static equilibrium (a = v = 0 in the HHT equation leaves
+// F(q) = 0), so both must end in the same state, for the seed's dt = 1e-4 s and
+// for a 10x larger step.
+// Tolerance: the dynamic run stops when the largest weighted change per step is
+// below tol = 1e-6 x the static max deflection; a transient that decays by a
+// factor rho per step leaves about tol rho/(1 - rho) behind (HHT with alpha
+// -0.2: rho -> (1 + alpha)/(1 - alpha) = 2/3 for omega h -> infinity, 0.88 at
+// omega h = pi); both Newton solves are converged to a relative 1e-8. Bound:
+// 1e-5 x the max deflection, i.e. rho up to 0.9 (measured: 8.3e-7 and 3.3e-7
+// of it for dt = 1e-4 and 1e-3 s).
+SurfaceInput osmotic_patch_input(int n) {
+  SurfaceInput s;
+  s.name = "patch";
+  s.mesh = testing::spherical_patch(n, 0.024, 0.025);
+  s.mesh.name = s.name;
+  s.normals = quad_mesh_vertex_normals(s.mesh);
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i)
+      if (i == 0 || j == 0 || i == n || j == n) s.periphery.push_back(j * (n + 1) + i);
+  return s;
+}
+
+TEST(SurfaceModel, DynamicOsmoticPathEndsAtTheStaticSteadyState) {
+  const SurfaceInput s = osmotic_patch_input(12);
+  const std::vector<std::string> effects = {"foundation_springs", "foundation_damping", "osmotic_pressure",
+                                            "periphery_fixed", "inertia"};
+  auto max_weighted = [](const Eigen::VectorXd& x, const Eigen::VectorXd& w) {
+    return x.cwiseAbs().cwiseProduct(w).maxCoeff();
+  };
+  // Static equilibrium in one quasi-static load step (the steady_state solve).
+  auto stat_model = build_surface_model(s, SurfaceParameters{}, effects, BoneMotion::fixed(), nullptr);
+  IntegratorOptions so;
+  so.quasi_static = true;
+  so.dt_s = 1.0;
+  so.max_newton_iterations = 30;
+  HhtIntegrator stat(*stat_model, so);
+  stat.initialize(0, stat_model->reference_state());
+  stat.advance_to(1.0);
+  const Eigen::VectorXd& w = stat_model->increment_weights();
+  const Eigen::VectorXd w_stat = nodal_deflection(*stat_model, stat.q());
+  const double w_max = w_stat.maxCoeff();
+  ASSERT_GT(w_max, 1e-5);  // the patch swells (tens of micrometres)
+  // Precondition of the comparison with the seed's dampers (c/k = 1e7 s): no
+  // node ends pressed towards the bone, where a compressive damper would hold
+  // it back for ~c/k (the anchor femur has such nodes; docs/shell_element.md,
+  // section 4). Round-off bound 1e-12 m.
+  ASSERT_GE(w_stat.minCoeff(), -1e-12);
+  for (double dt : {1e-4, 1e-3}) {
+    auto dyn_model = build_surface_model(s, SurfaceParameters{}, effects, BoneMotion::fixed(), nullptr);
+    IntegratorOptions o;  // alpha -0.2 (seed)
+    o.dt_s = dt;
+    o.reuse_factorization = true;
+    HhtIntegrator dyn(*dyn_model, o);
+    dyn.initialize(0, dyn_model->reference_state());
+    double change = 0;
+    const bool steady = dyn.advance_to_steady_state(1e-6 * w_max, 2000 * dt, &change);
+    ASSERT_TRUE(steady) << "dt " << dt << ": change per step still " << change << " m at t = " << dyn.time();
+    const double diff = max_weighted(dyn.q() - stat.q(), w);
+    std::printf("dynamic osmotic patch, dt %g: %ld steps, %ld Newton iterations, %ld factorizations, max deflection %.6e (static %.6e), "
+                "max weighted difference %.3e m (%.3e of it)\n",
+                dt, dyn.statistics().steps, dyn.statistics().newton_iterations, dyn.statistics().factorizations,
+                nodal_deflection(*dyn_model, dyn.q()).maxCoeff(), w_max, diff, diff / w_max);
+    EXPECT_LT(diff, 1e-5 * w_max) << "dt " << dt;
+    EXPECT_EQ(dyn.statistics().rejected_steps, 0);
+  }
 }
 
 // Interpolated bone motion: samples are reproduced, and the spatial velocity

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 #include "common/effects.h"
 #include "common/error.h"
@@ -133,6 +134,25 @@ TEST(SurfaceStage, BundledOsmoticReachesSteadyStateAndBulgesOutwards) {
   EXPECT_FALSE(ledger.built("imposed_kinematics"));
   EXPECT_EQ(ledger.count("foundation_springs"), N);  // one spring per node
   EXPECT_EQ(ledger.count("periphery_fixed"), fixed.sum());
+
+  // XDMF sidecar (same stem): a temporal collection with one femur grid per
+  // frame, each carrying the six per-frame fields of docs/surface_output.md.
+  std::string x = o.out;
+  x.replace(x.rfind(".h5"), 3, ".xdmf");
+  std::ifstream xin(x);
+  ASSERT_TRUE(xin.good()) << x;
+  const std::string xml((std::istreambuf_iterator<char>(xin)), std::istreambuf_iterator<char>());
+  auto count = [&xml](const std::string& needle) {
+    int c = 0;
+    for (auto p = xml.find(needle); p != std::string::npos; p = xml.find(needle, p + 1)) ++c;
+    return c;
+  };
+  EXPECT_EQ(count("CollectionType=\"Temporal\""), 1);
+  EXPECT_EQ(count("<Time Value="), 2);  // the reference and the steady state
+  for (const char* field : {"displacement", "deflection", "E", "e1", "e1_dir", "e2"})
+    EXPECT_EQ(count(std::string("<Attribute Name=\"") + field + "\""), 2) << field;
+  EXPECT_GE(count("/surfaces/femur/strain/e1_dir"), 2);
+  EXPECT_GE(count("Quadrilateral"), 2);
 }
 
 // A scenario without osmotic_pressure never builds the pressure term (and the
