@@ -144,9 +144,9 @@ TEST(Comak, ModelJacobianSkippingUnmovedTermsEqualsTheFullOne) {
 
 // The contact search with warm caches (guess, distance bound, box candidates:
 // contact.h) gives the same result as a cold search, bit for bit, along a
-// sequence of small moves of the tibia and patella around a loaded pose, and
-// the box candidates do get used (the ring of triangles around the contact
-// patches).
+// sequence of small and larger moves of the tibia and patella around a
+// loaded pose, and the box candidates do get used (the ring of triangles
+// around the contact patches).
 TEST(Comak, ContactSearchWithBoxCandidatesEqualsColdSearch) {
   const auto& m = coarse_model();
   msk::ComakProblem p(m, {});
@@ -154,7 +154,10 @@ TEST(Comak, ContactSearchWithBoxCandidatesEqualsColdSearch) {
   auto warm = msk::make_data(m);
   int candidate_tests = 0;
   for (int step = 0; step < 8; ++step) {
-    for (int c : p.secondary_coordinates()) q[c] += (step % 2 ? 1 : -1) * 2e-5 * (1 + c % 3);
+    // Mostly small moves (the cached boxes stay valid), every third one
+    // 0.4 mm / 0.4 deg per unit (the boxes go stale and are rebuilt).
+    const double size = step % 3 == 2 ? 4e-4 : 2e-5;
+    for (int c : p.secondary_coordinates()) q[c] += (step % 2 ? 1 : -1) * size * (1 + c % 3);
     msk::evaluate_forces(m, warm, q, {}, {});
     auto cold = msk::make_data(m);
     msk::evaluate_forces(m, cold, q, {}, {});
