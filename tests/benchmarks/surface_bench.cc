@@ -292,6 +292,8 @@ BENCHMARK(BM_OsmoticAnchorDynamic)
     ->Args({1000, 1, 1, 10, 1})
     ->Args({100, 1, 1, 10, 1})
     ->Args({1000, 1, 1, 10, 0})
+    ->Args({1000, 1, 1, 0, 1})
+    ->Args({1000, 1, 0, 10, 1})
     ->Unit(benchmark::kSecond)
     ->Iterations(1);
 
