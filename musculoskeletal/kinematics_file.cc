@@ -97,6 +97,10 @@ KinematicsFileWriter::KinematicsFileWriter(const std::string& path, const ComakP
   f.set_attribute("/", "trial", info.trial_path);
   f.set_attribute("/", "world_frame", "femur (the model's root body; its pose is the identity)");
   f.set_attribute("/", "ankle_equilibrium", problem.options().ankle_equilibrium ? 1 : 0);
+  // 1: the tibia and patella carried their own weight and d'Alembert forces and
+  // the applied external load was the foot's moved to the knee; /external_loads
+  // still holds the inverse dynamics' F_ext, M_ext (shank included).
+  f.set_attribute("/", "body_inertia", problem.options().body_inertia ? 1 : 0);
   for (int c : problem.free_coordinates()) impl_->coordinate_names.push_back(m.tree.coordinates[c]);
   f.write("/coordinates/names", impl_->coordinate_names);
   std::vector<std::string> pres;

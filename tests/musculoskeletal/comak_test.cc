@@ -470,4 +470,7 @@ TEST(Comak, SceneDefaultsAreTheSolverDefaults) {
   const auto* ankle = arthrosim::common::find_option("comak", "ankle_equilibrium");
   ASSERT_NE(ankle, nullptr);
   EXPECT_EQ(ankle->default_value == "true", o.ankle_equilibrium);
+  const auto* inertia = arthrosim::common::find_option("comak", "body_inertia");
+  ASSERT_NE(inertia, nullptr);
+  EXPECT_EQ(inertia->default_value == "true", o.body_inertia);
 }
