@@ -231,21 +231,32 @@ def write(res, out_name):
     o.append("     Parametric right knee, 12 DOF (docs/model_format.md). Sources: see the script. -->")
     o.append('<robot name="knee_parametric_%s" xmlns:arthrosim="https://arthrosim.org/model">' % res)
 
-    def link(name, mass, mesh=None):
+    def link(name, mass, mesh=None, com_y=0.0, rg_transverse=0.0, rg_long=0.0):
         o.append('  <link name="%s">' % name)
         if mass:
-            o.append('    <inertial><mass value="%.4f"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>'
-                     % mass)
+            it, il = mass * rg_transverse ** 2, mass * rg_long ** 2
+            o.append('    <inertial><origin xyz="0 %.4f 0"/><mass value="%.4f"/>'
+                     '<inertia ixx="%.5f" ixy="0" ixz="0" iyy="%.5f" iyz="0" izz="%.5f"/></inertial>'
+                     % (com_y, mass, it, il, it))
         if mesh:
             o.append('    <visual><geometry><mesh filename="%s/%s.stl" scale="0.001 0.001 0.001"/></geometry></visual>'
                      % (res, mesh))
         o.append("  </link>")
 
     # Segment masses [W09] (thigh 0.100, leg 0.0465 of 61 kg); patella 0.02 kg (small,
-    # order of magnitude of a patella); statics do not use them. Inertia is
-    # written as zero (URDF's <inertial> requires it; unused by the statics).
+    # order of magnitude of a patella). The statics use none of them; COMAK's optional
+    # body inertia (comak.body_inertia, docs/comak.md) uses the tibia's and the
+    # patella's. The tibia link carries the shank segment as the trial's inverse
+    # dynamics does (musculoskeletal/anthropometry.h, docs/trials.md): COM 0.433 of
+    # the shank length L = 0.246 x 1.65 m below the knee on the flexion axis,
+    # radius of gyration 0.302 L about the transverse axes [W09] and 0.1 L about
+    # the long axis (order of de Leva 1996), so the option and the inverse dynamics
+    # describe the same body. Femur and patella: mass only, zero inertia tensors
+    # (the femur is moved by the trial; the patella's inertia is negligible).
+    shank_length = 0.246 * 1.65  # [W09] segment length / height, the subject's 1.65 m [S02]
     link("femur", 0.100 * body_mass, "femur_bone")
-    link("tibia", 0.0465 * body_mass, "tibia_bone")
+    link("tibia", 0.0465 * body_mass, "tibia_bone", com_y=-0.433 * shank_length,
+         rg_transverse=0.302 * shank_length, rg_long=0.1 * shank_length)
     link("patella", 0.02, "patella_bone")
     link("pelvis", None)
     link("calcaneus", None)
