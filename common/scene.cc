@@ -131,6 +131,19 @@ const std::vector<OptionSpec>& schema_table() {
        true,
        "sparse solver of the Newton steps: auto (CHOLMOD when every tangent is symmetric, else "
        "UMFPACK), cholmod (on the symmetric part (K + K^T)/2), umfpack"},
+      // Opt-in keys of the dynamic path (pipelines/surface_stage.cc; all off
+      // by default, so existing scenes run unchanged).
+      {"surface", "osmotic_ramp_s", T::kNumber, U::kSecond, "0", false, 0, 1e4, "", true,
+       "without imposed_kinematics: the osmotic pressure rises from 0 over this time by the smoothstep "
+       "3 s^2 - 2 s^3 of the seating ramp (0: full pressure from t = 0; with imposed_kinematics the "
+       "pressure rises over seating_time_s instead); at most end_time_s"},
+      {"surface", "steady_state_change_mm", T::kNumber, U::kMillimetre, "0", false, 0, 1e3, "", true,
+       "time-stepping runs: end once the largest weighted coordinate change over one step (positions, "
+       "and transverse gradients x h/2) is at most this, after the pressure ramp; 0: run to end_time_s. "
+       "The output records where and why it stopped (docs/surface_output.md)"},
+      {"surface", "newton_reuse_factorization", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
+       "modified Newton: keep the last factorisation across iterations and steps of the same size while "
+       "the residual falls by 4x per iteration (else refactorise); not with mesh_contact"},
       // Deformable mesh contact (effect mesh_contact; cartilage/mesh_contact.h,
       // docs/contact.md) and the seating of imposed kinematics.
       {"surface", "contact_pairs", T::kTextList, U::kNone, "[femur:tibia_medial, femur:tibia_lateral]",

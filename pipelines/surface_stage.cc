@@ -331,6 +331,31 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   iopt.solver = solver == "cholmod"   ? cartilage::LinearSolverChoice::kCholmod
                 : solver == "umfpack" ? cartilage::LinearSolverChoice::kUmfpack
                                       : cartilage::LinearSolverChoice::kAuto;
+  // Opt-in keys of the dynamic path (docs/scenes.md; all off by default).
+  // osmotic_ramp_s: without imposed kinematics the osmotic pressure rises
+  // over this time, by the same smoothstep the seating ramp uses with
+  // imposed kinematics (SurfaceParameters::osmotic_ramp_s, set below from
+  // seating_time_s when bones move).
+  const double osmotic_ramp = o.si("osmotic_ramp_s");
+  if (osmotic_ramp > 0) {
+    if (moving)
+      throw common::InputError(scene.file.string(), o.value("osmotic_ramp_s").line,
+                               "scenario '" + sc->name + "': osmotic_ramp_s is for scenarios without "
+                               "imposed_kinematics (with them the pressure rises over seating_time_s)");
+    if (osmotic_ramp > end_time)
+      throw common::InputError(scene.file.string(), o.value("osmotic_ramp_s").line,
+                               "scenario '" + sc->name + "': osmotic_ramp_s (" + std::to_string(osmotic_ramp) +
+                                   " s) exceeds end_time_s (" + std::to_string(end_time) +
+                                   " s): the pressure would never reach osmotic_pressure_mpa");
+    par.osmotic_ramp_s = osmotic_ramp;
+  }
+  // steady_state_change_mm: a time-stepping run ends once the largest
+  // weighted coordinate change over one step is at most this (m here).
+  const double stop_change = o.si("steady_state_change_mm");
+  if (stop_change > 0 && steady)
+    throw common::InputError(scene.file.string(), o.value("steady_state_change_mm").line,
+                             "scenario '" + sc->name + "': steady_state_change_mm stops a time-stepping run; "
+                             "it has no meaning with steady_state: true");
 
   // ---- models -------------------------------------------------------------
   common::EffectLedger ledger("surface:" + sc->name);
@@ -553,6 +578,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   solver_out.push_back(out.appender_int("/solver/rejections", {}, so));
   solver_out.push_back(out.appender("/solver/wall_s", {}, so));
   solver_out.push_back(out.appender("/solver/max_deflection_m", {}, so));
+  // steady_state_change_mm: the largest weighted coordinate change per step.
+  std::unique_ptr<H5File::Appender> change_out;
+  if (stop_change > 0) change_out = std::make_unique<H5File::Appender>(out.appender("/solver/change_m", {}, so));
   if (contact) {
     solver_out.push_back(out.appender("/solver/max_penetration_m", {}, so));
     solver_out.push_back(out.appender("/solver/penetration_ratio", {}, so));
@@ -672,6 +700,11 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
 
   // ---- integrate ----------------------------------------------------------
   if (contact) iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
+  iopt.reuse_factorization = o.flag("newton_reuse_factorization");
+  if (iopt.reuse_factorization && contact)
+    throw common::InputError(scene.file.string(), o.value("newton_reuse_factorization").line,
+                             "scenario '" + sc->name + "': newton_reuse_factorization cannot be combined with "
+                             "mesh_contact (its Newton line search needs a fresh tangent)");
   iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
   iopt.residual_rtol = o.si("newton_tolerance");
   iopt.increment_rtol = o.si("newton_tolerance");
@@ -708,7 +741,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
                    (steady ? std::string("steady state (static equilibrium at t = ") + std::to_string(end_time) + " s)"
                            : (quasi_static ? "quasi-static" : "HHT alpha " + std::to_string(iopt.alpha)) +
                                  std::string(", dt ") + std::to_string(dt) + " s to " + std::to_string(total_time) +
-                                 " s" + (seating > 0 ? " (" + std::to_string(seating) + " s seating first)" : "")));
+                                 " s" + (seating > 0 ? " (" + std::to_string(seating) + " s seating first)" : "") +
+                                 (osmotic_ramp > 0 ? ", osmotic pressure ramped over " + std::to_string(osmotic_ramp) +
+                                                         " s"
+                                                   : std::string()) +
+                                 (stop_change > 0 ? ", stopping at the steady state (change per step <= " +
+                                                        std::to_string(stop_change * 1e3) + " mm)"
+                                                  : std::string())));
   write_frame(integrator.q(), 0.0, reports);
   common::ProgressOptions popt;
   if (!options.progress) popt.mode = common::ProgressOptions::Mode::kOff;
@@ -718,6 +757,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   const bool stop_on_penetration = o.text("penetration_action") == "stop";
   double t = 0;
   int k_out = 1;
+  // steady_state_change_mm: each step is taken by advance_to_steady_state
+  // over that one step (same halving rules as advance_to), which returns
+  // whether the step's weighted change was at most stop_change. The stop is
+  // not accepted before the pressure ramp (or seating) has ended: at the
+  // start of a smoothstep ramp the load barely changes.
+  bool stopped_steady = false;
+  double last_change = std::numeric_limits<double>::quiet_NaN();
   long last_iterations = 0, last_rejections = 0;
   SurfaceStageResult res;
   try {
@@ -726,7 +772,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       while (t < t_out * (1 - 1e-12)) {
         const double t_next = std::min(t + step, t_out);
         const double w0 = now_s();
-        integrator.advance_to(t_next);
+        bool at_steady = false;
+        if (stop_change > 0) {
+          at_steady = integrator.advance_to_steady_state(stop_change, t_next, &last_change) &&
+                      t_next >= par.osmotic_ramp_s;
+        } else {
+          integrator.advance_to(t_next);
+        }
         const double wall = now_s() - w0;
         const cartilage::IntegratorStatistics& s = integrator.statistics();
         const cartilage::StepRecord& rec = s.log.back();
@@ -750,6 +802,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         solver_out[5].append(static_cast<int>(s.rejected_steps - last_rejections));
         solver_out[6].append(wall);
         solver_out[7].append(max_def);
+        if (change_out) change_out->append(last_change);
         if (contact) {
           reports = contact_reports(integrator.q());
           double pen = 0, rim_depth = 0;
@@ -787,9 +840,14 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         last_rejections = s.rejected_steps;
         t = t_next;
         progress.step();
+        if (at_steady) {
+          stopped_steady = true;
+          break;
+        }
       }
-      write_frame(integrator.q(), t, reports);
+      write_frame(integrator.q(), t, reports);  // at a stop: the steady state is the last frame
       ++k_out;
+      if (stopped_steady) break;
     }
   } catch (const std::exception& e) {
     out.set_attribute("/", "status", std::string("failed: ") + e.what());
@@ -816,6 +874,31 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     res.surfaces.push_back(r.summary);
   }
   for (auto& a : solver_out) a.close();
+  if (change_out) change_out->close();
+  if (stop_change > 0) {
+    res.steady_state_stop = true;
+    res.steady_state_reached = stopped_steady;
+    res.stop_time_s = t;
+    res.last_change_m = last_change;
+    out.set_attribute("/solver", "steady_state_change_tol_m", stop_change);
+    out.set_attribute("/solver", "stop_reason", stopped_steady ? "steady_state" : "end_time");
+    out.set_attribute("/solver", "stop_time_s", t);
+    out.set_attribute("/solver", "last_change_m", last_change);
+    std::ostringstream m;
+    m << "scenario " << sc->name << ": ";
+    if (stopped_steady) {
+      m << "steady state reached at t = " << t << " s after " << integrator.statistics().steps
+        << " steps: largest weighted change over the last step " << last_change * 1e3 << " mm <= "
+        << stop_change * 1e3 << " mm";
+      common::log_info(m.str());
+    } else {
+      m << "end_time_s = " << t << " s reached before the steady state (a whole step of time_step_s after the "
+        << "pressure ramp with a largest weighted change <= " << stop_change * 1e3
+        << " mm, steady_state_change_mm); the last step's change was " << last_change * 1e3 << " mm";
+      common::log_warn(m.str());
+    }
+  }
+  if (osmotic_ramp > 0) out.set_attribute("/", "osmotic_ramp_s", osmotic_ramp);
   for (auto& a : contact_out) a.close();
   const cartilage::IntegratorStatistics& s = integrator.statistics();
   const cartilage::CoupledSystemStatistics& cs = system.statistics();

@@ -48,6 +48,11 @@ struct SurfaceStageResult {
   long active_contacts_sum = 0;        ///< sum over steps of active contacts
   long penetration_warnings = 0;       ///< steps breaking the accuracy rule
   double worst_penetration_ratio = 0;  ///< largest penetration / deflection of those
+  // steady_state_change_mm > 0 only:
+  bool steady_state_stop = false;      ///< the run could stop at the steady state
+  bool steady_state_reached = false;   ///< it did (false: end_time_s came first)
+  double stop_time_s = 0;              ///< time of the last step
+  double last_change_m = 0;            ///< largest weighted coordinate change over that step
 };
 
 /// Runs the stage. Throws common::InputError on bad input (naming file and

@@ -547,6 +547,15 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
   EXPECT_EQ(RunnerTest::names(plan_stages(osmotic, out)), (V{"prepare", "surface.osmotic"}));
   EXPECT_FALSE(osmotic.require_scenario("osmotic").wants("mesh_contact"));
   EXPECT_TRUE(osmotic.require_scenario("osmotic").wants("osmotic_pressure"));
+  // The same scenario run dynamically to the steady state (opt-in keys of the
+  // surface stage): same plan, model, prepared resolution and effects.
+  const Scene dynamic = common::load_scene(dir / "osmotic_dynamic.yaml");
+  EXPECT_EQ(RunnerTest::names(plan_stages(dynamic, out)), (V{"prepare", "surface.osmotic"}));
+  EXPECT_EQ(dynamic.model, osmotic.model);
+  EXPECT_EQ(dynamic.prepare.canonical_text(), osmotic.prepare.canonical_text());
+  EXPECT_EQ(dynamic.require_scenario("osmotic").effects, osmotic.require_scenario("osmotic").effects);
+  EXPECT_FALSE(dynamic.require_scenario("osmotic").options.flag("steady_state"));
+  EXPECT_GT(dynamic.require_scenario("osmotic").options.si("steady_state_change_mm"), 0.0);
 
   const Scene gait = common::load_scene(dir / "gait.yaml");
   EXPECT_EQ(RunnerTest::names(plan_stages(gait, out)), (V{"prepare", "comak", "surface.gait"}));
