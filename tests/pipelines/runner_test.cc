@@ -585,7 +585,7 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
       return kept;
     };
     EXPECT_EQ(options(stance), options(whole->scenarios.front())) << name;
-    EXPECT_DOUBLE_EQ(stance.options.si("end_time_s"), 0.63) << name;
+    EXPECT_DOUBLE_EQ(stance.options.si("end_time_s"), 0.35) << name;
   }
 }
 
