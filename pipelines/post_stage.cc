@@ -308,7 +308,19 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
         follows_cycle = common::read_effect_ledger(h5).built("imposed_kinematics");
     }
     if (follows_cycle) {
-      for (const auto& [name, t] : key_times) frames.emplace_back(name, nearest(t));
+      // A key time the run does not reach (e.g. a walk that ends before the
+      // second peak) gets no map: the nearest frame would be another instant.
+      const Eigen::Index nt = field.time.size();
+      const double half_step = nt > 1 ? 0.5 * (field.time(nt - 1) - field.time(0)) / double(nt - 1) : 0.0;
+      for (const auto& [name, t] : key_times) {
+        if (t < field.time(0) - half_step || t > field.time(nt - 1) + half_step) {
+          summary.missing.push_back(scenario + ": the run covers " + report::number(field.time(0)) + " to " +
+                                    report::number(field.time(nt - 1)) + " s of the trial, not the " + name +
+                                    " at " + report::number(t) + " s (no map for it)");
+          continue;
+        }
+        frames.emplace_back(name, nearest(t));
+      }
     } else if (field.e1.rows() > 0) {
       Eigen::Index fmax = field.e1.rows() - 1;
       if (field.deflection.size() > 0) field.deflection.cwiseAbs().rowwise().maxCoeff().maxCoeff(&fmax);

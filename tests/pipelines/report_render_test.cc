@@ -27,7 +27,7 @@ const fs::path kDir = fs::path(ARTHROSIM_BINARY_DIR) / "report_render_test";
 // With `walking`, also what a mesh-contact scenario writes (docs/surface_output.md):
 // /trial_time (a 0.02 s seating before the trial clock), the tibiofemoral force and
 // the per-step accuracy-rule records, the first step without active contacts.
-void write_surface(const fs::path& path, double phase, bool walking = false) {
+void write_surface(const fs::path& path, double phase, bool walking = false, double t_end = 1.0) {
   const int nx = 40, ny = 30, T = 5;
   Eigen::MatrixXd V((nx + 1) * (ny + 1), 3);
   for (int j = 0; j <= ny; ++j)
@@ -53,7 +53,7 @@ void write_surface(const fs::path& path, double phase, bool walking = false) {
     }
   common::H5File f(path.string(), common::H5File::Mode::kTruncate);
   f.set_attribute("/", "scenario", "test");
-  f.write("/time", Eigen::VectorXd::LinSpaced(T, 0.0, 1.0));
+  f.write("/time", Eigen::VectorXd::LinSpaced(T, 0.0, t_end));
   f.write("/surfaces/femur/nodes", V);
   f.write("/surfaces/femur/quads", Q);
   f.write("/surfaces/femur/strain/e1", e1);
@@ -63,7 +63,7 @@ void write_surface(const fs::path& path, double phase, bool walking = false) {
   f.set_attribute("/solver/femur", "total_s", 12.5);
   f.set_attribute("/solver/femur", "newton_iterations", 42);
   if (!walking) return;
-  const Eigen::VectorXd time = Eigen::VectorXd::LinSpaced(T, 0.0, 1.0);
+  const Eigen::VectorXd time = Eigen::VectorXd::LinSpaced(T, 0.0, t_end);
   f.write("/trial_time", Eigen::VectorXd(time.array() - 0.02));
   Eigen::MatrixXd F = Eigen::MatrixXd::Zero(T, 3);
   F.col(2) = Eigen::VectorXd::LinSpaced(T, 100.0, 900.0);
@@ -172,6 +172,30 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   // is larger; the grid's outline is a rectangle, not the map's outline, so only the
   // ordering is asserted here (the known-answer bound is post_synthetic_test).
   EXPECT_LT(s.scenarios[0].stats.front().mean_deg, s.scenarios[1].stats.front().mean_deg);
+}
+
+// A walk that ends before the second peak (as the demo's, which stops at mid
+// stance) gets maps only at the key frames it covers; the others are listed as
+// missing with the span the run covers, never drawn at the nearest frame.
+TEST(ReportRender, KeyFramesOutsideTheRunAreReportedNotDrawn) {
+  fs::create_directories(kDir);
+  write_surface(kDir / "surface_short.h5", 0.3, /*walking=*/true, /*t_end=*/0.3);
+  write_kinematics(kDir / "kinematics.h5");
+  PostInputs in;
+  in.surfaces = {{"gait", (kDir / "surface_short.h5").string()}};
+  in.kinematics = (kDir / "kinematics.h5").string();
+  PostOptions opt;
+  opt.view = ViewOptions{};
+  opt.splitline_map = std::string(ARTHROSIM_SOURCE_DIR) + "/data/splitlines/synthetic_femur.csv";
+  const PostSummary s = run_post(in, opt, (kDir / "short").string());
+  // Trial clock -0.02 .. 0.28 s: the first peak (0.15 s) is covered, mid-stance
+  // (about 0.33 s) and the second peak (0.5 s) are not.
+  // contact + accuracy rule + 1 key frame x (deflection + e1) + directions + overlay + error
+  EXPECT_EQ(s.figures.size(), 2u + 2u + 3u);
+  ASSERT_EQ(s.missing.size(), 2u);
+  EXPECT_NE(s.missing[0].find("not the mid-stance"), std::string::npos) << s.missing[0];
+  EXPECT_NE(s.missing[1].find("not the second peak at 0.5 s"), std::string::npos) << s.missing[1];
+  EXPECT_EQ(check(kDir / "short", 7), 0);
 }
 
 TEST(ReportRender, MissingOptionalInputsAreReportedNotFatal) {
