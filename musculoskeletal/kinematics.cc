@@ -113,10 +113,6 @@ Eigen::Matrix<double, 3, Eigen::Dynamic> point_jacobian(const KinematicTree& tre
   return J;
 }
 
-}  // namespace arthrosim::musculoskeletal
-
-namespace arthrosim::musculoskeletal {
-
 namespace {
 Vec3 axial(const Eigen::Matrix3d& S) {
   // Axial vector of the skew part of S (mean of each antisymmetric pair).
@@ -128,6 +124,15 @@ Eigen::Matrix3d skew(const Vec3& w) {
   return S;
 }
 }  // namespace
+
+void central_difference_rotation_rates(const std::array<Eigen::Matrix3d, 3>& R, double step, Vec3& w,
+                                       Vec3& alpha) {
+  const Eigen::Matrix3d Rdot = (R[2] - R[0]) / (2.0 * step);
+  const Eigen::Matrix3d Rddot = (R[2] - 2.0 * R[1] + R[0]) / (step * step);
+  const Eigen::Matrix3d Rt = R[1].transpose();
+  w = axial(Rdot * Rt);
+  alpha = axial(Rddot * Rt - skew(w) * skew(w));
+}
 
 void add_inertial_forces(const KinematicTree& tree, const Eigen::VectorXd& q,
                          const std::vector<int>& bodies, const RootMotion& motion,
@@ -155,17 +160,16 @@ void add_inertial_forces(const KinematicTree& tree, const Eigen::VectorXd& q,
     const Body& B = tree.bodies.at(b);
     if (B.mass == 0.0 && B.inertia.isZero(0.0)) continue;
     Vec3 p[3];
-    Eigen::Matrix3d R[3];
+    std::array<Eigen::Matrix3d, 3> R;
     for (int s = 0; s < 3; ++s) {
       const Pose X_LB = motion.X_LR[s] * k[s].X_WB[b];
       p[s] = X_LB * B.com - o;
       R[s] = X_LB.linear();
     }
     const Vec3 a_L = (p[2] - 2.0 * p[1] + p[0]) / e2;
-    const Eigen::Matrix3d Rt = R[1].transpose();
-    const Vec3 w_L = axial((R[2] - R[0]) / (2.0 * motion.step) * Rt);
-    const Vec3 alpha_L = axial((R[2] - 2.0 * R[1] + R[0]) / e2 * Rt - skew(w_L) * skew(w_L));
-    const Eigen::Matrix3d I_L = R[1] * B.inertia * Rt;
+    Vec3 w_L, alpha_L;
+    central_difference_rotation_rates(R, motion.step, w_L, alpha_L);
+    const Eigen::Matrix3d I_L = R[1] * B.inertia * R[1].transpose();
     const Vec3 f_R = B.mass * (g_R - R_RL * a_L);
     const Vec3 tau_R = -(R_RL * (I_L * alpha_L + w_L.cross(I_L * w_L)));
     add_point_force(tree, k[1], b, k[1].X_WB[b] * B.com, f_R, Q);

@@ -81,6 +81,15 @@ void add_point_force(const KinematicTree& tree, const KinematicsData& data, int 
 void add_body_couple(const KinematicTree& tree, const KinematicsData& data, int body,
                      const Vec3& tau_W, Eigen::VectorXd& Q);
 
+/// Angular velocity w and angular acceleration alpha, in the frame the
+/// rotations map into, at the middle of three orientations
+/// R[k] = R(t + (k - 1) step), by central differences:
+/// w = axial(Rdot R^T), alpha = axial(Rddot R^T - [w]x^2) (axial: the vector
+/// of the skew part). Shared by the inverse dynamics (knee_loads.cc) and
+/// add_inertial_forces.
+void central_difference_rotation_rates(const std::array<Eigen::Matrix3d, 3>& R, double step, Vec3& w,
+                                       Vec3& alpha);
+
 /// Motion of the root frame R in an inertial (lab) frame L, for the
 /// d'Alembert forces of add_inertial_forces: the root pose at t - step, t and
 /// t + step (along the trial's local Taylor path), gravity in L and, when

@@ -1,11 +1,13 @@
 #include "musculoskeletal/knee_loads.h"
 
+#include <array>
 #include <cmath>
 #include <utility>
 #include <sstream>
 
 #include "common/error.h"
 #include "common/finite.h"
+#include "musculoskeletal/kinematics.h"
 
 namespace arthrosim::musculoskeletal {
 
@@ -16,17 +18,6 @@ using Coords = Eigen::Matrix<double, kNumTrialCoordinates, 1>;
 Eigen::Matrix3d rx(double a) { return Eigen::AngleAxisd(a, Eigen::Vector3d::UnitX()).toRotationMatrix(); }
 Eigen::Matrix3d ry(double a) { return Eigen::AngleAxisd(a, Eigen::Vector3d::UnitY()).toRotationMatrix(); }
 Eigen::Matrix3d rz(double a) { return Eigen::AngleAxisd(a, Eigen::Vector3d::UnitZ()).toRotationMatrix(); }
-
-Eigen::Vector3d unskew(const Eigen::Matrix3d& S) {
-  // Axial vector of the skew part (averaging the two entries of each pair).
-  return 0.5 * Eigen::Vector3d(S(2, 1) - S(1, 2), S(0, 2) - S(2, 0), S(1, 0) - S(0, 1));
-}
-
-Eigen::Matrix3d skew(const Eigen::Vector3d& w) {
-  Eigen::Matrix3d S;
-  S << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
-  return S;
-}
 
 // Reflection through the sagittal plane (z -> -z) of coordinates: list,
 // rotation and tz change sign (see header).
@@ -153,19 +144,16 @@ KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
     for (int b = 0; b < 2; ++b) {
       const SegmentInertia& seg = *segs[b];
       Eigen::Vector3d p[3];
-      Eigen::Matrix3d R[3];
+      std::array<Eigen::Matrix3d, 3> R;
       for (int k = 0; k < 3; ++k) {
         const Eigen::Isometry3d& X = b == 0 ? P[k].X_WT : P[k].X_WC;
         p[k] = X * seg.p_com;
         R[k] = X.linear();
       }
       Eigen::Vector3d a = (p[2] - 2.0 * p[1] + p[0]) / (eps * eps);
-      const Eigen::Matrix3d Rdot = (R[2] - R[0]) / (2.0 * eps);
-      const Eigen::Matrix3d Rddot = (R[2] - 2.0 * R[1] + R[0]) / (eps * eps);
-      const Eigen::Matrix3d Rt = R[1].transpose();
-      const Eigen::Vector3d w = unskew(Rdot * Rt);
-      const Eigen::Vector3d alpha = unskew(Rddot * Rt - skew(w) * skew(w));
-      const Eigen::Matrix3d I_W = R[1] * seg.inertia_about_com() * Rt;
+      Eigen::Vector3d w, alpha;
+      central_difference_rotation_rates(R, eps, w, alpha);
+      const Eigen::Matrix3d I_W = R[1] * seg.inertia_about_com() * R[1].transpose();
       if (!options.include_inertia) a.setZero();
       const Eigen::Vector3d f = seg.mass_kg * (options.gravity_W - a);
       F += f;

@@ -206,7 +206,8 @@ void evaluate_jacobian(const Model& model, ModelData& d, const Eigen::VectorXd& 
     Eigen::VectorXd qp = q, qm = q;
     qp[c] += h;
     qm[c] -= h;
-    const TermMask mask = terms_moved_by(model, c);
+    TermMask mask;
+    if (opt.jacobian_skip_unmoved_terms) mask = terms_moved_by(model, c);
     const TermMask* m = opt.jacobian_skip_unmoved_terms ? &mask : nullptr;
     evaluate_terms(model, work, qp, qdot, activations, opt, m);
     const Eigen::VectorXd Qp = work.Q;
