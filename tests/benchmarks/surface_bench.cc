@@ -55,6 +55,7 @@
 #include "cartilage/surface_model.h"
 #include "common/metadata.h"
 #include "common/scene.h"
+#include "common/scene_edit.h"
 #include "pipelines/prepare.h"
 #include "pipelines/runner.h"
 #include "pipelines/surface_stage.h"
@@ -88,18 +89,18 @@ const std::string& medium_prepared() {
   return path;
 }
 
+// data/scenes/osmotic.yaml, with linear_solver set unless it is "auto" (the
+// bundled default); the edited scene (paths absolute) goes into the bench folder.
+std::string osmotic_scene(const std::string& linear_solver) {
+  const std::string bundled = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/osmotic.yaml";
+  if (linear_solver == "auto") return bundled;
+  const std::string scene = (bench_dir() / ("osmotic_" + linear_solver + ".yaml")).string();
+  std::ofstream(scene) << common::edit_scene_text(bundled, {{"surface.scenarios.osmotic.linear_solver", linear_solver}});
+  return scene;
+}
+
 void run(benchmark::State& state, const std::string& linear_solver) {
-  std::string scene = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/osmotic.yaml";
-  if (linear_solver != "auto") {
-    // The bundled scene with one more key in the scenario.
-    std::ifstream in(scene);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const std::string anchor = "      steady_state: true\n";
-    text.replace(text.find(anchor), anchor.size(), anchor + "      linear_solver: " + linear_solver + "\n");
-    text.replace(text.find("model: ../models"), 16, "model: " + std::string(ARTHROSIM_SOURCE_DIR) + "/data/models");
-    scene = (bench_dir() / ("osmotic_" + linear_solver + ".yaml")).string();
-    std::ofstream(scene) << text;
-  }
+  const std::string scene = osmotic_scene(linear_solver);
   SurfaceStageOptions o;
   o.prepared = medium_prepared();
   o.scene = scene;
@@ -160,16 +161,7 @@ double cpu_seconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC
 
 void BM_OsmoticAnchorStatic(benchmark::State& state) {
   const std::string solver = state.range(0) == 1 ? "cholmod" : "auto";
-  std::string scene = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/osmotic.yaml";
-  if (solver != "auto") {
-    std::ifstream in(scene);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const std::string anchor = "      steady_state: true\n";
-    text.replace(text.find(anchor), anchor.size(), anchor + "      linear_solver: " + solver + "\n");
-    text.replace(text.find("model: ../models"), 16, "model: " + std::string(ARTHROSIM_SOURCE_DIR) + "/data/models");
-    scene = (bench_dir() / ("osmotic_anchor_" + solver + ".yaml")).string();
-    std::ofstream(scene) << text;
-  }
+  const std::string scene = osmotic_scene(solver);
   SurfaceStageOptions o;
   o.prepared = anchor_model().path;
   o.scene = scene;
