@@ -3,9 +3,32 @@
 #include <Eigen/CholmodSupport>
 #include <Eigen/UmfPackSupport>
 
+#include <dlfcn.h>
+
+#include <mutex>
+
 #include "common/error.h"
 
 namespace arthrosim::cartilage {
+
+namespace {
+// The dense kernels under UMFPACK and CHOLMOD come from whichever BLAS the
+// system provides (Debian: OpenBLAS through the libblas.so.3 alternative).
+// OpenBLAS's threaded kernels round differently from its serial ones: the
+// same UMFPACK solve of a walking-scenario tangent differs in its last bits
+// between 1 and 2 threads, so results would depend on the machine's core
+// count and on OMP_NUM_THREADS (the scene runner gives concurrent stages one
+// thread each). UMFPACK's factorisation gained nothing from the second thread
+// (0.330 vs 0.337 s on that 42k-unknown tangent), so the BLAS is pinned to one
+// thread when the symbol exists; any other BLAS is left as it is.
+void pin_blas_to_one_thread() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    using SetThreads = void (*)(int);
+    if (auto* set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
+  });
+}
+}  // namespace
 
 const char* to_string(LinearSolverKind kind) {
   return kind == LinearSolverKind::kCholmod ? "CHOLMOD supernodal LLT" : "UMFPACK LU";
@@ -21,6 +44,14 @@ SparseDirectSolver::SparseDirectSolver(LinearSolverKind kind) : impl_(std::make_
   // A non-SPD matrix is reported through factorize()'s return value and the
   // caller's statistics; keep CHOLMOD from printing its own warning.
   impl_->cholmod.cholmod().print = 0;
+  pin_blas_to_one_thread();
+  // No iterative refinement in UMFPACK's solve: every caller is a Newton
+  // iteration, which corrects the solve's error in its next residual
+  // anyway, and on the coupled contact system (42k unknowns) the default two
+  // refinement steps made each solve 5.7 x slower (0.132 vs 0.023 s) for a
+  // relative residual of 3.3e-12 instead of 4.8e-12 (measured 2026-12-02 on a
+  // tangent of the demo's walk; docs/contact.md, "Cost of a Newton iteration").
+  impl_->umfpack.umfpackControl()(UMFPACK_IRSTEP) = 0;
 }
 SparseDirectSolver::~SparseDirectSolver() = default;
 

@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
@@ -17,6 +18,7 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <thread>
 
 #include "common/error.h"
 #include "common/effects.h"
@@ -216,11 +218,14 @@ std::string quote(const std::string& arg) {
   return q + "'";
 }
 
-// Runs `exe args...` with this process's stdout/stderr (so the stage's own
-// output and progress display stream through). Returns the exit code, or 128
-// + signal number when the stage was killed; `usage` receives the stage
-// process's resource usage (wait4), which studies report per stage.
-int execute(const fs::path& exe, const std::vector<std::string>& args, struct rusage& usage) {
+// Starts `exe args...` and returns its pid (-1 when fork fails). With an
+// empty `log_file` the stage shares this process's stdout/stderr (its own
+// output and progress display stream through); otherwise both go to that
+// file, which the runner shows in parts (stages running side by side would
+// interleave on a terminal). `omp_threads` > 0 sets OMP_NUM_THREADS in the
+// stage's environment.
+pid_t launch(const fs::path& exe, const std::vector<std::string>& args, const fs::path& log_file,
+             int omp_threads) {
   std::cout.flush();
   std::cerr.flush();
   std::fflush(nullptr);
@@ -230,21 +235,46 @@ int execute(const fs::path& exe, const std::vector<std::string>& args, struct ru
   std::vector<char*> argv;
   for (std::string& a : argv_store) argv.push_back(a.data());
   argv.push_back(nullptr);
+  const std::string threads = std::to_string(omp_threads);
   const pid_t pid = fork();
-  if (pid < 0) return 127;
-  if (pid == 0) {
-    execv(argv[0], argv.data());
-    std::fprintf(stderr, "arthrosim: cannot execute %s: %s\n", argv[0], std::strerror(errno));
-    _exit(127);
+  if (pid != 0) return pid;
+  // Child: only async-signal-safe calls until execv.
+  if (!log_file.empty()) {
+    const int fd = ::open(log_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd < 0) _exit(127);
+    ::dup2(fd, STDOUT_FILENO);
+    ::dup2(fd, STDERR_FILENO);
+    ::close(fd);
   }
-  int status = 0;
-  usage = {};
-  while (wait4(pid, &status, 0, &usage) < 0) {
-    if (errno != EINTR) return 127;
-  }
+  if (omp_threads > 0) ::setenv("OMP_NUM_THREADS", threads.c_str(), 1);
+  execv(argv[0], argv.data());
+  std::fprintf(stderr, "arthrosim: cannot execute %s: %s\n", argv[0], std::strerror(errno));
+  _exit(127);
+}
+
+// The exit code of a waited-for stage, or 128 + signal number when killed.
+int exit_code_of(int status) {
   if (WIFEXITED(status)) return WEXITSTATUS(status);
   if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
   return 127;
+}
+
+// The last `n` lines of a text file (a stage's log), each prefixed.
+std::string tail_lines(const fs::path& file, std::size_t n, const std::string& prefix) {
+  std::ifstream in(file);
+  std::vector<std::string> lines;
+  std::string line;
+  while (std::getline(in, line)) {
+    // A progress display redraws with '\r'; keep what was drawn last.
+    const std::size_t cr = line.find_last_of('\r', line.size() > 1 ? line.size() - 2 : 0);
+    if (cr != std::string::npos && cr + 1 < line.size()) line = line.substr(cr + 1);
+    if (line.empty()) continue;
+    lines.push_back(std::move(line));
+    if (lines.size() > n) lines.erase(lines.begin());
+  }
+  std::string out;
+  for (const std::string& l : lines) out += prefix + l + "\n";
+  return out;
 }
 
 // An exclusive lock on DIR/.arthrosim.lock for the duration of a run, so two
@@ -445,75 +475,123 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       return report;
     }
   }
-  std::vector<std::string> will_change;  // dry run: outputs that would be rewritten
-  for (std::size_t i = 0; i < plan.size(); ++i) {
+  const std::size_t n = plan.size();
+  // deps[i]: the earlier stages that write one of stage i's inputs.
+  std::vector<std::vector<std::size_t>> deps(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = 0; j < i; ++j) {
+      bool uses = false;
+      for (const auto& input : plan[i].inputs) {
+        for (const fs::path& o : plan[j].outputs) uses = uses || input.second == o;
+      }
+      if (uses) deps[i].push_back(j);
+    }
+  }
+
+  // ---- dry run: in plan order, nothing executed ----------------------------
+  std::vector<std::string> will_change;  // outputs that would be rewritten
+  for (std::size_t i = 0; options.dry_run && i < n; ++i) {
     const StageStep& step = plan[i];
     StageOutcome& outcome = report.stages[i];
     const fs::path exe = options.stage_dir / step.executable;
-
-    // Dry run: an input that an earlier stage would (re)write cannot be
-    // hashed yet; this stage then runs after it (unless that stage reproduces
-    // identical bytes, which only a real run can tell).
+    // An input that an earlier stage would (re)write cannot be hashed yet;
+    // this stage then runs after it (unless that stage reproduces identical
+    // bytes, which only a real run can tell).
     std::string pending;
     for (const auto& [label, path] : step.inputs) {
       for (const std::string& w : will_change) {
         if (path == fs::path(w)) pending += (pending.empty() ? "" : ", ") + label;
       }
     }
-    if (options.dry_run && !pending.empty()) {
+    if (!pending.empty()) {
       outcome.status = StageStatus::kWouldRun;
       outcome.reason = "input " + pending + " is written earlier in this run";
       log << step.name << ": would run — " << outcome.reason << "\n";
       for (const fs::path& o : step.outputs) will_change.push_back(o.string());
       continue;
     }
-
     const Stamp now = current_state(step, exe, out_dir, scene.file);
     outcome.key = now.key;
     Stamp last;
     const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);
     std::string reason = why_run(step, now, have_last ? &last : nullptr);
     if (options.force) reason = "--force";
-
     if (reason.empty()) {
-      outcome.status = options.dry_run ? StageStatus::kWouldSkip : StageStatus::kSkipped;
+      outcome.status = StageStatus::kWouldSkip;
       outcome.reason = "inputs, options and code unchanged (hash " + short_key(now.key) + ")";
-      log << step.name << ": " << (options.dry_run ? "would skip" : "skipping") << " — "
-          << outcome.reason << "\n";
+      log << step.name << ": would skip — " << outcome.reason << "\n";
       continue;
     }
+    outcome.status = StageStatus::kWouldRun;
     outcome.reason = reason;
-    if (options.dry_run) {
-      outcome.status = StageStatus::kWouldRun;
-      log << step.name << ": would run — " << reason << "\n";
-      log << "  $ " << quote(exe.string());
-      for (const std::string& a : step.arguments) log << " " << quote(a);
-      log << "\n";
-      for (const fs::path& o : step.outputs) will_change.push_back(o.string());
-      continue;
-    }
-
-    log << step.name << ": running — " << reason << "\n";
+    log << step.name << ": would run — " << reason << "\n";
     log << "  $ " << quote(exe.string());
     for (const std::string& a : step.arguments) log << " " << quote(a);
     log << "\n";
-    log.flush();
-    // A failed or interrupted run must never look up to date.
-    std::error_code ec;
-    fs::remove(stamp_path(out_dir, step.name), ec);
-    const auto t0 = std::chrono::steady_clock::now();
-    struct rusage usage {};
-    outcome.exit_code = execute(exe, step.arguments, usage);
-    outcome.wall_time_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    for (const fs::path& o : step.outputs) will_change.push_back(o.string());
+  }
+
+  // ---- real run: a stage starts once the stages writing its inputs are done;
+  // up to options.jobs run at once -----------------------------------------
+  using Clock = std::chrono::steady_clock;
+  enum class Phase { kWaiting, kRunning, kFinished };
+  std::vector<Phase> phase(n, Phase::kWaiting);
+  struct Running {
+    std::size_t index;
+    pid_t pid;
+    Clock::time_point t0;
+    fs::path log_file;  // empty: the stage writes to this process's stdout/stderr
+    Stamp now;
+  };
+  std::vector<Running> running;
+  std::vector<bool> checked(n, false);  // stamp compared (once its inputs exist)
+  std::vector<Stamp> stamp_now(n);
+  const std::size_t jobs = static_cast<std::size_t>(std::max(1, options.jobs));
+  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const bool user_threads = std::getenv("OMP_NUM_THREADS") != nullptr;
+  bool stop = false;  // a stage failed: start nothing more
+
+  const auto is_ready = [&](std::size_t i) {
+    if (phase[i] != Phase::kWaiting) return false;
+    for (std::size_t j : deps[i]) {
+      if (phase[j] != Phase::kFinished) return false;
+      const StageStatus st = report.stages[j].status;
+      if (st != StageStatus::kRan && st != StageStatus::kSkipped) return false;
+    }
+    return true;
+  };
+  const auto fail = [&](std::size_t i) {
+    const StageStep& step = plan[i];
+    const StageOutcome& outcome = report.stages[i];
+    if (report.status == RunStatus::kOk) {
+      report.status = RunStatus::kStageFailed;
+      report.message = "stage " + step.name + " (" + step.executable + ") " + outcome.reason +
+                       "; stopping (outputs of earlier stages are kept in " + out_dir.string() + ")";
+    }
+    log << step.name << ": FAILED after " << std::fixed << std::setprecision(1) << outcome.wall_time_s
+        << " s — " << outcome.reason << "\n";
+    log.unsetf(std::ios::floatfield);
+    stop = true;
+    if (!running.empty()) {
+      log << "arthrosim: waiting for " << running.size()
+          << " stage(s) already running to finish (their results are kept)\n";
+    }
+  };
+  // Checks a stage that exited: outputs present, effect ledger as asked; stamps it.
+  const auto finish = [&](const Running& r, int status, const struct rusage& usage) {
+    const std::size_t i = r.index;
+    const StageStep& step = plan[i];
+    StageOutcome& outcome = report.stages[i];
+    phase[i] = Phase::kFinished;
+    outcome.exit_code = exit_code_of(status);
+    outcome.wall_time_s = std::chrono::duration<double>(Clock::now() - r.t0).count();
     outcome.cpu_time_s = static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
                          1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
     outcome.max_rss_kb = usage.ru_maxrss;  // kilobytes on Linux (getrusage(2))
     if (outcome.exit_code != 0) {
       outcome.status = StageStatus::kFailed;
-      outcome.reason = outcome.exit_code > 128
-                           ? "killed by signal " + std::to_string(outcome.exit_code - 128)
-                           : "exited with status " + std::to_string(outcome.exit_code);
+      outcome.reason = outcome.exit_code > 128 ? "killed by signal " + std::to_string(outcome.exit_code - 128)
+                                               : "exited with status " + std::to_string(outcome.exit_code);
     } else {
       for (const fs::path& o : step.outputs) {
         if (!fs::exists(o)) {
@@ -522,6 +600,11 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
           break;
         }
       }
+    }
+    if (!r.log_file.empty()) {
+      // What the stage printed last: its summary, or the error that stopped it.
+      log << step.name << ": last lines of " << r.log_file.string() << ":\n"
+          << tail_lines(r.log_file, outcome.status == StageStatus::kFailed ? 30 : 12, "  | ");
     }
     if (outcome.status != StageStatus::kFailed && step.effects) {
       // The stage's own account of what it built must match the scene.
@@ -546,25 +629,126 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       }
     }
     if (outcome.status == StageStatus::kFailed) {
-      report.status = RunStatus::kStageFailed;
-      report.message = "stage " + step.name + " (" + step.executable + ") " + outcome.reason +
-                       "; stopping (outputs of earlier stages are kept in " + out_dir.string() +
-                       ")";
-      log << step.name << ": FAILED after " << std::fixed << std::setprecision(1)
-          << outcome.wall_time_s << " s — " << outcome.reason << "\n";
-      log << "arthrosim: error: " << report.message << "\n";
-      log.unsetf(std::ios::floatfield);
-      return report;
+      fail(i);
+      return;
     }
-    Stamp done = now;
-    for (const fs::path& o : step.outputs) {
-      done.outputs[o.filename().string()] = common::sha256_file(o);
-    }
+    Stamp done = r.now;
+    for (const fs::path& o : step.outputs) done.outputs[o.filename().string()] = common::sha256_file(o);
     write_stamp(stamp_path(out_dir, step.name), step, done);
     outcome.status = StageStatus::kRan;
-    log << step.name << ": done in " << std::fixed << std::setprecision(1) << outcome.wall_time_s
-        << " s (hash " << short_key(now.key) << ")\n";
+    log << step.name << ": done in " << std::fixed << std::setprecision(1) << outcome.wall_time_s << " s (hash "
+        << short_key(r.now.key) << ")\n";
     log.unsetf(std::ios::floatfield);
+    log.flush();
+  };
+
+  auto last_heartbeat = Clock::now();
+  while (!options.dry_run) {
+    // Skip every ready stage that is up to date (which may make more stages
+    // ready), then start ready stages while slots are free.
+    for (bool progressed = true; progressed && !stop;) {
+      progressed = false;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (!is_ready(i) || checked[i]) continue;
+        const StageStep& step = plan[i];
+        StageOutcome& outcome = report.stages[i];
+        stamp_now[i] = current_state(step, options.stage_dir / step.executable, out_dir, scene.file);
+        checked[i] = true;
+        outcome.key = stamp_now[i].key;
+        Stamp last;
+        const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);
+        outcome.reason = options.force ? "--force" : why_run(step, stamp_now[i], have_last ? &last : nullptr);
+        if (outcome.reason.empty()) {
+          phase[i] = Phase::kFinished;
+          outcome.status = StageStatus::kSkipped;
+          outcome.reason = "inputs, options and code unchanged (hash " + short_key(stamp_now[i].key) + ")";
+          log << step.name << ": skipping — " << outcome.reason << "\n";
+          progressed = true;
+        }
+      }
+    }
+    for (std::size_t i = 0; i < n && running.size() < jobs && !stop; ++i) {
+      if (!is_ready(i)) continue;
+      const StageStep& step = plan[i];
+      StageOutcome& outcome = report.stages[i];
+      const fs::path exe = options.stage_dir / step.executable;
+      const Stamp& now = stamp_now[i];
+      const std::string& reason = outcome.reason;
+      std::size_t others_ready = 0;
+      for (std::size_t k = 0; k < n; ++k) others_ready += k != i && is_ready(k) ? 1 : 0;
+      // Alone, a stage streams to the terminal and uses every core; side by
+      // side, each writes a log and gets an equal share of the cores
+      // (results do not depend on the thread count: docs/scenes.md).
+      const bool alone = jobs == 1 || (running.empty() && others_ready == 0);
+      const std::size_t together = std::min(jobs, running.size() + 1 + others_ready);
+      const int threads =
+          alone || user_threads ? 0 : std::max(1, cores / static_cast<int>(together));
+      fs::path log_file;
+      if (!alone) {
+        fs::create_directories(out_dir / "logs");
+        log_file = out_dir / "logs" / (step.name + ".log");
+      }
+      log << step.name << ": running — " << reason << "\n";
+      log << "  $ " << quote(exe.string());
+      for (const std::string& a : step.arguments) log << " " << quote(a);
+      log << "\n";
+      if (!alone) {
+        log << "  (side by side with other stages: " << (threads > 0 ? std::to_string(threads) : "OMP_NUM_THREADS")
+            << " thread(s); its output goes to " << log_file.string() << ")\n";
+      }
+      log.flush();
+      // A failed or interrupted run must never look up to date.
+      std::error_code ec;
+      fs::remove(stamp_path(out_dir, step.name), ec);
+      const pid_t pid = launch(exe, step.arguments, log_file, threads);
+      phase[i] = Phase::kRunning;
+      if (pid < 0) {
+        phase[i] = Phase::kFinished;
+        outcome.status = StageStatus::kFailed;
+        outcome.exit_code = 127;
+        outcome.reason = std::string("could not be started: ") + std::strerror(errno);
+        fail(i);
+        break;
+      }
+      running.push_back({i, pid, Clock::now(), log_file, now});
+    }
+    if (running.empty()) break;
+
+    // Wait for one of the running stages to exit.
+    bool exited = false;
+    for (std::size_t r = 0; r < running.size(); ++r) {
+      int status = 0;
+      struct rusage usage {};
+      const pid_t got = wait4(running[r].pid, &status, running.size() == 1 && running[r].log_file.empty() ? 0 : WNOHANG,
+                              &usage);
+      if (got == 0 || (got < 0 && errno == EINTR)) continue;
+      if (got < 0) status = 127 << 8;  // not our child any more: report as failed to start
+      const Running done = running[r];
+      running.erase(running.begin() + static_cast<std::ptrdiff_t>(r));
+      finish(done, status, usage);
+      exited = true;
+      break;
+    }
+    if (exited) continue;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (Clock::now() - last_heartbeat > std::chrono::seconds(30)) {
+      // Stages writing to logs: their latest progress line.
+      last_heartbeat = Clock::now();
+      for (const Running& r : running) {
+        if (r.log_file.empty()) continue;
+        const double t = std::chrono::duration<double>(Clock::now() - r.t0).count();
+        std::string last = tail_lines(r.log_file, 1, "");
+        if (!last.empty() && last.back() == '\n') last.pop_back();
+        log << "  " << plan[r.index].name << " (" << std::fixed << std::setprecision(0) << t
+            << " s): " << (last.empty() ? "started" : last) << "\n";
+        log.unsetf(std::ios::floatfield);
+      }
+      log.flush();
+    }
+  }
+  if (report.status != RunStatus::kOk) {
+    log << "arthrosim: error: " << report.message << "\n";
+    return report;
   }
   log << "arthrosim: " << (options.dry_run ? "dry run finished:" : "finished:");
   for (const StageOutcome& o : report.stages) {

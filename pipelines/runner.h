@@ -71,6 +71,14 @@ struct RunnerOptions {
   std::filesystem::path stage_dir;
   bool force = false;    ///< run every planned stage even when up to date
   bool dry_run = false;  ///< print the plan and what would run; run nothing
+  /// How many stages may run at once. A stage starts when the stages that
+  /// write its inputs are done, so with 2 the surface scenarios run side by
+  /// side after COMAK. A stage running alone streams its output and uses every
+  /// core; stages running together write DIR/logs/<stage>.log (the runner
+  /// prints their progress every 30 s and each log's last lines when it ends)
+  /// and share the cores through OMP_NUM_THREADS (unless the caller set it).
+  /// Results are bit-identical for any value. 1: one stage after the other.
+  int jobs = 1;
 };
 
 enum class StageStatus {

@@ -5,9 +5,11 @@
 // Scene format: docs/scenes.md. Runner: pipelines/runner.h.
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <thread>
 
 #include "common/effects.h"
 #include "common/error.h"
@@ -24,13 +26,19 @@ constexpr const char* kDescription = R"(arthrosim: knee simulation pipeline driv
 
 Runs a scene (a YAML file naming the model, trial, outputs, effects and
 options; see docs/scenes.md): works out which stages its outputs need, runs
-only those, in order, each as its own program writing files into the output
-folder, and skips a stage whose inputs, options and code are unchanged since
-its last successful run (hashes in OUT/.stamps/).
+only those, each as its own program writing files into the output folder, and
+skips a stage whose inputs, options and code are unchanged since its last
+successful run (hashes in OUT/.stamps/). A stage starts once the stages that
+write its inputs are done; with --jobs 2 (the default on a 2-core machine)
+the surface scenarios run side by side after COMAK, each with its share of
+the cores and its output in OUT/logs/<stage>.log. Results do not depend on
+--jobs.
 
 Sample runs (from the repository root, after scripts/build.sh):
   build/bin/arthrosim run data/scenes/demo.yaml --out out/demo
-      prepare the bundled knee (the demo today asks for the prepared model)
+      the whole pipeline on the bundled knee (README command 1)
+  build/bin/arthrosim run data/scenes/demo.yaml --out out/demo --jobs 1
+      the same, one stage after the other, every stage's output on the terminal
   build/bin/arthrosim run data/scenes/demo.yaml --out out/demo --dry-run
       show the plan and what would run or be skipped, and why
   build/bin/arthrosim run data/scenes/demo.yaml --out out/demo --force
@@ -116,6 +124,12 @@ int main(int argc, char** argv) {
   run->add_option("--out", out_dir, "output folder (created when missing)")->capture_default_str();
   run->add_flag("--force", options.force, "run every planned stage even when up to date");
   run->add_flag("--dry-run", options.dry_run, "print the plan and what would run; run nothing");
+  options.jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  run->add_option("--jobs", options.jobs,
+                  "how many stages may run at once (stages whose inputs are ready); "
+                  "default: the number of cores")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   std::vector<std::string> set_items;
   run->add_option("--set", set_items,
                   "KEY=VALUE: change one scalar option of the scene (dotted key, e.g. "

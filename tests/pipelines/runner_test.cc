@@ -13,7 +13,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
+#include <thread>
 
 #include "common/effects.h"
 #include "common/hdf5.h"
@@ -437,6 +439,145 @@ TEST_F(RunnerTest, FailingStageStopsTheRunAndKeepsEarlierOutputs) {
   EXPECT_EQ(status(r, "prepare"), StageStatus::kSkipped);
   EXPECT_EQ(status(r, "comak"), StageStatus::kRan);
   EXPECT_EQ(reason(r, "comak"), "no previous output");
+}
+
+// A surface stage that records when it starts and ends (nanoseconds) and the
+// OMP_NUM_THREADS it was given, sleeps 1 s (the walking scenarios), and then
+// does what the fake does.
+// Its scenario "gait" fails when $ARTHROSIM_FAIL_GAIT is set.
+constexpr const char* kTimedSurface = R"SH(#!/bin/sh
+scenario=""; prev=""
+for a in "$@"; do
+  case "$prev" in --scenario) scenario="$a" ;; esac
+  prev="$a"
+done
+echo "start $scenario $(date +%s%N) threads=${OMP_NUM_THREADS:-unset}" >> "$ARTHROSIM_FAKE_TIMES"
+echo "surface $scenario: 50% (1/2)"
+case "$scenario" in gait*) sleep 1 ;; esac
+echo "end $scenario $(date +%s%N)" >> "$ARTHROSIM_FAKE_TIMES"
+if [ "$scenario" = gait ] && [ -n "$ARTHROSIM_FAIL_GAIT" ]; then echo "gait: diverged at t = 0.3 s" >&2; exit 3; fi
+exec "$ARTHROSIM_FAKE_REAL" "$@"
+)SH";
+
+class RunnerJobsTest : public RunnerTest {
+ protected:
+  void SetUp() override {
+    RunnerTest::SetUp();
+    fs::create_directories(root_ / "real");
+    const fs::path real = root_ / "real" / "arthrosim-surface";
+    std::ofstream(real) << kFakeStage;
+    fs::permissions(real, fs::perms::owner_all);
+    setenv("ARTHROSIM_FAKE_REAL", real.c_str(), 1);
+    times_ = root_ / "times.log";
+    setenv("ARTHROSIM_FAKE_TIMES", times_.c_str(), 1);
+    write_stage("arthrosim-surface", kTimedSurface);
+    unsetenv("OMP_NUM_THREADS");
+    unsetenv("ARTHROSIM_FAIL_GAIT");
+  }
+  void TearDown() override {
+    unsetenv("ARTHROSIM_FAIL_GAIT");
+    RunnerTest::TearDown();
+  }
+  // scenario -> (start, end) in ns, and scenario -> OMP_NUM_THREADS seen.
+  void read_times(std::map<std::string, std::pair<long long, long long>>& span,
+                  std::map<std::string, std::string>& threads) const {
+    std::ifstream in(times_);
+    for (std::string what, scenario; in >> what >> scenario;) {
+      long long t = 0;
+      in >> t;
+      if (what == "start") {
+        std::string th;
+        in >> th;
+        span[scenario].first = t;
+        threads[scenario] = th;
+      } else {
+        span[scenario].second = t;
+      }
+    }
+  }
+  fs::path times_;
+};
+
+TEST_F(RunnerJobsTest, ReadyStagesRunSideBySideWithTheSameResults) {
+  const Scene s = scene(three_scenarios("[report]"));
+  options_.jobs = 2;
+  std::string printed;
+  const RunReport r = run(s, &printed);
+  ASSERT_EQ(r.status, RunStatus::kOk) << r.message;
+  for (const StageOutcome& o : r.stages) EXPECT_EQ(o.status, StageStatus::kRan) << o.name;
+  std::map<std::string, std::pair<long long, long long>> span;
+  std::map<std::string, std::string> threads;
+  read_times(span, threads);
+  ASSERT_EQ(span.size(), 3u);
+  // gait and gait_osmotic both wait for COMAK and then overlap in time (each
+  // sleeps 1 s; run one after the other they could not overlap at all).
+  EXPECT_LT(span["gait"].first, span["gait_osmotic"].second);
+  EXPECT_LT(span["gait_osmotic"].first, span["gait"].second);
+  // Each of two stages side by side gets half the cores (at least one).
+  const std::string expect = "threads=" + std::to_string(std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / 2));
+  EXPECT_EQ(threads["gait"], expect);
+  EXPECT_EQ(threads["gait_osmotic"], expect);
+  // Their output went to logs, and the runner showed each log's last lines.
+  std::ifstream gait_log(root_ / "out" / "logs" / "surface.gait.log");
+  std::stringstream gl;
+  gl << gait_log.rdbuf();
+  EXPECT_NE(gl.str().find("arthrosim-surface: done"), std::string::npos) << gl.str();
+  EXPECT_NE(printed.find("surface.gait: last lines of "), std::string::npos);
+  EXPECT_NE(printed.find("  | arthrosim-surface: done"), std::string::npos);
+
+  // One stage after the other (jobs 1) in another folder: byte-identical outputs.
+  const fs::path parallel_out = options_.out_dir;
+  options_.jobs = 1;
+  options_.out_dir = root_ / "out_serial";
+  fs::remove(times_);
+  std::string serial_printed;
+  ASSERT_EQ(run(s, &serial_printed).status, RunStatus::kOk);
+  EXPECT_EQ(serial_printed.find("last lines of"), std::string::npos);  // streamed, no logs
+  span.clear();
+  threads.clear();
+  read_times(span, threads);
+  EXPECT_GE(span["gait_osmotic"].first, span["gait"].second);
+  EXPECT_EQ(threads["gait"], "threads=unset");
+  for (const char* f : {"prepared.h5", "kinematics.h5", "surface_osmotic.h5", "surface_gait.h5",
+                        "surface_gait_osmotic.h5", "report.html"}) {
+    std::ifstream a(parallel_out / f), b(options_.out_dir / f);
+    std::stringstream sa, sb;
+    sa << a.rdbuf();
+    sb << b.rdbuf();
+    // The fakes write their command lines, which name the output folder.
+    std::string pa = sa.str(), pb = sb.str();
+    for (std::string* t : {&pa, &pb}) {
+      // The longer folder name first: one is a prefix of the other.
+      for (const std::string& dir : {options_.out_dir.string(), parallel_out.string()}) {
+        for (std::size_t k; (k = t->find(dir)) != std::string::npos;) t->replace(k, dir.size(), "$OUT");
+      }
+    }
+    EXPECT_TRUE(pa == pb) << f << " differs between --jobs 2 and --jobs 1";
+  }
+}
+
+TEST_F(RunnerJobsTest, AFailureStartsNothingMoreButLetsRunningStagesFinish) {
+  setenv("ARTHROSIM_FAIL_GAIT", "1", 1);
+  options_.jobs = 2;
+  std::string printed;
+  const RunReport r = run(scene(three_scenarios("[report]")), &printed);
+  EXPECT_EQ(r.status, RunStatus::kStageFailed);
+  EXPECT_EQ(r.message.rfind("stage surface.gait (arthrosim-surface) exited with status 3; stopping", 0), 0u)
+      << r.message;
+  EXPECT_EQ(status(r, "surface.gait"), StageStatus::kFailed);
+  // The scenario running beside it finished, was checked and stamped: a rerun reuses it.
+  EXPECT_EQ(status(r, "surface.gait_osmotic"), StageStatus::kRan);
+  EXPECT_TRUE(fs::exists(root_ / "out" / ".stamps" / "surface.gait_osmotic.txt"));
+  EXPECT_FALSE(fs::exists(root_ / "out" / ".stamps" / "surface.gait.txt"));
+  EXPECT_EQ(status(r, "post"), StageStatus::kNotReached);
+  // The failed stage's own message reaches the user through its log.
+  EXPECT_NE(printed.find("  | gait: diverged at t = 0.3 s"), std::string::npos) << printed;
+
+  unsetenv("ARTHROSIM_FAIL_GAIT");
+  const RunReport again = run(scene(three_scenarios("[report]")));
+  ASSERT_EQ(again.status, RunStatus::kOk) << again.message;
+  EXPECT_EQ(status(again, "surface.gait_osmotic"), StageStatus::kSkipped);
+  EXPECT_EQ(status(again, "surface.gait"), StageStatus::kRan);
 }
 
 TEST_F(RunnerTest, KilledStageAndStageWithoutOutputFail) {
