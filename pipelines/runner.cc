@@ -259,8 +259,11 @@ int exit_code_of(int status) {
   return 127;
 }
 
-// The last `n` lines of a text file (a stage's log), each prefixed.
-std::string tail_lines(const fs::path& file, std::size_t n, const std::string& prefix) {
+// The last `n` lines of a text file (a stage's log), each prefixed; with
+// `progress_only`, the last line drawn by a progress display ("...% (k/n)
+// elapsed ..."; common/progress.h), or else the last line.
+std::string tail_lines(const fs::path& file, std::size_t n, const std::string& prefix,
+                       bool progress_only = false) {
   std::ifstream in(file);
   std::vector<std::string> lines;
   std::string line;
@@ -269,6 +272,10 @@ std::string tail_lines(const fs::path& file, std::size_t n, const std::string& p
     const std::size_t cr = line.find_last_of('\r', line.size() > 1 ? line.size() - 2 : 0);
     if (cr != std::string::npos && cr + 1 < line.size()) line = line.substr(cr + 1);
     if (line.empty()) continue;
+    if (progress_only && !lines.empty() && lines.back().find("% (") != std::string::npos &&
+        line.find("% (") == std::string::npos) {
+      continue;  // keep the progress line
+    }
     lines.push_back(std::move(line));
     if (lines.size() > n) lines.erase(lines.begin());
   }
@@ -737,7 +744,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       for (const Running& r : running) {
         if (r.log_file.empty()) continue;
         const double t = std::chrono::duration<double>(Clock::now() - r.t0).count();
-        std::string last = tail_lines(r.log_file, 1, "");
+        std::string last = tail_lines(r.log_file, 1, "", true);
         if (!last.empty() && last.back() == '\n') last.pop_back();
         log << "  " << plan[r.index].name << " (" << std::fixed << std::setprecision(0) << t
             << " s): " << (last.empty() ? "started" : last) << "\n";
