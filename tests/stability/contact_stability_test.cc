@@ -1,8 +1,9 @@
 // Hard cases of deformable mesh contact (issue 8, label stability): a large
 // rigid rotation of the whole contact configuration must not change the
 // result; a contact stiffness a thousand times the surface stage's default
-// should still converge to the springs-in-series state (disabled: it does not
-// yet, see the case).
+// should still converge to the springs-in-series state: it does when the
+// smaller plate's rim nodes are penetrating vertices; with the stage's
+// defaults it does not yet (disabled, see the case).
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -162,21 +163,25 @@ TEST(ContactStability, LargeRigidRotationOfTheWholeContact) {
 // penetration bound below could not hold with these options: the faded
 // contacts holding that rim are 34-40 um deep at t = 0.86 s. Run it with
 //   build/tests/contact_stability_test --gtest_also_run_disabled_tests --gtest_filter='*Thousand*'
-TEST(ContactStability, DISABLED_ContactStiffnessThousandTimesTheDefault) {
+// The pressed plates at the default contact stiffness and at 1000 x, with or
+// without rim nodes as penetrating vertices; the assertions of both cases
+// below. Returns the stiff run's statistics.
+IntegratorStatistics press_at_thousand_times(bool rim_vertices) {
   SeriesResult r[2];
   const double kc[2] = {2e10, 2e13};
   for (int i = 0; i < 2; ++i) {
     ContactOptions o = with_stiffness(kc[i]);
-    o.rim_vertices = false;
+    o.rim_vertices = rim_vertices;
     o.rim_max_depth_m = 0.5e-3;
     r[i] = press_plates(o, Eigen::Isometry3d::Identity(), i == 0 ? 1e-8 : 0.03);  // 0.1 % of the ~30 N contact force
     const IntegratorStatistics& s = r[i].stats;
-    std::printf("k_c %.0e N/m^3: %s, %ld steps, %ld rejected, %ld Newton iterations; w1 %.4e (p/k1 %.4e), "
-                "w2 %.4e (p/k2 %.4e), force %.4f N, max penetration %.3e m\n",
-                kc[i], s.status == IntegratorStatus::kFailed ? "FAILED" : "converged", s.steps, s.rejected_steps,
-                s.newton_iterations, r[i].w_lower, r[i].p_expected / r[i].k1, r[i].w_upper,
-                r[i].p_expected / r[i].k2, r[i].force_on_lower_B.z(), r[i].max_penetration);
-    ASSERT_NE(s.status, IntegratorStatus::kFailed);
+    std::printf("k_c %.0e N/m^3, rim vertices %s: %s, %ld steps, %ld rejected, %ld Newton iterations; w1 %.4e "
+                "(p/k1 %.4e), w2 %.4e (p/k2 %.4e), force %.4f N, max penetration %.3e m\n",
+                kc[i], rim_vertices ? "on" : "off", s.status == IntegratorStatus::kFailed ? "FAILED" : "converged",
+                s.steps, s.rejected_steps, s.newton_iterations, r[i].w_lower, r[i].p_expected / r[i].k1,
+                r[i].w_upper, r[i].p_expected / r[i].k2, r[i].force_on_lower_B.z(), r[i].max_penetration);
+    EXPECT_NE(s.status, IntegratorStatus::kFailed);
+    if (s.status == IntegratorStatus::kFailed) return r[1].stats;
     EXPECT_NEAR(r[i].w_lower, r[i].p_expected / r[i].k1, 0.06 * r[i].p_expected / r[i].k1);
     EXPECT_NEAR(r[i].w_upper, r[i].p_expected / r[i].k2, 0.06 * r[i].p_expected / r[i].k2);
     EXPECT_TRUE(std::isfinite(r[i].force_on_lower_B.norm()));
@@ -185,6 +190,22 @@ TEST(ContactStability, DISABLED_ContactStiffnessThousandTimesTheDefault) {
   // Stiffer contact, slightly larger deflections (less contact compliance).
   EXPECT_GT(r[1].w_lower, r[0].w_lower);
   EXPECT_GT(r[1].w_upper, r[0].w_upper);
+  return r[1].stats;
+}
+
+TEST(ContactStability, DISABLED_ContactStiffnessThousandTimesTheDefault) { press_at_thousand_times(false); }
+
+// The same with the upper plate's rim supported: its rim nodes are
+// penetrating vertices (contact_rim_vertices, a scene option; off by default
+// because stage 1 never samples a rim, docs/contact.md). Measured 2026-12-02:
+// converges (88 steps, 23 rejected attempts, 1223 Newton iterations, 56 s on
+// the 2-core machine), centre deflections -0.64 % and +2.5 % from springs in
+// series, largest penetration 0.78 um. The many iterations are the ridge
+// alternation of a rim vertex (docs/contact.md, "Stiff contact"); the bound
+// below (1.5 x the measured count) catches a regression, not a target.
+TEST(ContactStability, ContactStiffnessThousandTimesTheDefaultWithRimVertices) {
+  const IntegratorStatistics s = press_at_thousand_times(true);
+  EXPECT_LT(s.newton_iterations, 1850);
 }
 
 }  // namespace
