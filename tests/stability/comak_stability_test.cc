@@ -53,9 +53,12 @@ msk::ComakFrameInput trial_frame_at(int trial_frame, double flexion) {
 
 // Solves the frame from q_start (settle pose if empty) and checks the
 // stability contract. Returns the result for case-specific checks.
+// With must_converge false the frame may be reported failed, but the report
+// must be consistent (converged exactly when Ipopt succeeded and the
+// residuals are within tolerance; failed frames say so in their message).
 msk::ComakFrameResult solve_and_check(const char* name, const msk::ComakFrameInput& in,
                                       Eigen::VectorXd q_start = {},
-                                      double* contact_sum_out = nullptr) {
+                                      double* contact_sum_out = nullptr, bool must_converge = true) {
   const auto& m = coarse_model();
   msk::ComakOptions o;
   msk::ComakProblem p(m, o);
@@ -71,17 +74,28 @@ msk::ComakFrameResult solve_and_check(const char* name, const msk::ComakFrameInp
   EXPECT_TRUE(r.activations.allFinite()) << name;
   EXPECT_TRUE(std::isfinite(r.objective)) << name;
   EXPECT_TRUE(std::isfinite(r.max_force_residual) && std::isfinite(r.max_moment_residual)) << name;
-  // Explicit status: these frames must converge.
-  EXPECT_EQ(r.status, msk::ComakFrameStatus::kConverged) << name << ": " << r.message;
-  // Equilibrium within the solver's tolerances (0.1 N; 0.1 N x 0.03 m for
-  // moments), as reported and recomputed independently at the solution.
-  EXPECT_LE(r.max_force_residual, o.force_tolerance) << name;
-  EXPECT_LE(r.max_moment_residual, o.force_tolerance * o.length_scale) << name;
   const Eigen::VectorXd res = p.residual(d, in, r.q, r.activations, {});
   EXPECT_TRUE(res.allFinite()) << name;
-  for (int k = 0; k < res.size(); ++k) {
-    const double tol = p.revolute(k) ? o.force_tolerance * o.length_scale : o.force_tolerance;
-    EXPECT_LE(std::abs(res[k]), tol) << name << ": free coordinate row " << k;
+  const bool within = r.max_force_residual <= o.force_tolerance &&
+                      r.max_moment_residual <= o.force_tolerance * o.length_scale;
+  if (must_converge || r.status == msk::ComakFrameStatus::kConverged) {
+    // Explicit status: these frames must converge.
+    EXPECT_EQ(r.status, msk::ComakFrameStatus::kConverged) << name << ": " << r.message;
+    // Equilibrium within the solver's tolerances (0.1 N; 0.1 N x 0.03 m for
+    // moments), as reported and recomputed independently at the solution.
+    EXPECT_TRUE(within) << name;
+    for (int k = 0; k < res.size(); ++k) {
+      const double tol = p.revolute(k) ? o.force_tolerance * o.length_scale : o.force_tolerance;
+      EXPECT_LE(std::abs(res[k]), tol) << name << ": free coordinate row " << k;
+    }
+  } else {
+    // Failed, and says so: the message names the status, and the reported
+    // largest residual is the one recomputed here (nothing hidden).
+    EXPECT_NE(r.message.find("failed"), std::string::npos) << r.message;
+    double force_max = 0, moment_max = 0;
+    for (int k = 0; k < res.size(); ++k) (p.revolute(k) ? moment_max : force_max) = std::max(p.revolute(k) ? moment_max : force_max, std::abs(res[k]));
+    EXPECT_NEAR(force_max, r.max_force_residual, 1e-9 * (1 + force_max)) << name;
+    EXPECT_NEAR(moment_max, r.max_moment_residual, 1e-9 * (1 + moment_max)) << name;
   }
   // Bounded forces: activations in [a_min, 1] (muscle force <= F_max);
   // the net tibiofemoral + patellar contact force below 20 body weights (in
@@ -137,6 +151,20 @@ TEST(ComakStability, DISABLED_DeepFlexion120Deg) {
   in.knee_flexion = deg(120);
   in.F_ext_T = Eigen::Vector3d(0, kBodyWeight, 0);
   solve_and_check("flexion 120 deg, 1 BW axial", in);
+}
+
+// The same frame, held to the part of the contract that does not need it to
+// converge: finite values, an explicit and consistent status, activations in
+// their bounds and contact and ligament forces below 20 BW. Both outcomes
+// seen (converged with OpenBLAS's Sandybridge kernels, failed with its Zen
+// ones) leave the patella at a joint limit (pf_tz = 0.05 m converged, pf_tx =
+// -0.05 m failed): at 120 deg this model's patella leaves the generated
+// trochlea (docs/comak.md), a limit of the model, not of the solver.
+TEST(ComakStability, DeepFlexion120DegReportsItsStatus) {
+  msk::ComakFrameInput in;
+  in.knee_flexion = deg(120);
+  in.F_ext_T = Eigen::Vector3d(0, kBodyWeight, 0);
+  solve_and_check("flexion 120 deg, 1 BW axial (status)", in, {}, nullptr, false);
 }
 
 // Slight hyperextension, -5 deg.
