@@ -87,6 +87,18 @@ def main():
     print(f"frames compared: {len(tt)} (trial time {tt[0]:.3f} .. {tt[-1]:.3f} s); body weight {bw:.1f} N")
     print(f"axial (compressive, -Y on the tibia) tibiofemoral force: stage 1 mean {mean1:.1f} N, stage 2 mean {np.mean(ax2):.1f} N")
     print(f"RMS difference {rms:.1f} N = {100 * rms / abs(mean1):.1f} % of the stage-1 mean")
+    # The difference by phase of the cycle: an offset (the same N in every
+    # phase) and an error proportional to the load look different here.
+    ss = float(np.sum((ax2 - ax1) ** 2))
+    for lo, hi, phase in ((0.0, 0.1, "loading"), (0.1, 0.25, "first peak"), (0.25, 0.45, "mid stance"),
+                          (0.45, 0.65, "second peak, push-off"), (0.65, np.inf, "swing")):
+        w = (tt >= lo) & (tt < hi)
+        if not w.any():
+            continue
+        d = ax2[w] - ax1[w]
+        print(f"  {phase:22s} {lo:.2f}-{min(hi, tt[-1]):.2f} s: stage 1 mean {np.mean(ax1[w]):7.1f} N, "
+              f"stage 2 - stage 1 mean {np.mean(d):+7.1f} N, RMS {np.sqrt(np.mean(d ** 2)):6.1f} N "
+              f"({100 * np.sum(d ** 2) / ss:4.1f} % of the squared difference)")
     for name, f in (("stage 1", ax1), ("stage 2", ax2)):
         (p1, tp1), (p2, tp2) = peaks(tt, f, a.trough_s)
         print(f"{name}: first peak {p1:.0f} N = {p1 / bw:.2f} BW at {tp1:.2f} s, "
