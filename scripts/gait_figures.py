@@ -142,7 +142,9 @@ def main():
             print(f"  {key}: {float(st.attrs[key]):.1f}")
     print(f"run status: {s.attrs.get('status', '?')}")
     if a.prepared:
-        rigid_overlap(k, a.prepared, [float(x) for x in a.overlap_times.split(",")])
+        times = [float(x) for x in a.overlap_times.split(",")]
+        rigid_overlap(k, a.prepared, times)
+        rim_share(s, a.prepared, times)
 
 
 def rigid_overlap(k, prepared, times):
@@ -170,6 +172,33 @@ def rigid_overlap(k, prepared, times):
             ov = -((q - Vf[j]) * Nf[j]).sum(1)
             print(f"rigid overlap {tib} at {t1[i]:.2f} s: rim max {1e3 * ov[rim].max():.2f} mm, "
                   f"interior max {1e3 * ov[~rim].max():.2f} mm")
+
+
+def rim_share(s, prepared, times):
+    """Stage 2's tibial contact pressure times nodal area (a quarter of each
+    adjacent quad), summed over all nodes, over the rim (periphery) nodes, and
+    over nodes above 30 MPa: stage 1 samples triangle centres and never a rim,
+    so force at rim nodes is force stage 1 does not have."""
+    p = h5py.File(prepared, "r")
+    tt = complete(s["trial_time"])
+    for t in times:
+        j = int(np.argmin(np.abs(tt - t)))
+        tot = rim_f = high = 0.0
+        for tib in ("tibia_medial", "tibia_lateral"):
+            g = "surfaces/" + tib + "/quads/"
+            if g + "nodes" not in p or "surfaces/" + tib + "/contact_pressure" not in s:
+                continue
+            V, Q = p[g + "nodes"][:], p[g + "quads"][:]
+            rim = p[g + "on_periphery"][:].astype(bool)
+            qa = 0.5 * np.linalg.norm(np.cross(V[Q[:, 2]] - V[Q[:, 0]], V[Q[:, 3]] - V[Q[:, 1]]), axis=1)
+            area = np.zeros(len(V))
+            for c in range(4):
+                np.add.at(area, Q[:, c], qa / 4)
+            f = s["surfaces/" + tib + "/contact_pressure"][j] * area
+            pr = s["surfaces/" + tib + "/contact_pressure"][j]
+            tot, rim_f, high = tot + f.sum(), rim_f + f[rim].sum(), high + f[pr > 30e6].sum()
+        print(f"stage 2 tibial pressure x area at {tt[j]:.2f} s: {tot:.1f} N, on rim nodes {rim_f:.1f} N, "
+              f"on nodes above 30 MPa {high:.1f} N")
 
 
 if __name__ == "__main__":
