@@ -58,7 +58,8 @@ def main():
     ap.add_argument("surface", help="stage-2 output of a walking scenario (arthrosim-surface)")
     ap.add_argument("--trough-s", type=float, default=0.3, help="time separating the two stance peaks [s]")
     ap.add_argument("--prepared", help="prepared model (arthrosim-prepare): also print the rigid overlap of the "
-                    "tibial and femoral shell surfaces at the stage-1 poses, at rim and interior nodes")
+                    "tibial and femoral shell surfaces at the stage-1 poses, at rim and interior nodes, "
+                    "and stage 2's tibial contact pressure x nodal area (all, rim nodes, nodes above 30 MPa)")
     ap.add_argument("--overlap-times", default="0,0.05,0.1,0.2,0.35,0.45,0.6",
                     help="trial times [s] for --prepared, comma separated")
     a = ap.parse_args()
