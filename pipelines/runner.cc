@@ -495,12 +495,31 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
     }
   }
 
+  // Why stage i must run ("" when it is up to date), from its key as the
+  // files are now (stored in `now` and the outcome) and its last stamp.
+  const auto reason_to_run = [&](std::size_t i, Stamp& now) {
+    const StageStep& step = plan[i];
+    now = current_state(step, options.stage_dir / step.executable, out_dir, scene.file);
+    report.stages[i].key = now.key;
+    if (options.force) return std::string("--force");
+    Stamp last;
+    const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);
+    return why_run(step, now, have_last ? &last : nullptr);
+  };
+  const auto log_command = [&](const StageStep& step) {
+    log << "  $ " << quote((options.stage_dir / step.executable).string());
+    for (const std::string& a : step.arguments) log << " " << quote(a);
+    log << "\n";
+  };
+  const auto up_to_date = [](const Stamp& now) {
+    return "inputs, options and code unchanged (hash " + short_key(now.key) + ")";
+  };
+
   // ---- dry run: in plan order, nothing executed ----------------------------
   std::vector<std::string> will_change;  // outputs that would be rewritten
   for (std::size_t i = 0; options.dry_run && i < n; ++i) {
     const StageStep& step = plan[i];
     StageOutcome& outcome = report.stages[i];
-    const fs::path exe = options.stage_dir / step.executable;
     // An input that an earlier stage would (re)write cannot be hashed yet;
     // this stage then runs after it (unless that stage reproduces identical
     // bytes, which only a real run can tell).
@@ -517,24 +536,17 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       for (const fs::path& o : step.outputs) will_change.push_back(o.string());
       continue;
     }
-    const Stamp now = current_state(step, exe, out_dir, scene.file);
-    outcome.key = now.key;
-    Stamp last;
-    const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);
-    std::string reason = why_run(step, now, have_last ? &last : nullptr);
-    if (options.force) reason = "--force";
-    if (reason.empty()) {
+    Stamp now;
+    outcome.reason = reason_to_run(i, now);
+    if (outcome.reason.empty()) {
       outcome.status = StageStatus::kWouldSkip;
-      outcome.reason = "inputs, options and code unchanged (hash " + short_key(now.key) + ")";
+      outcome.reason = up_to_date(now);
       log << step.name << ": would skip — " << outcome.reason << "\n";
       continue;
     }
     outcome.status = StageStatus::kWouldRun;
-    outcome.reason = reason;
-    log << step.name << ": would run — " << reason << "\n";
-    log << "  $ " << quote(exe.string());
-    for (const std::string& a : step.arguments) log << " " << quote(a);
-    log << "\n";
+    log << step.name << ": would run — " << outcome.reason << "\n";
+    log_command(step);
     for (const fs::path& o : step.outputs) will_change.push_back(o.string());
   }
 
@@ -548,11 +560,10 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
     pid_t pid;
     Clock::time_point t0;
     fs::path log_file;  // empty: the stage writes to this process's stdout/stderr
-    Stamp now;
   };
   std::vector<Running> running;
   std::vector<bool> checked(n, false);  // stamp compared (once its inputs exist)
-  std::vector<Stamp> stamp_now(n);
+  std::vector<Stamp> stamp_now(n);      // the key each stage runs under
   const std::size_t jobs = static_cast<std::size_t>(std::max(1, options.jobs));
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   const bool user_threads = std::getenv("OMP_NUM_THREADS") != nullptr;
@@ -639,12 +650,12 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       fail(i);
       return;
     }
-    Stamp done = r.now;
+    Stamp done = stamp_now[i];
     for (const fs::path& o : step.outputs) done.outputs[o.filename().string()] = common::sha256_file(o);
     write_stamp(stamp_path(out_dir, step.name), step, done);
     outcome.status = StageStatus::kRan;
     log << step.name << ": done in " << std::fixed << std::setprecision(1) << outcome.wall_time_s << " s (hash "
-        << short_key(r.now.key) << ")\n";
+        << short_key(stamp_now[i].key) << ")\n";
     log.unsetf(std::ios::floatfield);
     log.flush();
   };
@@ -657,19 +668,14 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       progressed = false;
       for (std::size_t i = 0; i < n; ++i) {
         if (!is_ready(i) || checked[i]) continue;
-        const StageStep& step = plan[i];
         StageOutcome& outcome = report.stages[i];
-        stamp_now[i] = current_state(step, options.stage_dir / step.executable, out_dir, scene.file);
+        outcome.reason = reason_to_run(i, stamp_now[i]);
         checked[i] = true;
-        outcome.key = stamp_now[i].key;
-        Stamp last;
-        const bool have_last = read_stamp(stamp_path(out_dir, step.name), last);
-        outcome.reason = options.force ? "--force" : why_run(step, stamp_now[i], have_last ? &last : nullptr);
         if (outcome.reason.empty()) {
           phase[i] = Phase::kFinished;
           outcome.status = StageStatus::kSkipped;
-          outcome.reason = "inputs, options and code unchanged (hash " + short_key(stamp_now[i].key) + ")";
-          log << step.name << ": skipping — " << outcome.reason << "\n";
+          outcome.reason = up_to_date(stamp_now[i]);
+          log << plan[i].name << ": skipping — " << outcome.reason << "\n";
           progressed = true;
         }
       }
@@ -678,9 +684,6 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       if (!is_ready(i)) continue;
       const StageStep& step = plan[i];
       StageOutcome& outcome = report.stages[i];
-      const fs::path exe = options.stage_dir / step.executable;
-      const Stamp& now = stamp_now[i];
-      const std::string& reason = outcome.reason;
       std::size_t others_ready = 0;
       for (std::size_t k = 0; k < n; ++k) others_ready += k != i && is_ready(k) ? 1 : 0;
       // Alone, a stage streams to the terminal and uses every core; side by
@@ -695,10 +698,8 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
         fs::create_directories(out_dir / "logs");
         log_file = out_dir / "logs" / (step.name + ".log");
       }
-      log << step.name << ": running — " << reason << "\n";
-      log << "  $ " << quote(exe.string());
-      for (const std::string& a : step.arguments) log << " " << quote(a);
-      log << "\n";
+      log << step.name << ": running — " << outcome.reason << "\n";
+      log_command(step);
       if (!alone) {
         log << "  (side by side with other stages: " << (threads > 0 ? std::to_string(threads) : "OMP_NUM_THREADS")
             << " thread(s); its output goes to " << log_file.string() << ")\n";
@@ -707,7 +708,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       // A failed or interrupted run must never look up to date.
       std::error_code ec;
       fs::remove(stamp_path(out_dir, step.name), ec);
-      const pid_t pid = launch(exe, step.arguments, log_file, threads);
+      const pid_t pid = launch(options.stage_dir / step.executable, step.arguments, log_file, threads);
       phase[i] = Phase::kRunning;
       if (pid < 0) {
         phase[i] = Phase::kFinished;
@@ -717,7 +718,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
         fail(i);
         break;
       }
-      running.push_back({i, pid, Clock::now(), log_file, now});
+      running.push_back({i, pid, Clock::now(), log_file});
     }
     if (running.empty()) break;
 

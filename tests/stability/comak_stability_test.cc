@@ -93,7 +93,10 @@ msk::ComakFrameResult solve_and_check(const char* name, const msk::ComakFrameInp
     // largest residual is the one recomputed here (nothing hidden).
     EXPECT_NE(r.message.find("failed"), std::string::npos) << r.message;
     double force_max = 0, moment_max = 0;
-    for (int k = 0; k < res.size(); ++k) (p.revolute(k) ? moment_max : force_max) = std::max(p.revolute(k) ? moment_max : force_max, std::abs(res[k]));
+    for (int k = 0; k < res.size(); ++k) {
+      double& m = p.revolute(k) ? moment_max : force_max;
+      m = std::max(m, std::abs(res[k]));
+    }
     EXPECT_NEAR(force_max, r.max_force_residual, 1e-9 * (1 + force_max)) << name;
     EXPECT_NEAR(moment_max, r.max_moment_residual, 1e-9 * (1 + moment_max)) << name;
   }
