@@ -59,9 +59,14 @@ def main():
     ap.add_argument("--trough-s", type=float, default=0.3, help="time separating the two stance peaks [s]")
     ap.add_argument("--prepared", help="prepared model (arthrosim-prepare): also print the rigid overlap of the "
                     "tibial and femoral shell surfaces at the stage-1 poses, at rim and interior nodes, "
-                    "and stage 2's tibial contact pressure x nodal area (all, rim nodes, nodes above 30 MPa)")
+                    "stage 2's tibial contact pressure x nodal area (all, rim nodes, nodes above 30 MPa), and each "
+                    "surface's contact and foundation force against stage 1's law at the shell nodes")
     ap.add_argument("--overlap-times", default="0,0.05,0.1,0.2,0.35,0.45,0.6",
                     help="trial times [s] for --prepared, comma separated")
+    ap.add_argument("--matched-modulus-mpa", type=float, default=10.0,
+                    help="E of the stage-1-matched foundation k_i = K / h_i (scene key matched_youngs_modulus_mpa)")
+    ap.add_argument("--matched-poisson", type=float, default=0.45,
+                    help="nu of the matched foundation (scene key matched_poisson_ratio)")
     a = ap.parse_args()
     k = h5py.File(a.kinematics, "r")
     s = h5py.File(a.surface, "r")
@@ -146,6 +151,7 @@ def main():
         times = [float(x) for x in a.overlap_times.split(",")]
         rigid_overlap(k, a.prepared, times)
         rim_share(s, a.prepared, times)
+        foundation_balance(k, s, a.prepared, times, a.matched_modulus_mpa, a.matched_poisson)
 
 
 def rigid_overlap(k, prepared, times):
@@ -201,6 +207,83 @@ def rim_share(s, prepared, times):
         print(f"stage 2 tibial pressure x area at {tt[j]:.2f} s: {tot:.1f} N, on rim nodes {rim_f:.1f} N, "
               f"on nodes above 30 MPa {high:.1f} N")
 
+
+def foundation_balance(k, s, prepared, times, E_mpa, nu):
+    """Where stage 2's contact force goes, per surface: contact pressure x
+    nodal area against the compressive foundation springs' force
+    K / h_i x compression x nodal area (the stage-1-matched foundation,
+    foundation_from_thickness; their difference is what the shell carries
+    itself), the largest lift of a node off its foundation, and on the tibial
+    surfaces stage 1's elastic-foundation law K d / (h_tibia + h_femur)
+    evaluated at the shell nodes (d: the rigid overlap along the node's
+    normal at the stage-1 pose), summed over nodal areas and projected on the
+    tibial axis: equal to stage 1's force up to quadrature, so a difference
+    between the stages is not the shells' sampling of the same overlap."""
+    p = h5py.File(prepared, "r")
+    K = (1 - nu) * E_mpa * 1e6 / ((1 + nu) * (1 - 2 * nu))
+    tt = complete(s["trial_time"])
+    t1 = k["time"][:]
+    XF, XT = k["bodies/femur/X_W"][:], k["bodies/tibia/X_W"][:]
+    fV = p["surfaces/femur/triangles/vertices"][:]
+    fF = p["surfaces/femur/triangles/faces"][:]
+    fh = p["surfaces/femur/triangles/thickness"][:][fF].mean(1)  # per triangle, as stage 1
+    a0, e1, e2 = fV[fF[:, 0]], fV[fF[:, 1]] - fV[fF[:, 0]], fV[fF[:, 2]] - fV[fF[:, 0]]
+    fn = np.cross(e1, e2)
+    fn /= np.linalg.norm(fn, axis=1)[:, None]
+
+    def overlap(c, nrm):
+        """First femoral triangle hit by the ray from c along -nrm within 20 mm
+        (Moller-Trumbore against every triangle); (depth, triangle) or None."""
+        d = -nrm
+        P = np.cross(d, e2)
+        det = (e1 * P).sum(1)
+        ok = np.abs(det) > 1e-18
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        T = c - a0
+        u = (T * P).sum(1) * inv
+        Q = np.cross(T, e1)
+        v = (Q @ d) * inv
+        dist = (e2 * Q).sum(1) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (dist > 0) & (dist <= 0.02)
+        if not hit.any():
+            return None
+        i = np.where(hit)[0]
+        j = i[np.argmin(dist[i])]
+        return (dist[j], j) if fn[j] @ nrm < 0 else None
+
+    for t in times:
+        j = int(np.argmin(np.abs(tt - t)))
+        i1 = int(np.argmin(np.abs(t1 - tt[j])))
+        X = np.linalg.inv(XF[i1]) @ XT[i1]  # tibia frame -> femur frame
+        parts, ef_axial = [], 0.0
+        for surf in ("femur", "tibia_medial", "tibia_lateral"):
+            g = "surfaces/" + surf + "/quads/"
+            if g + "nodes" not in p or "surfaces/" + surf + "/deflection" not in s:
+                continue
+            V, Q = p[g + "nodes"][:], p[g + "quads"][:]
+            h = p[g + "thickness"][:]
+            rim = p[g + "on_periphery"][:].astype(bool)
+            qa = 0.5 * np.linalg.norm(np.cross(V[Q[:, 2]] - V[Q[:, 0]], V[Q[:, 3]] - V[Q[:, 1]]), axis=1)
+            area = np.zeros(len(V))
+            for c in range(4):
+                np.add.at(area, Q[:, c], qa / 4)
+            defl = s["surfaces/" + surf + "/deflection"][j]
+            ff = K / h * np.maximum(0.0, -defl) * area
+            pc = s["surfaces/" + surf + "/contact_pressure"][j] * area if "surfaces/" + surf + "/contact_pressure" in s \
+                else np.zeros(len(V))
+            parts.append(f"{surf}: contact {pc.sum():.0f} N, foundation {ff.sum():.0f} N "
+                         f"(rim {ff[rim].sum():.0f}), largest lift off the foundation {1e3 * max(0.0, defl.max()):.2f} mm")
+            if surf.startswith("tibia"):
+                Nn = p[g + "normals"][:]
+                for x, nrm, a_, hh in zip(V, Nn, area, h):
+                    nw = X[:3, :3] @ nrm
+                    r = overlap(X[:3, :3] @ x + X[:3, 3], nw)
+                    if r is not None:
+                        ef_axial += K * r[0] / (hh + fh[r[1]]) * a_ * (nw @ X[:3, 1])
+        print(f"force balance at {tt[j]:.2f} s: " + "; ".join(parts))
+        print(f"  stage 1's law at the tibial shell nodes (rigid overlap): axial {ef_axial:.0f} N; "
+              f"stage 1 {-k['contact/tibiofemoral/force'][i1, 1]:.0f} N, stage 2 "
+              f"{-s['contact/tibiofemoral/force'][j, 1]:.0f} N")
 
 if __name__ == "__main__":
     main()
