@@ -255,7 +255,7 @@ def foundation_balance(k, s, prepared, times, E_mpa, nu):
         j = int(np.argmin(np.abs(tt - t)))
         i1 = int(np.argmin(np.abs(t1 - tt[j])))
         X = np.linalg.inv(XF[i1]) @ XT[i1]  # tibia frame -> femur frame
-        parts, ef_axial = [], 0.0
+        parts, ef_axial, ef_rim = [], 0.0, 0.0
         for surf in ("femur", "tibia_medial", "tibia_lateral"):
             g = "surfaces/" + surf + "/quads/"
             if g + "nodes" not in p or "surfaces/" + surf + "/deflection" not in s:
@@ -275,13 +275,16 @@ def foundation_balance(k, s, prepared, times, E_mpa, nu):
                          f"(rim {ff[rim].sum():.0f}), largest lift off the foundation {1e3 * max(0.0, defl.max()):.2f} mm")
             if surf.startswith("tibia"):
                 Nn = p[g + "normals"][:]
-                for x, nrm, a_, hh in zip(V, Nn, area, h):
+                for x, nrm, a_, hh, on_rim in zip(V, Nn, area, h, rim):
                     nw = X[:3, :3] @ nrm
                     r = overlap(X[:3, :3] @ x + X[:3, 3], nw)
                     if r is not None:
-                        ef_axial += K * r[0] / (hh + fh[r[1]]) * a_ * (nw @ X[:3, 1])
+                        f = K * r[0] / (hh + fh[r[1]]) * a_ * (nw @ X[:3, 1])
+                        ef_axial += f
+                        ef_rim += f if on_rim else 0.0
         print(f"force balance at {tt[j]:.2f} s: " + "; ".join(parts))
-        print(f"  stage 1's law at the tibial shell nodes (rigid overlap): axial {ef_axial:.0f} N; "
+        print(f"  stage 1's law at the tibial shell nodes (rigid overlap): axial {ef_axial:.0f} N "
+              f"(rim nodes {ef_rim:.0f} N); "
               f"stage 1 {-k['contact/tibiofemoral/force'][i1, 1]:.0f} N, stage 2 "
               f"{-s['contact/tibiofemoral/force'][j, 1]:.0f} N")
 
