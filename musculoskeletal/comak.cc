@@ -531,6 +531,22 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
   return a;
 }
 
+// The passive settle at the frame's flexion from the neutral pose (secondary
+// coordinates at zero, the patella flexed by 0.7 x the knee flexion, roughly
+// where it follows the trochlea): a start that does not depend on the frames
+// before. The first frame of a run starts here, and every frame's second start.
+SettleResult settle_from_neutral(const ComakProblem& p, ModelData& data, const ComakFrameInput& in) {
+  const Model& model = p.model();
+  SettleOptions so = p.options().settle;
+  so.fixed = {p.flexion_coordinate()};
+  so.forces = p.options().forces;
+  Eigen::VectorXd q = p.coordinates(in, Eigen::VectorXd());
+  const int pf = model.tree.coordinate_index("pf_flexion");
+  q[pf >= 0 ? pf : p.flexion_coordinate()] = 0.7 * in.knee_flexion;
+  q[p.flexion_coordinate()] = in.knee_flexion;
+  return settle(model, data, q, so);
+}
+
 }  // namespace
 
 ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
@@ -606,14 +622,35 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   res.iterations += at.iterations;
   res.attempts = 1;
   evaluate(at);
-  // Attempt 2: from the passive settle at this flexion, activations at a_min.
-  if (res.status != ComakFrameStatus::kConverged && o.retries >= 1) {
+  auto settled_start = [&]() {
     SettleOptions so = o.settle;
     so.fixed = {p.flexion_coordinate()};
     so.forces = o.forces;
     const SettleResult sr = settle(model, data, q0, so);
+    return make_x0(sr.q, Eigen::VectorXd::Constant(nm, o.activation_min));
+  };
+  std::string second_note;
+  if (res.status == ComakFrameStatus::kConverged && o.second_start) {
+    // Second start: the passive settle from the neutral pose, independent of
+    // the frames before; the lower converged objective wins.
+    const ComakFrameResult first = res;
     at = run_ipopt(p, data, in,
-                   make_x0(sr.q, Eigen::VectorXd::Constant(nm, o.activation_min)), false, nullptr);
+                   make_x0(settle_from_neutral(p, data, in).q, Eigen::VectorXd::Constant(nm, o.activation_min)),
+                   false, nullptr);
+    evaluate(at);
+    const bool second_wins = res.status == ComakFrameStatus::kConverged && res.objective < first.objective;
+    std::ostringstream s;
+    s << "; second start " << (res.status == ComakFrameStatus::kConverged ? "converged" : "failed")
+      << ", objective " << res.objective << " m^3 (first " << first.objective << "), "
+      << (second_wins ? "kept" : "not kept");
+    if (!second_wins) res = first;
+    res.iterations = first.iterations + at.iterations;
+    res.attempts = 2;
+    second_note = s.str();
+  }
+  // Attempt 2: from the passive settle at this flexion, activations at a_min.
+  if (res.status != ComakFrameStatus::kConverged && o.retries >= 1) {
+    at = run_ipopt(p, data, in, settled_start(), false, nullptr);
     res.iterations += at.iterations;
     res.attempts = 2;
     evaluate(at);
@@ -631,7 +668,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     << ", " << res.iterations << " iterations, " << res.attempts << " attempt"
     << (res.attempts > 1 ? "s" : "") << "), objective " << res.objective << " m^3, max residual "
     << res.max_force_residual << " N, " << res.max_moment_residual << " N m, "
-    << res.wall_time << " s";
+    << res.wall_time << " s" << second_note;
   res.message = s.str();
   return res;
 }
@@ -735,19 +772,9 @@ ComakRunSummary run_comak(
     throw stop(frames.front(), e);
   }
   // The first frame starts from the passive settle at its flexion.
-  SettleOptions so = o.settle;
-  so.fixed = {p.flexion_coordinate()};
-  so.forces = o.forces;
-  Eigen::VectorXd q = p.coordinates(frames.front(), Eigen::VectorXd());
-  // The patella follows the trochlea at roughly 0.7 x knee flexion (start
-  // guess of the settle; the settle moves it).
-  q[model.tree.coordinate_index("pf_flexion") >= 0 ? model.tree.coordinate_index("pf_flexion")
-                                                    : p.flexion_coordinate()] =
-      0.7 * frames.front().knee_flexion;
-  q[p.flexion_coordinate()] = frames.front().knee_flexion;
-  sum.first_settle = settle(model, data, q, so);
+  sum.first_settle = settle_from_neutral(p, data, frames.front());
   common::log_info("COMAK: first frame from the passive settle: " + sum.first_settle.message);
-  q = sum.first_settle.q;
+  Eigen::VectorXd q = sum.first_settle.q;
   Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, o.activation_min);
   ComakMultipliers warm;
   bool have_warm = false;

@@ -73,7 +73,10 @@
 // the tolerances. A failed frame is retried (ComakOptions::retries): attempt 2
 // starts from the passive settle at the frame's flexion with activations at
 // a_min; attempt 3 starts from the warm start with Ipopt's adaptive barrier
-// update and twice the iteration limit. If all fail, the frame is marked
+// update and twice the iteration limit. A frame whose first attempt converged
+// is, with ComakOptions::second_start (default), solved a second time from the
+// passive settle of the neutral pose and the lower converged objective kept.
+// If all fail, the frame is marked
 // failed (its last iterate is reported as such, never replaced). A non-finite
 // value stops the run with a NumericalError naming the frame.
 #include <Eigen/Core>
@@ -145,6 +148,12 @@ struct ComakOptions {
   /// Retry attempts after a failed first attempt: 0, 1 (from the settle
   /// pose) or 2 (also: adaptive barrier, doubled iteration limit).
   int retries = 2;
+  /// Also solve every frame whose first attempt converged from the passive
+  /// settle at its flexion (activations at a_min) and keep the converged
+  /// solution with the lower objective: the problem has local optima (the
+  /// knee's laxity, the faceted contact), and a warm start carries the
+  /// previous frame's branch forward.
+  bool second_start = true;
   /// Force terms and the finite-difference step of dQ/dq.
   ForceOptions forces;
   /// Passive settle of the first frame and of retry 1 (its `fixed` is set
@@ -196,7 +205,7 @@ struct ComakFrameResult {
   int ipopt_status = 0;          ///< Ipopt::ApplicationReturnStatus of the last attempt
   std::string ipopt_status_name;
   int iterations = 0;            ///< Ipopt iterations of all attempts
-  int attempts = 0;              ///< 1 + retries used
+  int attempts = 0;              ///< Ipopt solves: 1, 2 with the second start or one retry, 3
   double objective = 0.0;        ///< sum w V a^2 + reserve terms (unscaled) [m^3]
   double max_force_residual = 0.0;   ///< max |c| over prismatic rows [N]
   double max_moment_residual = 0.0;  ///< max |c| over revolute rows [N m]
