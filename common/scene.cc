@@ -88,7 +88,7 @@ const std::vector<OptionSpec>& schema_table() {
       {"comak", "body_inertia", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
        "add the weight and d'Alembert forces of the tibia and patella bodies (URDF inertials, "
        "moving with the model; the shank's terms leave the external load) (docs/comak.md)"},
-      {"comak", "second_start", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
+      {"comak", "second_start", T::kFlag, U::kNone, "true", false, 0, 0, "", false,
        "also solve every converged frame from the passive settle at its flexion and keep the lower "
        "objective (the problem has local optima; a warm start carries the previous frame's branch; "
        "docs/comak.md)"},

@@ -74,7 +74,7 @@
 // starts from the passive settle at the frame's flexion with activations at
 // a_min; attempt 3 starts from the warm start with Ipopt's adaptive barrier
 // update and twice the iteration limit. A frame whose first attempt converged
-// is, with ComakOptions::second_start (opt-in), solved a second time from the
+// is, with ComakOptions::second_start (default), solved a second time from the
 // passive settle of the neutral pose and the lower converged objective kept.
 // If all fail, the frame is marked
 // failed (its last iterate is reported as such, never replaced). A non-finite
@@ -152,9 +152,8 @@ struct ComakOptions {
   /// settle at its flexion (activations at a_min) and keep the converged
   /// solution with the lower objective: the problem has local optima (the
   /// knee's laxity, the faceted contact), and a warm start carries the
-  /// previous frame's branch forward. Off by default: it doubles stage 1's
-  /// time and changes the walks it feeds (docs/comak.md, "Second start").
-  bool second_start = false;
+  /// previous frame's branch forward.
+  bool second_start = true;
   /// Force terms and the finite-difference step of dQ/dq.
   ForceOptions forces;
   /// Passive settle of the first frame and of retry 1 (its `fixed` is set

@@ -111,10 +111,10 @@ int main(int argc, char** argv) {
   app.add_flag("--force-length", o.forces.force_length,
                "muscle force a F_max f_L(l~) (Thelen 2003 active force-length; every muscle of the "
                "model must give optimal_fiber_length and tendon_slack_length, docs/model_format.md)");
-  bool second_start = false;
-  app.add_flag("--second-start", second_start,
-               "also solve every converged frame from the passive settle of the neutral pose and keep "
-               "the lower objective (about twice the time; avoids some poor local optima, docs/comak.md)");
+  bool single_start = false;
+  app.add_flag("--single-start", single_start,
+               "solve each frame from the previous frame's solution only (no second start from the "
+               "passive settle; about half the time, may keep a worse local optimum)");
   app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0, 1 or 2")
       ->capture_default_str();
   app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
@@ -157,10 +157,10 @@ int main(int argc, char** argv) {
         if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.flag("ankle_equilibrium");
         if (!app.count("--body-inertia")) o.body_inertia = c.flag("body_inertia");
         if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
-        if (!second_start) o.second_start = c.flag("second_start");
+        if (!single_start) o.second_start = c.flag("second_start");
       }
     }
-    if (second_start) o.second_start = true;
+    if (single_start) o.second_start = false;
     for (const std::string& wa : weight_args) {
       const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
       o.muscle_weights[name] = w;  // name and range checked by ComakProblem
