@@ -417,22 +417,37 @@ double ShellElement::strain_energy(const Vector24& q) const {
 
 Eigen::Matrix<double, 6, 1> ShellElement::strain(const Vector24& q, double xi, double eta,
                                                  double zeta, Eigen::Matrix3d* frame) const {
+  std::vector<Eigen::Matrix3d> frames;
+  const Eigen::Matrix<double, 6, Eigen::Dynamic> s = strains(q, {xi}, {eta}, zeta, frame ? &frames : nullptr);
+  if (frame) *frame = frames.front();
+  return s.col(0);
+}
+
+Eigen::Matrix<double, 6, Eigen::Dynamic> ShellElement::strains(const Vector24& q, const std::vector<double>& xi,
+                                                               const std::vector<double>& eta, double zeta,
+                                                               std::vector<Eigen::Matrix3d>* frames) const {
   const Eigen::Map<const Eigen::Matrix<double, 3, 8>> Qt(q.data());
   Eigen::Matrix<double, 5, 1> alpha;
   Vector24 f;
   internal_force(q, f, nullptr, &alpha);
   const Corners C = sample_corners(Qt, Q0t_, h_);
   const Level L = sample_level(Qt, Q0t_, h_, zeta);
-  Vector6 eps_nat;
-  Eigen::Matrix<double, 6, 24> B;
-  Vector8 a, b;
-  point_strain(Qt, Q0t_, h_, L, C, xi, eta, zeta, eps_nat, B, a, b);
-  Eigen::Matrix<double, 6, 6> T;
-  Eigen::Matrix3d fr;
-  double detJ;
-  local_map(xi, eta, zeta, T, fr, detJ);
-  if (frame) *frame = fr;
-  return T * eps_nat + eas_matrix(xi, eta, zeta, detJ) * alpha;
+  const int n = static_cast<int>(xi.size());
+  Eigen::Matrix<double, 6, Eigen::Dynamic> out(6, n);
+  if (frames) frames->resize(n);
+  for (int k = 0; k < n; ++k) {
+    Vector6 eps_nat;
+    Eigen::Matrix<double, 6, 24> B;
+    Vector8 a, b;
+    point_strain(Qt, Q0t_, h_, L, C, xi[k], eta[k], zeta, eps_nat, B, a, b);
+    Eigen::Matrix<double, 6, 6> T;
+    Eigen::Matrix3d fr;
+    double detJ;
+    local_map(xi[k], eta[k], zeta, T, fr, detJ);
+    if (frames) (*frames)[k] = fr;
+    out.col(k) = T * eps_nat + eas_matrix(xi[k], eta[k], zeta, detJ) * alpha;
+  }
+  return out;
 }
 
 }  // namespace arthrosim::cartilage

@@ -73,6 +73,13 @@ class ShellElement {
   /// in the local frame returned in `frame` (columns e1, e2, e3, world).
   Eigen::Matrix<double, 6, 1> strain(const Vector24& q, double xi, double eta, double zeta,
                                      Eigen::Matrix3d* frame = nullptr) const;
+  /// The same at several points of one configuration: the condensed EAS
+  /// parameters (one internal-force evaluation) and the ANS samples are
+  /// computed once, not per point. Column k of the result and frames[k]
+  /// belong to (xi[k], eta[k], zeta); identical to strain() point by point.
+  Eigen::Matrix<double, 6, Eigen::Dynamic> strains(const Vector24& q, const std::vector<double>& xi,
+                                                   const std::vector<double>& eta, double zeta,
+                                                   std::vector<Eigen::Matrix3d>* frames = nullptr) const;
 
   /// Consistent mass matrix (constant): rho int phi_s phi_t dV (x) I3.
   const Matrix24& mass() const { return mass_; }

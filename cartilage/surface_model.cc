@@ -194,15 +194,17 @@ NodalStrains nodal_strains(const ShellModel& model, const NodeBasis& basis, cons
   Eigen::MatrixXd sum = Eigen::MatrixXd::Zero(N, 3);
   Eigen::VectorXi count = Eigen::VectorXi::Zero(N);
   // Corner natural coordinates, counter-clockwise (ShellElement node order).
-  static const double kXi[4] = {-1, 1, 1, -1};
-  static const double kEta[4] = {-1, -1, 1, 1};
+  static const std::vector<double> kXi = {-1, 1, 1, -1};
+  static const std::vector<double> kEta = {-1, -1, 1, 1};
   std::vector<Eigen::Matrix<double, 4, 3>> per_element(M);
 #pragma omp parallel for schedule(static)
   for (int e = 0; e < M; ++e) {
     const Vector24 qe = model.gather(e, q);
+    std::vector<Eigen::Matrix3d> frames;
+    const Eigen::Matrix<double, 6, Eigen::Dynamic> corner = model.element(e).strains(qe, kXi, kEta, 0.0, &frames);
     for (int k = 0; k < 4; ++k) {
-      Eigen::Matrix3d frame;
-      const Eigen::Matrix<double, 6, 1> s = model.element(e).strain(qe, kXi[k], kEta[k], 0.0, &frame);
+      const Eigen::Matrix3d& frame = frames[k];
+      const Eigen::Matrix<double, 6, 1> s = corner.col(k);
       Eigen::Matrix2d El;
       El << s(0), s(3), s(3), s(1);
       const Eigen::Matrix<double, 3, 2> P = frame.leftCols<2>();
