@@ -531,20 +531,24 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
   return a;
 }
 
+// The passive settle from q with the frame's flexion held.
+SettleResult settle_at_flexion(const ComakProblem& p, ModelData& data, const Eigen::VectorXd& q) {
+  SettleOptions so = p.options().settle;
+  so.fixed = {p.flexion_coordinate()};
+  so.forces = p.options().forces;
+  return settle(p.model(), data, q, so);
+}
+
 // The passive settle at the frame's flexion from the neutral pose (secondary
 // coordinates at zero, the patella flexed by 0.7 x the knee flexion, roughly
 // where it follows the trochlea): a start that does not depend on the frames
 // before. The first frame of a run starts here, and every frame's second start.
 SettleResult settle_from_neutral(const ComakProblem& p, ModelData& data, const ComakFrameInput& in) {
-  const Model& model = p.model();
-  SettleOptions so = p.options().settle;
-  so.fixed = {p.flexion_coordinate()};
-  so.forces = p.options().forces;
   Eigen::VectorXd q = p.coordinates(in, Eigen::VectorXd());
-  const int pf = model.tree.coordinate_index("pf_flexion");
+  const int pf = p.model().tree.coordinate_index("pf_flexion");
   q[pf >= 0 ? pf : p.flexion_coordinate()] = 0.7 * in.knee_flexion;
   q[p.flexion_coordinate()] = in.knee_flexion;
-  return settle(model, data, q, so);
+  return settle_at_flexion(p, data, q);
 }
 
 }  // namespace
@@ -622,21 +626,13 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   res.iterations += at.iterations;
   res.attempts = 1;
   evaluate(at);
-  auto settled_start = [&]() {
-    SettleOptions so = o.settle;
-    so.fixed = {p.flexion_coordinate()};
-    so.forces = o.forces;
-    const SettleResult sr = settle(model, data, q0, so);
-    return make_x0(sr.q, Eigen::VectorXd::Constant(nm, o.activation_min));
-  };
+  const Eigen::VectorXd a_min = Eigen::VectorXd::Constant(nm, o.activation_min);
   std::string second_note;
   if (res.status == ComakFrameStatus::kConverged && o.second_start) {
     // Second start: the passive settle from the neutral pose, independent of
     // the frames before; the lower converged objective wins.
     const ComakFrameResult first = res;
-    at = run_ipopt(p, data, in,
-                   make_x0(settle_from_neutral(p, data, in).q, Eigen::VectorXd::Constant(nm, o.activation_min)),
-                   false, nullptr);
+    at = run_ipopt(p, data, in, make_x0(settle_from_neutral(p, data, in).q, a_min), false, nullptr);
     evaluate(at);
     const bool second_wins = res.status == ComakFrameStatus::kConverged && res.objective < first.objective;
     std::ostringstream s;
@@ -650,7 +646,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   }
   // Attempt 2: from the passive settle at this flexion, activations at a_min.
   if (res.status != ComakFrameStatus::kConverged && o.retries >= 1) {
-    at = run_ipopt(p, data, in, settled_start(), false, nullptr);
+    at = run_ipopt(p, data, in, make_x0(settle_at_flexion(p, data, q0).q, a_min), false, nullptr);
     res.iterations += at.iterations;
     res.attempts = 2;
     evaluate(at);

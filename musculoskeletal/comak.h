@@ -149,7 +149,8 @@ struct ComakOptions {
   /// pose) or 2 (also: adaptive barrier, doubled iteration limit).
   int retries = 2;
   /// Also solve every frame whose first attempt converged from the passive
-  /// settle at its flexion (activations at a_min) and keep the converged
+  /// settle of the neutral pose at its flexion (activations at a_min; where a
+  /// run's first frame starts) and keep the converged
   /// solution with the lower objective: the problem has local optima (the
   /// knee's laxity, the faceted contact), and a warm start carries the
   /// previous frame's branch forward.

@@ -181,6 +181,16 @@ def rigid_overlap(k, prepared, times):
                   f"interior max {1e3 * ov[~rim].max():.2f} mm")
 
 
+def nodal_areas(V, Q):
+    """A quarter of each adjacent quad's area per node (quad area from its
+    diagonals)."""
+    qa = 0.5 * np.linalg.norm(np.cross(V[Q[:, 2]] - V[Q[:, 0]], V[Q[:, 3]] - V[Q[:, 1]]), axis=1)
+    area = np.zeros(len(V))
+    for c in range(4):
+        np.add.at(area, Q[:, c], qa / 4)
+    return area
+
+
 def rim_share(s, prepared, times):
     """Stage 2's tibial contact pressure times nodal area (a quarter of each
     adjacent quad), summed over all nodes, over the rim (periphery) nodes, and
@@ -197,10 +207,7 @@ def rim_share(s, prepared, times):
                 continue
             V, Q = p[g + "nodes"][:], p[g + "quads"][:]
             rim = p[g + "on_periphery"][:].astype(bool)
-            qa = 0.5 * np.linalg.norm(np.cross(V[Q[:, 2]] - V[Q[:, 0]], V[Q[:, 3]] - V[Q[:, 1]]), axis=1)
-            area = np.zeros(len(V))
-            for c in range(4):
-                np.add.at(area, Q[:, c], qa / 4)
+            area = nodal_areas(V, Q)
             f = s["surfaces/" + tib + "/contact_pressure"][j] * area
             pr = s["surfaces/" + tib + "/contact_pressure"][j]
             tot, rim_f, high = tot + f.sum(), rim_f + f[rim].sum(), high + f[pr > 30e6].sum()
@@ -263,10 +270,7 @@ def foundation_balance(k, s, prepared, times, E_mpa, nu):
             V, Q = p[g + "nodes"][:], p[g + "quads"][:]
             h = p[g + "thickness"][:]
             rim = p[g + "on_periphery"][:].astype(bool)
-            qa = 0.5 * np.linalg.norm(np.cross(V[Q[:, 2]] - V[Q[:, 0]], V[Q[:, 3]] - V[Q[:, 1]]), axis=1)
-            area = np.zeros(len(V))
-            for c in range(4):
-                np.add.at(area, Q[:, c], qa / 4)
+            area = nodal_areas(V, Q)
             defl = s["surfaces/" + surf + "/deflection"][j]
             ff = K / h * np.maximum(0.0, -defl) * area
             pc = s["surfaces/" + surf + "/contact_pressure"][j] * area if "surfaces/" + surf + "/contact_pressure" in s \
