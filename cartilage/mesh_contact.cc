@@ -553,7 +553,10 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     else
       ++cnt.vertex_face;
     cnt.max_penetration_m = std::max(cnt.max_penetration_m, c.fade_edge == 1 ? c.fade * -c.gap : -c.gap);
-    if (c.fade_edge >= 0) cnt.max_rim_depth_m = std::max(cnt.max_rim_depth_m, -c.gap);
+    if (c.fade_edge >= 0)
+      cnt.max_rim_depth_m = std::max(cnt.max_rim_depth_m, -c.gap);
+    else
+      cnt.max_interior_penetration_m = std::max(cnt.max_interior_penetration_m, -c.gap);
     active.push_back(std::move(c));
   }
   if (counts) *counts = cnt;

@@ -188,6 +188,10 @@ struct ContactCounts {
   /// their whole depth: they have crossed a triangle.
   double max_penetration_m = 0;
   double max_rim_depth_m = 0;  ///< max(-g) over active faded contacts (either kind), unweighted (diagnostics)
+  /// max(-g) over active contacts that are not faded (fade_edge < 0): the
+  /// penalty's own interpenetration, away from the rims where kFadeInside
+  /// deliberately lets a surface pass (docs/contact.md, accuracy rule).
+  double max_interior_penetration_m = 0;
 };
 
 /// Contact between surface a and surface b.

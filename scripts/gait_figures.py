@@ -13,7 +13,7 @@ prints, over the frames both cover (stage 2 on the stage-1 clock, /trial_time):
 - the largest femoral cartilage deflection and its time, and the extremes of
   the first and second principal strains over the femoral surface;
 - the solver's per-step record: steps, Newton iterations, rejections, wall
-  time, the worst penetration/deflection ratio.
+  time, the worst penetration/deflection ratio (also over unfaded contacts only).
 
 A run still being written can be read: only complete frames are used
 (attribute arthrosim_frames_complete). Needs h5py and numpy (Debian:
@@ -143,6 +143,10 @@ def main():
     if ratio.size:
         print(f"penetration/deflection: median {np.median(ratio):.3f}, max {ratio.max():.3f}; "
               f"steps over 0.1: {(ratio > 0.1).sum()}; active contacts per step: median {np.median(active):.0f}")
+    if "interior_penetration_ratio" in st:
+        ri = complete(st["interior_penetration_ratio"])
+        print(f"  unfaded contacts only (away from rims): median {np.median(ri):.3f}, max {ri.max():.3f}; "
+              f"steps over 0.1: {(ri > 0.1).sum()}")
     for key in ("assembly_s", "contact_s", "factorization_s", "solve_s"):
         if key in st.attrs:
             print(f"  {key}: {float(st.attrs[key]):.1f}")

@@ -67,6 +67,9 @@ int main(int argc, char** argv) {
                   "%ld steps broke the accuracy rule (worst penetration/deflection %.3g), %ld pattern changes\n",
                   r.contact_steps, static_cast<double>(r.active_contacts_sum) / r.contact_steps,
                   r.max_penetration_m * 1e3, r.penetration_warnings, r.worst_penetration_ratio, r.pattern_changes);
+    if (r.contact_steps > 0)
+      std::printf("contact away from rims (unfaded contacts): %ld steps over the accuracy rule's limit (worst %.3g)\n",
+                  r.interior_penetration_warnings, r.worst_interior_penetration_ratio);
     std::printf("wrote %s\n", o.out.c_str());
   } catch (const std::exception& e) {
     std::cerr << "arthrosim-surface: error: " << e.what() << "\n";

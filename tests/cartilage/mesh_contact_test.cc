@@ -222,6 +222,43 @@ TEST(MeshContact, RimFadeInsideIsContinuousAndNeverSideways) {
   }
 }
 
+// The counts behind the seed's accuracy rule: a small plate tilted about
+// its y axis and pressed into a larger one, so that its deepest row is its
+// rim, where kFadeInside fades the contacts. max_penetration_m is the
+// deepest of all active contacts (a faded one here), max_interior_
+// penetration_m the deepest unfaded one, max_rim_depth_m the deepest faded
+// one; each is checked against the contact list itself, and the tilt must
+// make the rim the deepest (otherwise the case would not tell them apart).
+// The small plate's rim nodes are not penetrating vertices, as in the
+// walking scenes (contact_rim_vertices false).
+TEST(MeshContact, PenetrationCountsSeparateFadedRimContacts) {
+  const common::QuadMesh big = shifted(testing::plate_mesh(12, 12, 10e-3, 10e-3), {-5e-3, -5e-3, 0});
+  common::QuadMesh small =
+      testing::flipped(shifted(testing::plate_mesh(6, 6, 4e-3, 4e-3, 0.2), {-2e-3, -2e-3, 0}), 10e-6);
+  // Tilt: z falls by 20 um per mm of x, so the plate's -x rim is 80 um
+  // deeper than its +x rim; part of it stays above the big plate.
+  for (int i = 0; i < small.V.rows(); ++i) small.V(i, 2) += 20e-3 * small.V(i, 0);
+  ContactOptions o;
+  o.stiffness_N_m3 = 5e10;
+  o.rim_vertices = false;  // the surface stage's default: rim nodes do not penetrate
+  MeshContact mc("big-small", ContactSurface(big), ContactSurface(small), o);
+  ContactCounts n;
+  const auto active = mc.detect(big.V, small.V, nullptr, nullptr, false, &n);
+  double deepest = 0, interior = 0, faded = 0;
+  for (const ContactPoint& c : active) {
+    deepest = std::max(deepest, -c.gap);
+    (c.fade_edge >= 0 ? faded : interior) = std::max(c.fade_edge >= 0 ? faded : interior, -c.gap);
+  }
+  std::printf("%zu contacts: deepest %.2f um, unfaded %.2f um, faded %.2f um\n", active.size(), deepest * 1e6,
+              interior * 1e6, faded * 1e6);
+  ASSERT_GT(interior, 0.0);
+  ASSERT_GT(faded, interior);  // the tilt puts the rim row deepest
+  EXPECT_EQ(n.max_penetration_m, deepest);
+  EXPECT_EQ(n.max_interior_penetration_m, interior);
+  EXPECT_EQ(n.max_rim_depth_m, faded);
+  EXPECT_LT(n.max_interior_penetration_m, n.max_penetration_m);
+}
+
 // The earlier rim treatment (RimTreatment::kRimContacts): a cap narrower
 // than its contact zone, plate vertices beside the cap's rim are behind the
 // plane of its boundary triangles and keep their distance to the rim as gap,

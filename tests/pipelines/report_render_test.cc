@@ -70,6 +70,7 @@ void write_surface(const fs::path& path, double phase, bool walking = false, dou
   f.write("/contact/tibiofemoral/force", F);
   f.write("/solver/time", Eigen::VectorXd(time.tail(T - 1)));
   f.write("/solver/penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.5, 0.05, 0.2, 0.08).finished()));
+  f.write("/solver/interior_penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.4, 0.02, 0.12, 0.05).finished()));
   f.write("/solver/active_contacts", Eigen::VectorXi((Eigen::VectorXi(4) << 0, 10, 12, 9).finished()));  // int, as written
   f.set_attribute("/solver", "penetration_limit", 0.1);
 }
@@ -162,7 +163,10 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   // step's 0.5 has no active contact and is not counted).
   const std::string json = slurp(kDir / "full" / "summary.json");
   for (const char* item : {"\"steps_in_contact\": 3", "\"median_ratio\": 0.08", "\"max_ratio\": 0.2",
-                           "\"limit\": 0.1", "\"steps_over_limit\": 1"})
+                           "\"limit\": 0.1", "\"steps_over_limit\": 1",
+                           // The same over unfaded contacts (0.02, 0.12, 0.05).
+                           "\"median_unfaded_ratio\": 0.05", "\"max_unfaded_ratio\": 0.12",
+                           "\"steps_over_limit_unfaded\": 1"})
     EXPECT_NE(json.find(item), std::string::npos) << item;
   EXPECT_NE(html.find("Accuracy rule of the mesh contact"), std::string::npos);
   // Key frames of the walking scenario on the trial clock (/trial_time =
