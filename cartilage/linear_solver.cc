@@ -39,9 +39,10 @@ void pin_blas_to_one_thread() {
 // to 1 GiB from the heap, no trimming) brought the factorisation from 0.326
 // to 0.252 s and that span from 100.8 to 84.4 s wall, bit-identical results
 // (measured 2026-12-02 on the demo's gait scenario, docs/contact.md "Cost of
-// a Newton iteration"). Peak memory is unchanged in kind: the heap keeps what
-// the largest factorisation needed. Process-wide, set once, like the BLAS
-// threads above; only glibc has mallopt.
+// a Newton iteration"). The price is peak memory: freed blocks stay in the
+// heap, so peak RSS rose from 572 to 642 MB on that span (the 1.5-mm osmotic
+// run of docs/studies.md: 1,250 MB now, 1,029 MB in an older run). Process-wide, set
+// once, like the BLAS threads above; only glibc has mallopt.
 void retain_freed_memory() {
 #ifdef __GLIBC__
   static std::once_flag once;

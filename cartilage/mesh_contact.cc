@@ -556,7 +556,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     if (c.fade_edge >= 0)
       cnt.max_rim_depth_m = std::max(cnt.max_rim_depth_m, -c.gap);
     else
-      cnt.max_interior_penetration_m = std::max(cnt.max_interior_penetration_m, -c.gap);
+      cnt.max_unfaded_penetration_m = std::max(cnt.max_unfaded_penetration_m, -c.gap);
     active.push_back(std::move(c));
   }
   if (counts) *counts = cnt;

@@ -191,7 +191,7 @@ struct ContactCounts {
   /// max(-g) over active contacts that are not faded (fade_edge < 0): the
   /// penalty's own interpenetration, away from the rims where kFadeInside
   /// deliberately lets a surface pass (docs/contact.md, accuracy rule).
-  double max_interior_penetration_m = 0;
+  double max_unfaded_penetration_m = 0;
 };
 
 /// Contact between surface a and surface b.

@@ -201,27 +201,27 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     const double limit = has_limit ? f.attribute_double("/solver", "penetration_limit") : 0.0;
     // The ratio over unfaded contacts only (files written since 2026-12-02;
     // older ones lack it and their rows say so).
-    const bool has_interior = f.exists("/solver/interior_penetration_ratio");
-    const Eigen::VectorXd ri = has_interior ? f.read_vector("/solver/interior_penetration_ratio") : Eigen::VectorXd();
-    if (has_interior && ri.size() != t.size())
-      throw InputError(file, 0, "/solver/interior_penetration_ratio has " + std::to_string(ri.size()) +
+    const bool has_unfaded = f.exists("/solver/unfaded_penetration_ratio");
+    const Eigen::VectorXd ri = has_unfaded ? f.read_vector("/solver/unfaded_penetration_ratio") : Eigen::VectorXd();
+    if (has_unfaded && ri.size() != t.size())
+      throw InputError(file, 0, "/solver/unfaded_penetration_ratio has " + std::to_string(ri.size()) +
                                     " values, /solver/time " + std::to_string(t.size()));
     report::Series s, si;
     s.label = "stage 2 " + scenario;
     si.label = "stage 2 " + scenario + ", unfaded contacts";
-    std::vector<double> in_contact, interior;
-    int over = 0, interior_over = 0;
+    std::vector<double> in_contact, unfaded;
+    int over = 0, unfaded_over = 0;
     for (Eigen::Index i = 0; i < t.size(); ++i) {
       if (n(i) <= 0) continue;
       s.x.push_back(t(i) + offset);
       s.y.push_back(r(i));
       in_contact.push_back(r(i));
       if (has_limit && r(i) > limit) ++over;
-      if (has_interior) {
+      if (has_unfaded) {
         si.x.push_back(t(i) + offset);
         si.y.push_back(ri(i));
-        interior.push_back(ri(i));
-        if (has_limit && ri(i) > limit) ++interior_over;
+        unfaded.push_back(ri(i));
+        if (has_limit && ri(i) > limit) ++unfaded_over;
       }
     }
     if (in_contact.empty()) continue;
@@ -232,13 +232,13 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
         .value("median_ratio", median).value("max_ratio", max_ratio);
     if (has_limit) json.value("limit", limit).value("steps_over_limit", over);
     std::string i_median = "(not recorded)", i_max = "-", i_over = "-";
-    if (has_interior) {
-      const double im = median_of(interior), ix = *std::max_element(interior.begin(), interior.end());
+    if (has_unfaded) {
+      const double im = median_of(unfaded), ix = *std::max_element(unfaded.begin(), unfaded.end());
       json.value("median_unfaded_ratio", im).value("max_unfaded_ratio", ix);
-      if (has_limit) json.value("steps_over_limit_unfaded", interior_over);
+      if (has_limit) json.value("steps_over_limit_unfaded", unfaded_over);
       i_median = report::number(im);
       i_max = report::number(ix);
-      if (has_limit) i_over = std::to_string(interior_over);
+      if (has_limit) i_over = std::to_string(unfaded_over);
     }
     json.end_object();
     rule_rows.push_back({scenario, std::to_string(m), report::number(median), report::number(max_ratio),
@@ -252,7 +252,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
       ratio_series.push_back(std::move(lim));
     }
     ratio_series.push_back(std::move(s));
-    if (has_interior) ratio_series.push_back(std::move(si));
+    if (has_unfaded) ratio_series.push_back(std::move(si));
   }
   json.end_array();
   if (!rule_rows.empty())

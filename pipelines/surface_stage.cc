@@ -586,8 +586,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     solver_out.push_back(out.appender("/solver/penetration_ratio", {}, so));
     solver_out.push_back(out.appender_int("/solver/active_contacts", {}, so));
     solver_out.push_back(out.appender("/solver/max_rim_depth_m", {}, so));
-    solver_out.push_back(out.appender("/solver/max_interior_penetration_m", {}, so));
-    solver_out.push_back(out.appender("/solver/interior_penetration_ratio", {}, so));
+    solver_out.push_back(out.appender("/solver/max_unfaded_penetration_m", {}, so));
+    solver_out.push_back(out.appender("/solver/unfaded_penetration_ratio", {}, so));
   }
   // Tibiofemoral contact force per frame (on the second surface of each
   // pair, in its bone's frame; pairs named medial/lateral are the
@@ -637,8 +637,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   double worst_ratio = 0;
   // The same rule on the unfaded contacts only (reported, not enforced):
   // separates the penalty's own interpenetration from the rims' faded zone.
-  long interior_over = 0;
-  double worst_interior_ratio = 0;
+  long unfaded_over = 0;
+  double worst_unfaded_ratio = 0;
   // One frame: every surface's fields, the contact forces, then /time (so
   // /time counts complete frames).
   // Contact state of every pair at q (computed once per step; the frame
@@ -811,27 +811,27 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         if (change_out) change_out->append(last_change);
         if (contact) {
           reports = contact_reports(integrator.q());
-          double pen = 0, rim_depth = 0, interior = 0;
+          double pen = 0, rim_depth = 0, unfaded = 0;
           long active = 0;
           for (const cartilage::ContactPairReport& rep : reports) {
             pen = std::max(pen, rep.counts.max_penetration_m);
             rim_depth = std::max(rim_depth, rep.counts.max_rim_depth_m);
-            interior = std::max(interior, rep.counts.max_interior_penetration_m);
+            unfaded = std::max(unfaded, rep.counts.max_unfaded_penetration_m);
             active += rep.counts.vertex_face + rep.counts.edge_edge;
           }
           auto ratio_of = [&](double p) {
             return max_def > 0 ? p / max_def : (p > 0 ? std::numeric_limits<double>::infinity() : 0.0);
           };
-          const double ratio = ratio_of(pen), interior_ratio = ratio_of(interior);
+          const double ratio = ratio_of(pen), unfaded_ratio = ratio_of(unfaded);
           solver_out[8].append(pen);
           solver_out[9].append(ratio);
           solver_out[10].append(static_cast<int>(active));
           solver_out[11].append(rim_depth);
-          solver_out[12].append(interior);
-          solver_out[13].append(interior_ratio);
-          if (active > 0 && interior_ratio > limit) {
-            ++interior_over;
-            worst_interior_ratio = std::max(worst_interior_ratio, interior_ratio);
+          solver_out[12].append(unfaded);
+          solver_out[13].append(unfaded_ratio);
+          if (active > 0 && unfaded_ratio > limit) {
+            ++unfaded_over;
+            worst_unfaded_ratio = std::max(worst_unfaded_ratio, unfaded_ratio);
           }
           res.max_penetration_m = std::max(res.max_penetration_m, pen);
           res.contact_steps += active > 0 ? 1 : 0;
@@ -938,8 +938,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   if (contact) {
     out.set_attribute("/solver", "penetration_warnings", static_cast<std::int64_t>(penetration_warnings));
     out.set_attribute("/solver", "worst_penetration_ratio", worst_ratio);
-    out.set_attribute("/solver", "interior_penetration_warnings", static_cast<std::int64_t>(interior_over));
-    out.set_attribute("/solver", "worst_interior_penetration_ratio", worst_interior_ratio);
+    out.set_attribute("/solver", "unfaded_penetration_warnings", static_cast<std::int64_t>(unfaded_over));
+    out.set_attribute("/solver", "worst_unfaded_penetration_ratio", worst_unfaded_ratio);
     out.set_attribute("/solver", "penetration_limit", limit);
     out.set_attribute("/solver", "max_penetration_m", res.max_penetration_m);
   }
@@ -954,8 +954,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.pattern_changes = s.pattern_changes;
   res.penetration_warnings = penetration_warnings;
   res.worst_penetration_ratio = worst_ratio;
-  res.interior_penetration_warnings = interior_over;
-  res.worst_interior_penetration_ratio = worst_interior_ratio;
+  res.unfaded_penetration_warnings = unfaded_over;
+  res.worst_unfaded_penetration_ratio = worst_unfaded_ratio;
   time_out.close();
   if (trial_time_out) trial_time_out->close();
   res.wall_s = now_s() - t_start;

@@ -49,8 +49,8 @@ struct SurfaceStageResult {
   long penetration_warnings = 0;       ///< steps breaking the accuracy rule
   double worst_penetration_ratio = 0;  ///< largest penetration / deflection of those
   /// The same over unfaded contacts only (away from rims; reported, not enforced).
-  long interior_penetration_warnings = 0;
-  double worst_interior_penetration_ratio = 0;
+  long unfaded_penetration_warnings = 0;
+  double worst_unfaded_penetration_ratio = 0;
   // steady_state_change_mm > 0 only:
   bool steady_state_stop = false;      ///< the run could stop at the steady state
   bool steady_state_reached = false;   ///< it did (false: end_time_s came first)

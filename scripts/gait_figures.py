@@ -143,8 +143,8 @@ def main():
     if ratio.size:
         print(f"penetration/deflection: median {np.median(ratio):.3f}, max {ratio.max():.3f}; "
               f"steps over 0.1: {(ratio > 0.1).sum()}; active contacts per step: median {np.median(active):.0f}")
-    if "interior_penetration_ratio" in st:
-        ri = complete(st["interior_penetration_ratio"])
+    if "unfaded_penetration_ratio" in st:
+        ri = complete(st["unfaded_penetration_ratio"])
         print(f"  unfaded contacts only (away from rims): median {np.median(ri):.3f}, max {ri.max():.3f}; "
               f"steps over 0.1: {(ri > 0.1).sum()}")
     for key in ("assembly_s", "contact_s", "factorization_s", "solve_s"):

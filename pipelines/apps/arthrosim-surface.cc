@@ -69,7 +69,7 @@ int main(int argc, char** argv) {
                   r.max_penetration_m * 1e3, r.penetration_warnings, r.worst_penetration_ratio, r.pattern_changes);
     if (r.contact_steps > 0)
       std::printf("contact away from rims (unfaded contacts): %ld steps over the accuracy rule's limit (worst %.3g)\n",
-                  r.interior_penetration_warnings, r.worst_interior_penetration_ratio);
+                  r.unfaded_penetration_warnings, r.worst_unfaded_penetration_ratio);
     std::printf("wrote %s\n", o.out.c_str());
   } catch (const std::exception& e) {
     std::cerr << "arthrosim-surface: error: " << e.what() << "\n";

@@ -225,7 +225,7 @@ TEST(MeshContact, RimFadeInsideIsContinuousAndNeverSideways) {
 // The counts behind the seed's accuracy rule: a small plate tilted about
 // its y axis and pressed into a larger one, so that its deepest row is its
 // rim, where kFadeInside fades the contacts. max_penetration_m is the
-// deepest of all active contacts (a faded one here), max_interior_
+// deepest of all active contacts (a faded one here), max_unfaded_
 // penetration_m the deepest unfaded one, max_rim_depth_m the deepest faded
 // one; each is checked against the contact list itself, and the tilt must
 // make the rim the deepest (otherwise the case would not tell them apart).
@@ -244,19 +244,20 @@ TEST(MeshContact, PenetrationCountsSeparateFadedRimContacts) {
   MeshContact mc("big-small", ContactSurface(big), ContactSurface(small), o);
   ContactCounts n;
   const auto active = mc.detect(big.V, small.V, nullptr, nullptr, false, &n);
-  double deepest = 0, interior = 0, faded = 0;
+  double deepest = 0, unfaded = 0, faded = 0;
   for (const ContactPoint& c : active) {
     deepest = std::max(deepest, -c.gap);
-    (c.fade_edge >= 0 ? faded : interior) = std::max(c.fade_edge >= 0 ? faded : interior, -c.gap);
+    double& m = c.fade_edge >= 0 ? faded : unfaded;
+    m = std::max(m, -c.gap);
   }
   std::printf("%zu contacts: deepest %.2f um, unfaded %.2f um, faded %.2f um\n", active.size(), deepest * 1e6,
-              interior * 1e6, faded * 1e6);
-  ASSERT_GT(interior, 0.0);
-  ASSERT_GT(faded, interior);  // the tilt puts the rim row deepest
+              unfaded * 1e6, faded * 1e6);
+  ASSERT_GT(unfaded, 0.0);
+  ASSERT_GT(faded, unfaded);  // the tilt puts the rim row deepest
   EXPECT_EQ(n.max_penetration_m, deepest);
-  EXPECT_EQ(n.max_interior_penetration_m, interior);
+  EXPECT_EQ(n.max_unfaded_penetration_m, unfaded);
   EXPECT_EQ(n.max_rim_depth_m, faded);
-  EXPECT_LT(n.max_interior_penetration_m, n.max_penetration_m);
+  EXPECT_LT(n.max_unfaded_penetration_m, n.max_penetration_m);
 }
 
 // The earlier rim treatment (RimTreatment::kRimContacts): a cap narrower

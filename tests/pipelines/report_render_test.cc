@@ -70,7 +70,7 @@ void write_surface(const fs::path& path, double phase, bool walking = false, dou
   f.write("/contact/tibiofemoral/force", F);
   f.write("/solver/time", Eigen::VectorXd(time.tail(T - 1)));
   f.write("/solver/penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.5, 0.05, 0.2, 0.08).finished()));
-  f.write("/solver/interior_penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.4, 0.02, 0.12, 0.05).finished()));
+  f.write("/solver/unfaded_penetration_ratio", Eigen::VectorXd((Eigen::VectorXd(4) << 0.4, 0.02, 0.12, 0.05).finished()));
   f.write("/solver/active_contacts", Eigen::VectorXi((Eigen::VectorXi(4) << 0, 10, 12, 9).finished()));  // int, as written
   f.set_attribute("/solver", "penetration_limit", 0.1);
 }
