@@ -16,7 +16,7 @@ add_test(NAME sample.arthrosim-surface.cantilever
   COMMAND arthrosim-surface --scene ${CMAKE_SOURCE_DIR}/data/scenes/cantilever_plate.yaml
           --out ${CMAKE_BINARY_DIR}/surface_sample_cantilever.h5)
 set_tests_properties(sample.arthrosim-surface.cantilever PROPERTIES LABELS sample TIMEOUT 60)
-# The walking sample (a 12-minute run: docs/status.md) is checked as
+# The walking sample (a whole cycle: 312 s plus COMAK 21 s, docs/studies.md) is checked as
 # a plan: the scene parses and the runner schedules prepare, COMAK and this stage.
 add_test(NAME sample.arthrosim-surface.gait_plan
   COMMAND arthrosim run ${CMAKE_SOURCE_DIR}/data/scenes/gait.yaml --out ${CMAKE_BINARY_DIR}/sample_gait_plan --dry-run)
