@@ -730,31 +730,5 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
   }
 }
 
-// The penalty-stiffness study (data/studies/gait_contact_stiffness.yaml,
-// docs/studies.md) is gait.yaml's walk cut to 0.3 s: the same plan, model,
-// prepared resolution, effects and options apart from end_time_s, so its
-// figures speak for the bundled walking scene.
-TEST(BundledScenes, StiffnessStudyIsTheWalkCutShort) {
-  const fs::path data = fs::path(ARTHROSIM_SOURCE_DIR) / "data";
-  const Scene gait = common::load_scene(data / "scenes" / "gait.yaml");
-  const Scene study = common::load_scene(data / "studies" / "gait_contact_stiffness.yaml");
-  using V = std::vector<std::string>;
-  EXPECT_EQ(RunnerTest::names(plan_stages(study, "/nonexistent/out")), (V{"prepare", "comak", "surface.gait"}));
-  EXPECT_EQ(study.model, gait.model);
-  EXPECT_EQ(study.prepare.canonical_text(), gait.prepare.canonical_text());
-  const common::Scenario& a = study.require_scenario("gait");
-  const common::Scenario& b = gait.require_scenario("gait");
-  EXPECT_EQ(a.effects, b.effects);
-  EXPECT_DOUBLE_EQ(a.options.si("end_time_s"), 0.3);
-  auto without_end = [](const common::Scenario& sc) {
-    std::vector<std::pair<std::string, std::string>> kept;
-    for (const auto& kv : sc.options.canonical())
-      if (kv.first.find("end_time_s") == std::string::npos && kv.first.find("description") == std::string::npos)
-        kept.push_back(kv);
-    return kept;
-  };
-  EXPECT_EQ(without_end(a), without_end(b));
-}
-
 }  // namespace
 }  // namespace arthrosim::pipelines
