@@ -96,9 +96,12 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
                              std::to_string(options.activation_min));
   if (!(options.length_scale > 0) || !(options.force_tolerance > 0) || !(options.muscle_stress > 0))
     throw common::InputError("COMAK: length_scale, force_tolerance and muscle_stress must be > 0");
-  if (options.retries < 0 || options.retries > 2)
-    throw common::InputError("COMAK: retries must be 0, 1 or 2, found " +
+  if (options.retries < 0 || options.retries > 3)
+    throw common::InputError("COMAK: retries must be 0, 1, 2 or 3, found " +
                              std::to_string(options.retries));
+  if (!(options.move_limit_m > 0) || !(options.move_limit_rad > 0) || options.move_limit_rounds < 1 ||
+      options.move_limit_iterations < 1)
+    throw common::InputError("COMAK: move limits must be positive and rounds and iterations >= 1");
   flexion_ = require_coordinate(model, "knee_flexion");
   hip_[0] = require_coordinate(model, "hip_flexion");
   hip_[1] = require_coordinate(model, "hip_adduction");
@@ -322,6 +325,10 @@ class FrameNlp : public Ipopt::TNLP {
       const Joint* j = joint_of(p_.model(), p_.secondary_coordinates()[c]);
       xl[nm_ + c] = std::max(j->lower, -1e19);
       xu[nm_ + c] = std::min(j->upper, 1e19);
+      if (box_half_.size() == ns_) {  // a move limit around the start (step control)
+        xl[nm_ + c] = std::max(xl[nm_ + c], x0_[nm_ + c] - box_half_[c]);
+        xu[nm_ + c] = std::min(xu[nm_ + c], x0_[nm_ + c] + box_half_[c]);
+      }
     }
     for (int k = 0; k < ne_; ++k) xl[nm_ + ns_ + k] = -1e19, xu[nm_ + ns_ + k] = 1e19;
     for (int k = 0; k < m; ++k) gl[k] = gu[k] = 0.0;
@@ -456,6 +463,9 @@ class FrameNlp : public Ipopt::TNLP {
   const Eigen::VectorXd& solution() const { return x_best_; }
   const ComakMultipliers& multipliers() const { return final_; }
   void set_warm(const ComakMultipliers* w) { warm_ = w; }
+  /// Limits each secondary coordinate to x0 +- half[c] (besides its joint
+  /// limits); empty: joint limits only.
+  void set_move_limit(const Eigen::VectorXd& half) { box_half_ = half; }
   int iterations() const { return iterations_; }
   std::exception_ptr error() const { return error_; }
   int nm() const { return nm_; }
@@ -466,7 +476,7 @@ class FrameNlp : public Ipopt::TNLP {
   const ComakProblem& p_;
   ModelData& data_;
   const ComakFrameInput& in_;
-  Eigen::VectorXd x0_, x_best_, q_base_;
+  Eigen::VectorXd x0_, x_best_, q_base_, box_half_;
   const ComakMultipliers* warm_ = nullptr;
   ComakMultipliers final_;
   int nm_ = 0, ns_ = 0, nf_ = 0, ne_ = 0;
@@ -482,8 +492,10 @@ struct Attempt {
 };
 
 Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput& in,
-                  const Eigen::VectorXd& x0, bool robust, const ComakMultipliers* warm) {
+                  const Eigen::VectorXd& x0, bool robust, const ComakMultipliers* warm,
+                  const Eigen::VectorXd& move_limit = {}) {
   Ipopt::SmartPtr<FrameNlp> nlp = new FrameNlp(p, data, in, x0);
+  nlp->set_move_limit(move_limit);
   const bool use_warm = warm && warm->lambda.size() == p.num_rows() &&
                         warm->z_lower.size() == x0.size();
   nlp->set_warm(use_warm ? warm : nullptr);
@@ -498,7 +510,9 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
   opt.SetNumericValue("acceptable_tol", o.ipopt_acceptable_tolerance);
   opt.SetNumericValue("constr_viol_tol", o.force_tolerance);
   opt.SetNumericValue("acceptable_constr_viol_tol", o.force_tolerance);
-  opt.SetIntegerValue("max_iter", robust ? 2 * o.max_iterations : o.max_iterations);
+  opt.SetIntegerValue("max_iter", robust                ? 2 * o.max_iterations
+                                  : move_limit.size() ? std::min(o.move_limit_iterations, o.max_iterations)
+                                                      : o.max_iterations);
   // A warm start is close to the solution: a small initial barrier keeps it
   // there instead of pushing activations to the middle of their bounds.
   opt.SetNumericValue("mu_init", 1e-3);
@@ -529,6 +543,17 @@ Attempt run_ipopt(const ComakProblem& p, ModelData& data, const ComakFrameInput&
   if (!a.x.allFinite())
     throw common::NumericalError(frame_name(in) + ": Ipopt returned a non-finite point");
   return a;
+}
+
+// Whether a secondary coordinate of q lies on one of its joint limits (within
+// 1e-6 of the range).
+bool on_joint_limit(const ComakProblem& p, const Eigen::VectorXd& q) {
+  for (int k : p.secondary_coordinates()) {
+    const Joint* j = joint_of(p.model(), k);
+    const double tol = 1e-6 * (j->upper - j->lower);
+    if (q[k] <= j->lower + tol || q[k] >= j->upper - tol) return true;
+  }
+  return false;
 }
 
 // The passive settle from q with the frame's flexion held.
@@ -620,27 +645,73 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     res.status = ipopt_ok && equilibrium ? ComakFrameStatus::kConverged : ComakFrameStatus::kFailed;
   };
 
-  // Attempt 1: warm start.
-  const Eigen::VectorXd q0 = p.coordinates(in, q_start);
-  Attempt at = run_ipopt(p, data, in, make_x0(q0, a_start), false, warm);
-  res.iterations += at.iterations;
-  res.attempts = 1;
-  evaluate(at);
   const Eigen::VectorXd a_min = Eigen::VectorXd::Constant(nm, o.activation_min);
+  Attempt at;
+  // Attempt 4: step control by moving limits, from the passive settle of the
+  // neutral pose (a start that owes nothing to the frames before or to the
+  // given start). Each round solves the NLP with every secondary coordinate
+  // held within +-move_limit of the round's start (besides its joint limits);
+  // a round that ends on such a limit, or fails, hands its last iterate to the
+  // next round as the new centre. Without the limits Ipopt's first steps from
+  // a far start can carry the patella out of its groove (measured: 120 deg
+  // under 1 BW, docs/comak.md); within them every step stays where the
+  // linearised contact is meaningful. A round that converges with no moving
+  // limit active is a solution of the unlimited problem (the same KKT
+  // conditions). Leaves its outcome in res.
+  auto moving_limits = [&](Eigen::VectorXd x, const ComakMultipliers* warm_first) {
+    Eigen::VectorXd half(ns);
+    for (int c = 0; c < ns; ++c)
+      half[c] = joint_of(model, p.secondary_coordinates()[c])->type == JointType::kRevolute
+                    ? o.move_limit_rad
+                    : o.move_limit_m;
+    for (int round = 0; round < o.move_limit_rounds; ++round) {
+      at = run_ipopt(p, data, in, x, false, round == 0 ? warm_first : nullptr, half);
+      res.iterations += at.iterations;
+      evaluate(at);
+      bool on_limit = false;
+      for (int c = 0; c < ns; ++c) {
+        const Joint* j = joint_of(model, p.secondary_coordinates()[c]);
+        const double lo = x[nm + c] - half[c], hi = x[nm + c] + half[c], v = at.x[nm + c];
+        const double tol = 1e-3 * half[c];
+        if ((lo > j->lower && v < lo + tol) || (hi < j->upper && v > hi - tol)) on_limit = true;
+      }
+      if (!on_limit && res.status == ComakFrameStatus::kConverged) return;
+      res.status = ComakFrameStatus::kFailed;  // a solution on a moving limit is not one
+      if (at.x == x) return;                    // no progress: the last round's result stands
+      x = at.x;
+    }
+  };
+  // Attempt 1: warm start, within moving limits (ComakOptions::move_limits_first).
+  const Eigen::VectorXd q0 = p.coordinates(in, q_start);
+  res.attempts = 1;
+  if (o.move_limits_first) {
+    moving_limits(make_x0(q0, a_start), warm);
+  } else {
+    at = run_ipopt(p, data, in, make_x0(q0, a_start), false, warm);
+    res.iterations += at.iterations;
+    evaluate(at);
+  }
   std::string second_note;
   if (res.status == ComakFrameStatus::kConverged && o.second_start) {
     // Second start: the passive settle from the neutral pose, independent of
     // the frames before; the lower converged objective wins.
     const ComakFrameResult first = res;
-    at = run_ipopt(p, data, in, make_x0(settle_from_neutral(p, data, in).q, a_min), false, nullptr);
-    evaluate(at);
+    const int before = res.iterations;
+    if (o.move_limits_first) {
+      moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);
+    } else {
+      at = run_ipopt(p, data, in, make_x0(settle_from_neutral(p, data, in).q, a_min), false, nullptr);
+      res.iterations += at.iterations;
+      evaluate(at);
+    }
+    const int second_iterations = res.iterations - before;
     const bool second_wins = res.status == ComakFrameStatus::kConverged && res.objective < first.objective;
     std::ostringstream s;
     s << "; second start " << (res.status == ComakFrameStatus::kConverged ? "converged" : "failed")
       << ", objective " << res.objective << " m^3 (first " << first.objective << "), "
       << (second_wins ? "kept" : "not kept");
     if (!second_wins) res = first;
-    res.iterations = first.iterations + at.iterations;
+    res.iterations = first.iterations + second_iterations;
     res.attempts = 2;
     second_note = s.str();
   }
@@ -657,6 +728,27 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     res.iterations += at.iterations;
     res.attempts = 3;
     evaluate(at);
+  }
+  if (res.status != ComakFrameStatus::kConverged && o.retries >= 3) {
+    res.attempts = 4;
+    moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);
+  }
+  // A converged solution with a secondary coordinate on its joint limit (the
+  // limits carry no force: a patella 50 mm lateral held only by its
+  // ligaments) is solved again with moving limits and the lower converged
+  // objective kept, as for the second start.
+  if (res.status == ComakFrameStatus::kConverged && o.retries >= 3 && on_joint_limit(p, res.q)) {
+    const ComakFrameResult before = res;
+    moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);
+    const bool wins = res.status == ComakFrameStatus::kConverged && res.objective < before.objective;
+    std::ostringstream s;
+    s << "; a coordinate on its joint limit, moving limits " << to_string(res.status) << ", objective "
+      << res.objective << " m^3, " << (wins ? "kept" : "not kept");
+    const int iterations = res.iterations;
+    if (!wins) res = before;
+    res.iterations = iterations;
+    res.attempts = before.attempts + 1;
+    second_note += s.str();
   }
   res.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::ostringstream s;

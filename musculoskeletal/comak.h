@@ -70,10 +70,14 @@
 // Never silently: each frame reports Ipopt's status, iterations, objective,
 // equilibrium residuals (N, N m) and wall time. A frame counts as converged
 // only if Ipopt reports success (or "acceptable") AND the residuals are below
-// the tolerances. A failed frame is retried (ComakOptions::retries): attempt 2
+// the tolerances. Attempt 1 starts from the previous frame within moving
+// limits (step control: see move_limits_first). A failed frame is retried (ComakOptions::retries): attempt 2
 // starts from the passive settle at the frame's flexion with activations at
 // a_min; attempt 3 starts from the warm start with Ipopt's adaptive barrier
-// update and twice the iteration limit. A frame whose first attempt converged
+// update and twice the iteration limit; attempt 4 starts from the passive
+// settle of the neutral pose (independent of the given start) with step
+// control: rounds of Ipopt solves within moving limits on the secondary
+// coordinates, each centred where the last one ended. A frame whose first attempt converged
 // is, with ComakOptions::second_start (default), solved a second time from the
 // passive settle of the neutral pose and the lower converged objective kept.
 // If all fail, the frame is marked
@@ -146,8 +150,26 @@ struct ComakOptions {
   /// multipliers too (Ipopt warm_start_init_point), not only its point.
   bool warm_start_multipliers = true;
   /// Retry attempts after a failed first attempt: 0, 1 (from the settle
-  /// pose) or 2 (also: adaptive barrier, doubled iteration limit).
-  int retries = 2;
+  /// pose), 2 (also: adaptive barrier, doubled iteration limit) or 3 (also:
+  /// moving limits from the passive settle of the neutral pose, below).
+  int retries = 3;
+  /// Attempt 4's step control: each round limits every secondary coordinate
+  /// to +- move_limit_m (translations) or move_limit_rad (rotations) around
+  /// the round's start; at most move_limit_rounds rounds of at most
+  /// min(move_limit_iterations, max_iterations) Ipopt iterations each. Measured on 120 deg under
+  /// 1 BW (docs/comak.md): 1 mm / 1 deg does not converge in 30 rounds, 3 and
+  /// 5 do; 100 iterations per round take about 2/3 of the time of 300.
+  /// Attempt 1 (the warm start from the previous frame) and the second
+  /// start also within moving limits: a frame then stays on the branch its
+  /// predecessor was on unless the second start finds a lower objective. Without it, measured on the
+  /// bundled trial with AVX2 kernels (docs/comak.md), Ipopt's first steps
+  /// flipped the patella to 136 deg of patellar flexion at 46 deg of knee
+  /// flexion (frames 92-100) and threw frame 64 18 mm off its neighbours.
+  bool move_limits_first = true;
+  double move_limit_m = 3e-3;
+  double move_limit_rad = 3.0 * 3.14159265358979323846 / 180.0;
+  int move_limit_rounds = 30;
+  int move_limit_iterations = 100;
   /// Also solve every frame whose first attempt converged from the passive
   /// settle of the neutral pose at its flexion (activations at a_min; where a
   /// run's first frame starts) and keep the converged
@@ -206,7 +228,7 @@ struct ComakFrameResult {
   int ipopt_status = 0;          ///< Ipopt::ApplicationReturnStatus of the last attempt
   std::string ipopt_status_name;
   int iterations = 0;            ///< Ipopt iterations of all attempts
-  int attempts = 0;              ///< Ipopt solves: 1, 2 with the second start or one retry, 3
+  int attempts = 0;              ///< Ipopt solves: 1, 2 with the second start or one retry, up to 4
   double objective = 0.0;        ///< sum w V a^2 + reserve terms (unscaled) [m^3]
   double max_force_residual = 0.0;   ///< max |c| over prismatic rows [N]
   double max_moment_residual = 0.0;  ///< max |c| over revolute rows [N m]

@@ -115,7 +115,7 @@ int main(int argc, char** argv) {
   app.add_flag("--single-start", single_start,
                "solve each frame from the previous frame's solution only (no second start from the "
                "passive settle; about half the time, may keep a worse local optimum)");
-  app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0, 1 or 2")
+  app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0..3 (docs/comak.md)")
       ->capture_default_str();
   app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
       ->capture_default_str();
