@@ -100,6 +100,7 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
     throw common::InputError("COMAK: retries must be 0, 1, 2 or 3, found " +
                              std::to_string(options.retries));
   if (!(options.move_limit_m > 0) || !(options.move_limit_rad > 0) || options.move_limit_rounds < 1 ||
+      !(options.second_start_move_limit_scale > 0) ||
       options.move_limit_iterations < 1)
     throw common::InputError("COMAK: move limits must be positive and rounds and iterations >= 1");
   flexion_ = require_coordinate(model, "knee_flexion");
@@ -647,9 +648,9 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
 
   const Eigen::VectorXd a_min = Eigen::VectorXd::Constant(nm, o.activation_min);
   Attempt at;
-  // Attempt 4: step control by moving limits, from the passive settle of the
-  // neutral pose (a start that owes nothing to the frames before or to the
-  // given start). Each round solves the NLP with every secondary coordinate
+  // Step control by moving limits (attempt 1 and the second start with
+  // options move_limits_first; attempt 4; the re-solve of a solution on a
+  // joint limit), from the start x. Each round solves the NLP with every secondary coordinate
   // held within +-move_limit of the round's start (besides its joint limits);
   // a round that ends on such a limit, or fails, hands its last iterate to the
   // next round as the new centre. Without the limits Ipopt's first steps from
@@ -658,12 +659,12 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   // linearised contact is meaningful. A round that converges with no moving
   // limit active is a solution of the unlimited problem (the same KKT
   // conditions). Leaves its outcome in res.
-  auto moving_limits = [&](Eigen::VectorXd x, const ComakMultipliers* warm_first) {
+  auto moving_limits = [&](Eigen::VectorXd x, const ComakMultipliers* warm_first, double box_scale = 1.0) {
     Eigen::VectorXd half(ns);
     for (int c = 0; c < ns; ++c)
       half[c] = joint_of(model, p.secondary_coordinates()[c])->type == JointType::kRevolute
-                    ? o.move_limit_rad
-                    : o.move_limit_m;
+                    ? box_scale * o.move_limit_rad
+                    : box_scale * o.move_limit_m;
     for (int round = 0; round < o.move_limit_rounds; ++round) {
       at = run_ipopt(p, data, in, x, false, round == 0 ? warm_first : nullptr, half);
       res.iterations += at.iterations;
@@ -698,7 +699,7 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     const ComakFrameResult first = res;
     const int before = res.iterations;
     if (o.move_limits_first) {
-      moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);
+      moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr, o.second_start_move_limit_scale);
     } else {
       at = run_ipopt(p, data, in, make_x0(settle_from_neutral(p, data, in).q, a_min), false, nullptr);
       res.iterations += at.iterations;
@@ -729,6 +730,8 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     res.attempts = 3;
     evaluate(at);
   }
+  // Attempt 4: moving limits from the passive settle of the neutral pose (a
+  // start that owes nothing to the frames before or to the given start).
   if (res.status != ComakFrameStatus::kConverged && o.retries >= 3) {
     res.attempts = 4;
     moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);

@@ -170,6 +170,13 @@ struct ComakOptions {
   double move_limit_rad = 3.0 * 3.14159265358979323846 / 180.0;
   int move_limit_rounds = 30;
   int move_limit_iterations = 100;
+  /// The second start's moving limits are this many times move_limit_m /
+  /// move_limit_rad: it starts from the unloaded neutral settle, far from a
+  /// loaded frame's solution. Measured on the demo's stage 1 (AVX2 kernels,
+  /// docs/comak.md): 1 -> 129 s and 33,634 Ipopt iterations, 3 -> 37.5 s and
+  /// 10,016, the same largest jumps between frames, objective sum 0.06 %
+  /// higher.
+  double second_start_move_limit_scale = 3.0;
   /// Also solve every frame whose first attempt converged from the passive
   /// settle of the neutral pose at its flexion (activations at a_min; where a
   /// run's first frame starts) and keep the converged

@@ -512,9 +512,15 @@ TEST(ComakSecondStart, KeepsTheLowerOfTheTwoConvergedStarts) {
   const Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, 0.01);
   auto d = msk::make_data(m);
   const auto first = msk::solve_comak_frame(p_off, d, in, q, a);
+  // The second start alone: a run's first frame starts from the neutral
+  // settle; with the second start's wider moving limits it is the same solve.
+  msk::ComakOptions wide = off;
+  wide.move_limit_m = on.second_start_move_limit_scale * on.move_limit_m;
+  wide.move_limit_rad = on.second_start_move_limit_scale * on.move_limit_rad;
+  msk::ComakProblem p_wide(m, wide);
   msk::ComakFrameResult neutral;
-  msk::run_comak(p_off, {in}, [&](const msk::ComakFrameInput&, const msk::ComakFrameResult& r,
-                                  const msk::ModelData&) { neutral = r; });
+  msk::run_comak(p_wide, {in}, [&](const msk::ComakFrameInput&, const msk::ComakFrameResult& r,
+                                   const msk::ModelData&) { neutral = r; });
   const auto both = msk::solve_comak_frame(p_on, d, in, q, a);
   std::printf("first start %.6e m^3, neutral settle %.6e m^3, kept %.6e m^3\n%s\n", first.objective,
               neutral.objective, both.objective, both.message.c_str());

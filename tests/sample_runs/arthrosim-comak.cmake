@@ -21,3 +21,12 @@ add_test(NAME sample.arthrosim-comak.ankle
           --ankle-equilibrium --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
           --out ${CMAKE_BINARY_DIR}/sample_runs/comak_ankle.h5 --first-frame 50 --last-frame 52)
 set_tests_properties(sample.arthrosim-comak.ankle PROPERTIES LABELS sample TIMEOUT 120)
+# scripts/kinematics_branches.py (docs/comak.md, "Step control") on the first
+# sample's kinematics file: it must read the file and report its 3 frames.
+set_tests_properties(sample.arthrosim-comak.coarse PROPERTIES FIXTURES_SETUP comak_coarse_h5)
+add_test(NAME sample.script.kinematics_branches
+  COMMAND /usr/bin/python3 ${CMAKE_SOURCE_DIR}/scripts/kinematics_branches.py
+          ${CMAKE_BINARY_DIR}/sample_runs/comak_coarse.h5 --frames 0:2)
+set_tests_properties(sample.script.kinematics_branches PROPERTIES LABELS sample TIMEOUT 60
+  FIXTURES_REQUIRED comak_coarse_h5
+  PASS_REGULAR_EXPRESSION "3 frames \\(0\\.\\.2\\), 3 converged, objective sum [0-9.e+-]+ m\\^3.*largest \\|pf_flexion")
