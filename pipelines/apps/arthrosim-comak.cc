@@ -115,6 +115,11 @@ int main(int argc, char** argv) {
   app.add_flag("--single-start", single_start,
                "solve each frame from the previous frame's solution only (no second start from the "
                "passive settle; about half the time, may keep a worse local optimum)");
+  bool no_move_limits = false;
+  app.add_flag("--no-move-limits", no_move_limits,
+               "solve attempt 1 and the second start as one Ipopt solve each, without the step "
+               "control of moving limits (as before 2026-12-03; faster on some frames, can leave "
+               "the patella's groove; docs/comak.md)");
   app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0..3 (docs/comak.md)")
       ->capture_default_str();
   app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
@@ -136,7 +141,10 @@ int main(int argc, char** argv) {
       "      # model folder + the scene's comak block (as `arthrosim run` calls it)\n"
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --ankle-equilibrium \\\n"
       "      --trial data/trials/synthetic_gait --out comak_ankle.h5 --first-frame 50 --last-frame 52\n"
-      "      # ankle moment balanced too (gastrocnemii, soleus, tibialis anterior)\n");
+      "      # ankle moment balanced too (gastrocnemii, soleus, tibialis anterior)\n"
+      "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --no-move-limits \\\n"
+      "      --trial data/trials/synthetic_gait --out comak_plain.h5 -v\n"
+      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-comak");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -161,6 +169,7 @@ int main(int argc, char** argv) {
       }
     }
     if (single_start) o.second_start = false;
+    if (no_move_limits) o.move_limits_first = false;
     for (const std::string& wa : weight_args) {
       const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
       o.muscle_weights[name] = w;  // name and range checked by ComakProblem
@@ -217,7 +226,11 @@ int main(int argc, char** argv) {
          << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
          << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
          << "\nsecond_start: " << (o.second_start ? "true" : "false")
-         << "\nretries: " << o.retries << "\nlowpass_cutoff_hz: " << lowpass_hz
+         << "\nretries: " << o.retries
+         << "\nmove_limits_first: " << (o.move_limits_first ? "true" : "false")
+         << "\nmove_limit_m: " << o.move_limit_m << "\nmove_limit_rad: " << o.move_limit_rad
+         << "\nsecond_start_move_limit_scale: " << o.second_start_move_limit_scale
+         << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
     for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
     std::string effect_text;
