@@ -1,4 +1,5 @@
 #pragma once
+#include <algorithm>
 // Shared set-up of the COMAK tests (tests/musculoskeletal/comak_test.cc and
 // tests/stability/comak_stability_test.cc): the bundled coarse knee, the knee
 // loads of the bundled SYNTHETIC trial, and a settled start pose.
@@ -43,6 +44,20 @@ inline Eigen::VectorXd settled_pose(const ComakProblem& p, double flexion, doubl
   so.fixed = {p.flexion_coordinate()};
   so.muscle_tone = tone;
   return settle(m, d, q, so).q;
+}
+
+/// settled_pose (tone 0.01) with every secondary coordinate moved by
+/// `offset_m` [m] (translations) or `offset_rad` [rad] (rotations): a
+/// deliberately poor start.
+inline Eigen::VectorXd offset_settled_pose(const ComakProblem& p, double flexion, double offset_m,
+                                           double offset_rad) {
+  Eigen::VectorXd q = settled_pose(p, flexion, 0.01);
+  const auto& free = p.free_coordinates();
+  for (int j : p.secondary_coordinates()) {
+    const int k = static_cast<int>(std::find(free.begin(), free.end(), j) - free.begin());
+    q[j] += p.revolute(k) ? offset_rad : offset_m;
+  }
+  return q;
 }
 
 }  // namespace arthrosim::musculoskeletal::test

@@ -503,12 +503,8 @@ TEST(ComakSecondStart, KeepsTheLowerOfTheTwoConvergedStarts) {
   // next test), which finds the lower optimum from the offset start too.
   on.retries = off.retries = 2;
   msk::ComakProblem p_on(m, on), p_off(m, off);
-  Eigen::VectorXd q = msk::test::settled_pose(p_off, in.knee_flexion, 0.01);
-  for (int j : p_off.secondary_coordinates()) {
-    const auto& free = p_off.free_coordinates();
-    const int k = static_cast<int>(std::find(free.begin(), free.end(), j) - free.begin());
-    q[j] += p_off.revolute(k) ? 2 * std::numbers::pi / 180 : 2e-3;
-  }
+  const Eigen::VectorXd q =
+      msk::test::offset_settled_pose(p_off, in.knee_flexion, 2e-3, 2 * std::numbers::pi / 180);
   const Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, 0.01);
   auto d = msk::make_data(m);
   const auto first = msk::solve_comak_frame(p_off, d, in, q, a);
@@ -555,12 +551,8 @@ TEST(ComakMovingLimits, SolutionOnAJointLimitIsSolvedAgain) {
   without.retries = 2;
   ASSERT_EQ(with.retries, 3) << "the default";
   msk::ComakProblem p_with(m, with), p_without(m, without);
-  Eigen::VectorXd q = msk::test::settled_pose(p_with, in.knee_flexion, 0.01);
-  for (int j : p_with.secondary_coordinates()) {
-    const auto& free = p_with.free_coordinates();
-    const int k = static_cast<int>(std::find(free.begin(), free.end(), j) - free.begin());
-    q[j] += p_with.revolute(k) ? 2 * std::numbers::pi / 180 : 2e-3;
-  }
+  const Eigen::VectorXd q =
+      msk::test::offset_settled_pose(p_with, in.knee_flexion, 2e-3, 2 * std::numbers::pi / 180);
   const Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, 0.01);
   auto d = msk::make_data(m);
   const auto plain = msk::solve_comak_frame(p_without, d, in, q, a);

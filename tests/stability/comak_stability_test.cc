@@ -226,12 +226,7 @@ TEST(ComakStability, BadInitialGuess) {
   const auto& m = coarse_model();
   msk::ComakProblem p(m, {});
   const auto in = trial_frame_at(20, deg(20));
-  Eigen::VectorXd q0 = settled_pose(p, in.knee_flexion, 0.01);
-  for (int j : p.secondary_coordinates()) {
-    const int k = static_cast<int>(std::find(p.free_coordinates().begin(), p.free_coordinates().end(), j) -
-                                   p.free_coordinates().begin());
-    q0[j] += p.revolute(k) ? deg(4) : 4e-3;
-  }
+  const Eigen::VectorXd q0 = msk::test::offset_settled_pose(p, in.knee_flexion, 4e-3, deg(4));
   // Only the stability contract is asserted: measured, this start converges
   // to a different local optimum (objective 6.2e-4 m^3) than the start from
   // the settle pose (1.05e-4 m^3); the NLP is non-convex through contact.
