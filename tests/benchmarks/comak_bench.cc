@@ -24,7 +24,9 @@
 // ARTHROSIM_COMAK_BENCH_DENSE_JACOBIAN=1 re-evaluates every force term in
 // every finite-difference column of dQ/dq (ForceOptions::
 // jacobian_skip_unmoved_terms = false; the behaviour before 2026-12-02) to
-// compare timings.
+// compare timings; ARTHROSIM_COMAK_BENCH_NO_MOVE_LIMITS=1 solves attempt 1
+// and the second start without step control (ComakOptions::
+// move_limits_first = false; the behaviour before 2026-12-03).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -73,6 +75,10 @@ void run_trial(benchmark::State& state, const char* model_file, bool ankle, bool
   if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_DENSE_JACOBIAN"); s && std::atoi(s)) {
     options.forces.jacobian_skip_unmoved_terms = false;
     std::printf("  dense finite-difference Jacobian (every term in every column)\n");
+  }
+  if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_NO_MOVE_LIMITS"); s && std::atoi(s)) {
+    options.move_limits_first = false;  // as arthrosim-comak --no-move-limits
+    std::printf("  attempt 1 and the second start without moving limits\n");
   }
   const auto trial = msk::load_gait_trial(root + "/data/trials/synthetic_gait");
   const msk::LegModel leg = msk::leg_model_for_trial(trial);
