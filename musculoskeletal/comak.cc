@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <functional>
 #include <limits>
 #include <sstream>
 
@@ -692,29 +693,39 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
     res.iterations += at.iterations;
     evaluate(at);
   }
+  // The start from the passive settle of the neutral pose, independent of
+  // the frames before and of the given start (settled once per frame).
+  Eigen::VectorXd neutral_x;
+  auto neutral_start = [&]() -> const Eigen::VectorXd& {
+    if (neutral_x.size() == 0) neutral_x = make_x0(settle_from_neutral(p, data, in).q, a_min);
+    return neutral_x;
+  };
+  // Solves the converged frame in res again from the neutral start (`solve`)
+  // and keeps the lower converged objective; the note says what it found.
   std::string second_note;
-  if (res.status == ComakFrameStatus::kConverged && o.second_start) {
-    // Second start: the passive settle from the neutral pose, independent of
-    // the frames before; the lower converged objective wins.
-    const ComakFrameResult first = res;
-    const int before = res.iterations;
-    if (o.move_limits_first) {
-      moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr, o.second_start_move_limit_scale);
-    } else {
-      at = run_ipopt(p, data, in, make_x0(settle_from_neutral(p, data, in).q, a_min), false, nullptr);
-      res.iterations += at.iterations;
-      evaluate(at);
-    }
-    const int second_iterations = res.iterations - before;
-    const bool second_wins = res.status == ComakFrameStatus::kConverged && res.objective < first.objective;
+  auto keep_lower = [&](const char* label, int attempts, const std::function<void()>& solve) {
+    const ComakFrameResult before = res;
+    solve();
+    const bool wins = res.status == ComakFrameStatus::kConverged && res.objective < before.objective;
     std::ostringstream s;
-    s << "; second start " << (res.status == ComakFrameStatus::kConverged ? "converged" : "failed")
-      << ", objective " << res.objective << " m^3 (first " << first.objective << "), "
-      << (second_wins ? "kept" : "not kept");
-    if (!second_wins) res = first;
-    res.iterations = first.iterations + second_iterations;
-    res.attempts = 2;
-    second_note = s.str();
+    s << "; " << label << " " << to_string(res.status) << ", objective " << res.objective << " m^3 (first "
+      << before.objective << "), " << (wins ? "kept" : "not kept");
+    const int iterations = res.iterations;
+    if (!wins) res = before;
+    res.iterations = iterations;
+    res.attempts = attempts;
+    second_note += s.str();
+  };
+  if (res.status == ComakFrameStatus::kConverged && o.second_start) {
+    keep_lower("second start", 2, [&] {
+      if (o.move_limits_first) {
+        moving_limits(neutral_start(), nullptr, o.second_start_move_limit_scale);
+      } else {
+        at = run_ipopt(p, data, in, neutral_start(), false, nullptr);
+        res.iterations += at.iterations;
+        evaluate(at);
+      }
+    });
   }
   // Attempt 2: from the passive settle at this flexion, activations at a_min.
   if (res.status != ComakFrameStatus::kConverged && o.retries >= 1) {
@@ -734,25 +745,15 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   // start that owes nothing to the frames before or to the given start).
   if (res.status != ComakFrameStatus::kConverged && o.retries >= 3) {
     res.attempts = 4;
-    moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);
+    moving_limits(neutral_start(), nullptr);
   }
   // A converged solution with a secondary coordinate on its joint limit (the
   // limits carry no force: a patella 50 mm lateral held only by its
   // ligaments) is solved again with moving limits and the lower converged
   // objective kept, as for the second start.
-  if (res.status == ComakFrameStatus::kConverged && o.retries >= 3 && on_joint_limit(p, res.q)) {
-    const ComakFrameResult before = res;
-    moving_limits(make_x0(settle_from_neutral(p, data, in).q, a_min), nullptr);
-    const bool wins = res.status == ComakFrameStatus::kConverged && res.objective < before.objective;
-    std::ostringstream s;
-    s << "; a coordinate on its joint limit, moving limits " << to_string(res.status) << ", objective "
-      << res.objective << " m^3, " << (wins ? "kept" : "not kept");
-    const int iterations = res.iterations;
-    if (!wins) res = before;
-    res.iterations = iterations;
-    res.attempts = before.attempts + 1;
-    second_note += s.str();
-  }
+  if (res.status == ComakFrameStatus::kConverged && o.retries >= 3 && on_joint_limit(p, res.q))
+    keep_lower("a coordinate on its joint limit, moving limits", res.attempts + 1,
+               [&] { moving_limits(neutral_start(), nullptr); });
   res.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::ostringstream s;
   s << frame_name(in) << ": " << to_string(res.status) << " (Ipopt " << res.ipopt_status_name

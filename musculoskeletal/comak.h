@@ -153,18 +153,23 @@ struct ComakOptions {
   /// pose), 2 (also: adaptive barrier, doubled iteration limit) or 3 (also:
   /// moving limits from the passive settle of the neutral pose, below).
   int retries = 3;
-  /// Attempt 4's step control: each round limits every secondary coordinate
-  /// to +- move_limit_m (translations) or move_limit_rad (rotations) around
-  /// the round's start; at most move_limit_rounds rounds of at most
-  /// min(move_limit_iterations, max_iterations) Ipopt iterations each. Measured on 120 deg under
-  /// 1 BW (docs/comak.md): 1 mm / 1 deg does not converge in 30 rounds, 3 and
-  /// 5 do; 100 iterations per round take about 2/3 of the time of 300.
-  /// Attempt 1 (the warm start from the previous frame) and the second
-  /// start also within moving limits: a frame then stays on the branch its
-  /// predecessor was on unless the second start finds a lower objective. Without it, measured on the
-  /// bundled trial with AVX2 kernels (docs/comak.md), Ipopt's first steps
-  /// flipped the patella to 136 deg of patellar flexion at 46 deg of knee
-  /// flexion (frames 92-100) and threw frame 64 18 mm off its neighbours.
+  /// Step control by moving limits (docs/comak.md, "Step control"): each
+  /// round limits every secondary coordinate to +- move_limit_m
+  /// (translations) or move_limit_rad (rotations) around the round's start;
+  /// at most move_limit_rounds rounds of at most min(move_limit_iterations,
+  /// max_iterations) Ipopt iterations each. Used by attempt 4 and the
+  /// re-solve of a solution on a joint limit (retries 3), and with
+  /// move_limits_first by attempt 1 and the second start. Measured on 120 deg
+  /// under 1 BW: 1 mm / 1 deg does not converge in 30 rounds, 3 and 5 do;
+  /// 100 iterations per round take about 2/3 of the time of 300.
+  ///
+  /// move_limits_first: attempt 1 (the warm start from the previous frame)
+  /// and the second start also within moving limits, so a frame stays on the
+  /// branch its predecessor was on unless the second start finds a lower
+  /// objective. Without it, measured on the bundled trial with AVX2 kernels,
+  /// Ipopt's first steps flipped the patella to about 135 deg of patellar
+  /// flexion at 8-46 deg of knee flexion (frames 92-107) and threw frame 64
+  /// 18 mm off its neighbours.
   bool move_limits_first = true;
   double move_limit_m = 3e-3;
   double move_limit_rad = 3.0 * 3.14159265358979323846 / 180.0;

@@ -1,9 +1,9 @@
 #pragma once
-#include <algorithm>
 // Shared set-up of the COMAK tests (tests/musculoskeletal/comak_test.cc and
 // tests/stability/comak_stability_test.cc): the bundled coarse knee, the knee
 // loads of the bundled SYNTHETIC trial, and a settled start pose.
 #include <Eigen/Core>
+#include <algorithm>
 #include <numbers>
 #include <string>
 
