@@ -191,8 +191,16 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
   rec.dt = h;
   double r_ref = 0, last_inc = std::numeric_limits<double>::infinity();
   const Eigen::VectorXd& w = sys_.increment_weights();
-  bool evaluated = false;  // F, Ma, K_ already hold the iterate (from the line search)
+  bool evaluated = false;  // F, Ma (and K_ if have_K) already hold the iterate (line search)
   bool have_K = false;
+  // The increment test of an iterate is known before it is evaluated. An
+  // iterate whose increment passes it is the converged one as soon as its
+  // residual passes too, so it is evaluated without the tangent first (the
+  // tangent is assembled after all only if Newton goes on from it): one
+  // tangent assembly less per step.
+  auto increment_passes = [&](double inc, const Eigen::VectorXd& qq) {
+    return inc <= opts_.increment_rtol * weighted_max(qq - q_, w) + opts_.increment_atol_m;
+  };
   for (int k = 0;; ++k) {
     newmark(q, a, v);
     const EvalRequest req = request(q, v, a);
@@ -200,9 +208,10 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
     // factorisation will be needed.
     const bool reuse = opts_.reuse_factorization && factor_valid_ && factor_h_ == h && !refactor_next_;
     if (!evaluated) {
+      const bool tangent = !reuse && !(k > 0 && increment_passes(last_inc, q));
       auto ta = Clock::now();
       try {
-        sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, reuse ? nullptr : &K_);
+        sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, tangent ? &K_ : nullptr);
         if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
       } catch (const common::NumericalError& e) {
         stats_.assembly_s += since(ta);
@@ -211,7 +220,7 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
         return false;
       }
       stats_.assembly_s += since(ta);
-      have_K = !reuse;
+      have_K = tangent;
     }
     evaluated = false;
     const double r = residual(F, Ma, G);
@@ -248,6 +257,21 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
         << " N, first " << r_ref << " N, last increment " << last_inc << " m)";
       reason = s.str();
       return false;
+    }
+    if (!reuse && !have_K) {
+      // Not converged after all: the tangent at this iterate.
+      auto tb = Clock::now();
+      try {
+        sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
+        if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
+      } catch (const common::NumericalError& e) {
+        stats_.assembly_s += since(tb);
+        factor_valid_ = false;
+        reason = e.what();
+        return false;
+      }
+      stats_.assembly_s += since(tb);
+      have_K = true;
     }
     if (reuse && k > 0 && r > opts_.refactor_ratio * rec.residual_norms[k - 1]) {
       // Contraction too slow with the old factorisation: re-evaluate the
@@ -287,21 +311,23 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
       // ||G(q + s dq)|| <= (1 - 1e-4 s) ||G(q)||, else the last one tried.
       double s = 1.0;
       Eigen::VectorXd qt, vt = v, at = a, Ft, Mat, Gt;
+      bool full_tangent = false;
       for (int ls = 0;; ++ls) {
         qt = q + s * dq;
         newmark(qt, at, vt);
         const EvalRequest rt = request(qt, vt, at);
+        if (ls == 0) full_tangent = !increment_passes(weighted_max(dq, w), qt);
         auto ta = Clock::now();
         double rt_norm = std::numeric_limits<double>::infinity();
         try {
-          sys_.evaluate(rt, Ft, opts_.quasi_static ? nullptr : &Mat, ls == 0 ? &K_ : nullptr);
+          sys_.evaluate(rt, Ft, opts_.quasi_static ? nullptr : &Mat, ls == 0 && full_tangent ? &K_ : nullptr);
           if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
           rt_norm = residual(Ft, Mat, Gt);
         } catch (const common::NumericalError&) {
           // a trial outside the admissible region: shorten the step
         }
         stats_.assembly_s += since(ta);
-        if (ls == 0) have_K = std::isfinite(rt_norm);
+        if (ls == 0) have_K = full_tangent && std::isfinite(rt_norm);
         const bool decrease = std::isfinite(rt_norm) && rt_norm <= (1 - 1e-4 * s) * r;
         if (decrease || ls >= opts_.line_search_halvings) {
           if (!std::isfinite(rt_norm)) {
@@ -311,7 +337,7 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
           q = qt;
           F = Ft;
           Ma = Mat;
-          evaluated = ls == 0;  // the full step's evaluation carries the tangent
+          evaluated = ls == 0;  // the full step's evaluation (with the tangent if have_K)
           if (ls > 0) ++stats_.line_search_reductions;
           break;
         }

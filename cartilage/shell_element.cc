@@ -15,6 +15,9 @@ using Vector8 = Eigen::Matrix<double, 8, 1>;
 using Matrix8 = Eigen::Matrix<double, 8, 8>;
 using Vector6 = Eigen::Matrix<double, 6, 1>;
 using Row24 = Eigen::Matrix<double, 1, 24>;
+/// Strain gradients, one strain component per row (rows contiguous: the
+/// tangent kernels below combine whole rows).
+using StrainGradient = Eigen::Matrix<double, 6, 24, Eigen::RowMajor>;
 
 constexpr double kNodeXi[4] = {-1, 1, 1, -1};
 constexpr double kNodeEta[4] = {-1, -1, 1, 1};
@@ -64,6 +67,24 @@ Row24 strain_gradient(const Vector8& pi, const Vector8& pj, const Eigen::Vector3
 /// E_ij w.r.t. slots (times I3).
 Matrix8 sym_outer(const Vector8& a, const Vector8& b) {
   return 0.5 * (a * b.transpose() + b * a.transpose());
+}
+
+/// K(l, m) = a_l . a_m - b_l . b_m for the 24 rows [a_l b_l] (a: NA
+/// values, b: NB) of a row-major array with the given row stride: dot
+/// products of contiguous rows with sizes known at compile time.
+template <int NA, int NB>
+void gram_minus(const double* rows, Eigen::Index stride, Matrix24& K) {
+  using RowA = Eigen::Map<const Eigen::Matrix<double, 1, NA>>;
+  using RowB = Eigen::Map<const Eigen::Matrix<double, 1, NB>>;
+  for (int m = 0; m < 24; ++m) {
+    const RowA am(rows + m * stride);
+    const RowB bm(rows + m * stride + NA);
+    for (int l = m; l < 24; ++l) {
+      const double k = RowA(rows + l * stride).dot(am) - RowB(rows + l * stride + NA).dot(bm);
+      K(l, m) = k;
+      K(m, l) = k;
+    }
+  }
 }
 
 void gauss_rule(int n, std::vector<double>& x, std::vector<double>& w) {
@@ -142,7 +163,7 @@ Corners sample_corners(const Eigen::Matrix<double, 3, 8>& Qt, const Eigen::Matri
 /// gradients at (xi, eta) on a level.
 void point_strain(const Eigen::Matrix<double, 3, 8>& Qt, const Eigen::Matrix<double, 3, 8>& Q0t,
                   const std::array<double, 4>& h, const Level& L, const Corners& C, double xi,
-                  double eta, double zeta, Vector6& eps, Eigen::Matrix<double, 6, 24>& B,
+                  double eta, double zeta, Vector6& eps, StrainGradient& B,
                   Vector8& p1, Vector8& p2) {
   const auto P = slot_derivatives(xi, eta, zeta, h);
   p1 = P.col(0);
@@ -243,6 +264,12 @@ ShellElement::ShellElement(const std::array<Eigen::Vector3d, 4>& X,
         p.dV = detJ * zeta_weights_[l];  // in-plane weights are 1
         p.Gamma = eas_matrix(p.xi, p.eta, p.zeta, detJ);
         H += p.Gamma.transpose() * D_ * p.Gamma * p.dV;
+        p.GDT = p.Gamma.transpose() * D_ * p.T * p.dV;
+        const Eigen::Matrix<double, 6, 6> Dnat = p.T.transpose() * D_ * p.T * p.dV;
+        Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(0.5 * (Dnat + Dnat.transpose()));
+        if (llt.info() != Eigen::Success)
+          throw common::InputError(label + ": material matrix is not positive definite at a quadrature point");
+        p.Wt = llt.matrixU();
         Vector8 phi;
         slot_derivatives(p.xi, p.eta, p.zeta, h_, &phi);
         m8 += material.density_kg_m3 * phi * phi.transpose() * p.dV;
@@ -251,6 +278,12 @@ ShellElement::ShellElement(const std::array<Eigen::Vector3d, 4>& X,
     }
   }
   H_inv_ = H.inverse();
+  {
+    Eigen::LLT<Eigen::Matrix<double, kNumEas, kNumEas>> llt(0.5 * (H_inv_ + H_inv_.transpose()));
+    if (llt.info() != Eigen::Success)
+      throw common::InputError(label + ": EAS matrix is not positive definite");
+    H_inv_t_ = llt.matrixU();
+  }
   for (int s = 0; s < 8; ++s)
     for (int t = 0; t < 8; ++t) mass_.block<3, 3>(3 * s, 3 * t) = m8(s, t) * Eigen::Matrix3d::Identity();
 
@@ -335,32 +368,45 @@ void ShellElement::internal_force(const Vector24& q, Vector24& f, Matrix24* K,
 
   const int nq = static_cast<int>(qp_.size());
   // Pass 1: compatible/ANS strains in the local frame; EAS right-hand sides.
+  // The material tangent sum_g B_g^T T^T D T B_g dV (B_g natural) is the
+  // Gram matrix of the rows of W_g = Wt_g B_g (Wt_g^T Wt_g = T^T D T dV),
+  // and the EAS correction P^T H^-1 P that of the rows of H_inv_t_ P: the
+  // tangent is sum_r w_r w_r^T over 6 nq rows minus the same over 5, with
+  // only its lower half computed (see docs/shell_element.md).
   Eigen::Matrix<double, 6, kMaxQp> eps_loc;
-  std::array<Eigen::Matrix<double, 6, 24>, kMaxQp> Bnat, Bloc;
+  std::array<StrainGradient, kMaxQp> Bnat;
+  // Columns: the rows w_r (24 each) of all W_g, then those of H_inv_t_ P.
+  Eigen::Matrix<double, 24, 6 * kMaxQp + kNumEas, Eigen::RowMajor> Wcols;
+  Eigen::Matrix<double, 24, kNumEas> Pt = Eigen::Matrix<double, 24, kNumEas>::Zero();  // P^T
   std::array<Vector8, kMaxQp> p1, p2;
   Eigen::Matrix<double, kNumEas, 1> Lv = Eigen::Matrix<double, kNumEas, 1>::Zero();
-  Eigen::Matrix<double, kNumEas, 24> P = Eigen::Matrix<double, kNumEas, 24>::Zero();
   for (int g = 0; g < nq; ++g) {
     const QuadraturePoint& qp = qp_[g];
     Vector6 eps_nat;
+    const StrainGradient& B = Bnat[g];
     point_strain(Qt, Q0t_, h_, levels[qp.level], C, qp.xi, qp.eta, qp.zeta, eps_nat, Bnat[g], p1[g],
                  p2[g]);
-    eps_loc.col(g) = qp.T * eps_nat;
-    const Eigen::Matrix<double, kNumEas, 6> GD = qp.Gamma.transpose() * D_ * qp.dV;
-    Lv += GD * eps_loc.col(g);
-    if (K) {
-      Bloc[g].noalias() = qp.T * Bnat[g];
-      P.noalias() += GD * Bloc[g];
+    eps_loc.col(g).noalias() = qp.T * eps_nat;
+    Lv.noalias() += qp.GDT * eps_nat;
+    if (!K) continue;
+    for (int i = 0; i < kNumEas; ++i)
+      for (int c = 0; c < 6; ++c) Pt.col(i) += qp.GDT(i, c) * B.row(c).transpose();
+    for (int r = 0; r < 6; ++r) {
+      auto w = Wcols.col(6 * g + r);
+      w = qp.Wt(r, r) * B.row(r).transpose();
+      for (int c = r + 1; c < 6; ++c) w += qp.Wt(r, c) * B.row(c).transpose();
     }
   }
   // Condensed EAS parameters: dPi/dalpha = L + H alpha = 0.
   const Eigen::Matrix<double, kNumEas, 1> alpha = -H_inv_ * Lv;
   if (alpha_out) *alpha_out = alpha;
 
-  // Pass 2: stresses, forces, tangent.
+  // Pass 2: stresses, forces, geometric stiffness.
   f.setZero();
   Matrix8 kg = Matrix8::Zero();
-  if (K) K->setZero();
+  // Coefficients of the ANS sample terms, summed per level (the sample
+  // vectors belong to the level, not to the point).
+  std::array<std::array<double, 2>, 3> c13{}, c23{};
   for (int g = 0; g < nq; ++g) {
     const QuadraturePoint& qp = qp_[g];
     const Vector6 eps = eps_loc.col(g) + qp.Gamma * alpha;
@@ -368,22 +414,38 @@ void ShellElement::internal_force(const Vector24& q, Vector24& f, Matrix24* K,
     const Vector6 sig = qp.T.transpose() * Deps;      // work-conjugate to natural strains
     f.noalias() += Bnat[g].transpose() * (sig * qp.dV);
     if (!K) continue;
-    K->noalias() += Bloc[g].transpose() * (D_ * qp.dV) * Bloc[g];
-    const Level& L = levels[qp.level];
-    kg += qp.dV * (sig(0) * p1[g] * p1[g].transpose() + sig(1) * p2[g] * p2[g].transpose() +
-                   sig(3) * sym_outer(p1[g], p2[g]));
-    const double a0 = 0.5 * (1 - qp.eta), a1 = 0.5 * (1 + qp.eta);
-    kg += qp.dV * sig(4) *
-          (a0 * sym_outer(L.p13a[0], L.p13b[0]) + a1 * sym_outer(L.p13a[1], L.p13b[1]));
-    const double b0 = 0.5 * (1 - qp.xi), b1 = 0.5 * (1 + qp.xi);
-    kg += qp.dV * sig(5) *
-          (b0 * sym_outer(L.p23a[0], L.p23b[0]) + b1 * sym_outer(L.p23a[1], L.p23b[1]));
+    // sig0 p1 p1^T + sig1 p2 p2^T + sig3 (p1 p2^T + p2 p1^T)/2, as two outer products.
+    const Vector8 u = qp.dV * (sig(0) * p1[g] + 0.5 * sig(3) * p2[g]);
+    const Vector8 v = qp.dV * (0.5 * sig(3) * p1[g] + sig(1) * p2[g]);
+    kg.noalias() += u * p1[g].transpose();
+    kg.noalias() += v * p2[g].transpose();
+    c13[qp.level][0] += qp.dV * sig(4) * 0.5 * (1 - qp.eta);
+    c13[qp.level][1] += qp.dV * sig(4) * 0.5 * (1 + qp.eta);
+    c23[qp.level][0] += qp.dV * sig(5) * 0.5 * (1 - qp.xi);
+    c23[qp.level][1] += qp.dV * sig(5) * 0.5 * (1 + qp.xi);
     double N[4], Nxi[4], Neta[4];
     bilinear(qp.xi, qp.eta, N, Nxi, Neta);
     for (int k = 0; k < 4; ++k) kg(2 * k + 1, 2 * k + 1) += qp.dV * sig(2) * N[k] * 0.25 * h_[k] * h_[k];
   }
   if (K) {
-    K->noalias() -= P.transpose() * H_inv_ * P;
+    for (size_t l = 0; l < zeta_points_.size(); ++l) {
+      const Level& L = levels[l];
+      for (int s = 0; s < 2; ++s) {
+        kg += c13[l][s] * sym_outer(L.p13a[s], L.p13b[s]);
+        kg += c23[l][s] * sym_outer(L.p23a[s], L.p23b[s]);
+      }
+    }
+    // Columns of (H_inv_t_ P)^T = P^T H_inv_t_^T.
+    const int nw = 6 * nq;
+    for (int i = 0; i < kNumEas; ++i) {
+      auto w = Wcols.col(nw + i);
+      w = H_inv_t_(i, i) * Pt.col(i);
+      for (int j = i + 1; j < kNumEas; ++j) w += H_inv_t_(i, j) * Pt.col(j);
+    }
+    if (nq == 8)
+      gram_minus<48, kNumEas>(Wcols.data(), Wcols.cols(), *K);
+    else
+      gram_minus<72, kNumEas>(Wcols.data(), Wcols.cols(), *K);
     for (int s = 0; s < 8; ++s)
       for (int t = 0; t < 8; ++t)
         for (int c = 0; c < 3; ++c) (*K)(3 * s + c, 3 * t + c) += kg(s, t);
@@ -400,7 +462,7 @@ double ShellElement::strain_energy(const Vector24& q) const {
   for (size_t g = 0; g < qp_.size(); ++g) {
     const QuadraturePoint& qp = qp_[g];
     Vector6 eps_nat;
-    Eigen::Matrix<double, 6, 24> B;
+    StrainGradient B;
     Vector8 a, b;
     point_strain(Qt, Q0t_, h_, levels[qp.level], C, qp.xi, qp.eta, qp.zeta, eps_nat, B, a, b);
     eps_loc.col(g) = qp.T * eps_nat;
@@ -437,7 +499,7 @@ Eigen::Matrix<double, 6, Eigen::Dynamic> ShellElement::strains(const Vector24& q
   if (frames) frames->resize(n);
   for (int k = 0; k < n; ++k) {
     Vector6 eps_nat;
-    Eigen::Matrix<double, 6, 24> B;
+    StrainGradient B;
     Vector8 a, b;
     point_strain(Qt, Q0t_, h_, L, C, xi[k], eta[k], zeta, eps_nat, B, a, b);
     Eigen::Matrix<double, 6, 6> T;

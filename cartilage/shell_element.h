@@ -104,6 +104,10 @@ class ShellElement {
     double dV;                                ///< det J * weights [m^3]
     Eigen::Matrix<double, 6, 6> T;            ///< natural -> local strain map
     Eigen::Matrix<double, 6, kNumEas> Gamma;  ///< EAS interpolation (local)
+    /// Upper-triangular factor of the material matrix in natural strains:
+    /// Wt^T Wt = T^T D T dV (Cholesky; SPD for nu < 0.5).
+    Eigen::Matrix<double, 6, 6> Wt;
+    Eigen::Matrix<double, kNumEas, 6> GDT;    ///< Gamma^T D T dV
     int level;                                ///< index of the zeta level
   };
   /// Natural-to-local map T, local frame and det J at a reference point.
@@ -121,6 +125,7 @@ class ShellElement {
   std::vector<QuadraturePoint> qp_;
   Eigen::Vector3d e1_center_;  ///< in-plane axis of the local frames
   Eigen::Matrix<double, kNumEas, kNumEas> H_inv_;
+  Eigen::Matrix<double, kNumEas, kNumEas> H_inv_t_;  ///< upper factor: H_inv_t_^T H_inv_t_ = H^-1
   Matrix24 mass_;
   Vector24 q0_;
   double area_ = 0;

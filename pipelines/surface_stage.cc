@@ -929,6 +929,22 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   out.set_attribute("/solver", "linear_solver", s.linear_solver);
   out.set_attribute("/solver", "assembly_s", s.assembly_s);
   out.set_attribute("/solver", "contact_s", cs.contact_time_s);
+  // Where the assembly time goes (wall): element loops, summing element
+  // results into the surface matrices, the surfaces' evaluations as a whole
+  // (all their terms), and copying between the surfaces and the system.
+  double elements_s = 0, element_scatter_s = 0;
+  for (const ShellModel* m : model_ptrs) {
+    elements_s += m->statistics().element_time_s;
+    element_scatter_s += m->statistics().scatter_time_s;
+  }
+  const long evaluations = model_ptrs.empty() ? 0 : model_ptrs.front()->statistics().evaluations;
+  const long tangent_evaluations = model_ptrs.empty() ? 0 : model_ptrs.front()->statistics().tangent_evaluations;
+  out.set_attribute("/solver", "evaluations", static_cast<std::int64_t>(evaluations));
+  out.set_attribute("/solver", "tangent_evaluations", static_cast<std::int64_t>(tangent_evaluations));
+  out.set_attribute("/solver", "elements_s", elements_s);
+  out.set_attribute("/solver", "element_scatter_s", element_scatter_s);
+  out.set_attribute("/solver", "surfaces_s", cs.models_time_s);
+  out.set_attribute("/solver", "coupling_copy_s", cs.copy_time_s);
   out.set_attribute("/solver", "factorization_s", s.factorization_s);
   out.set_attribute("/solver", "solve_s", s.solve_s);
   out.set_attribute("/solver", "total_s", s.total_s);
@@ -949,6 +965,12 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.factorizations = s.factorizations;
   res.assembly_s = s.assembly_s;
   res.contact_s = cs.contact_time_s;
+  res.elements_s = elements_s;
+  res.evaluations = evaluations;
+  res.tangent_evaluations = tangent_evaluations;
+  res.element_scatter_s = element_scatter_s;
+  res.surfaces_s = cs.models_time_s;
+  res.coupling_copy_s = cs.copy_time_s;
   res.factorization_s = s.factorization_s;
   res.solve_s = s.solve_s;
   res.pattern_changes = s.pattern_changes;

@@ -41,6 +41,10 @@ struct SurfaceStageResult {
   long steps = 0, newton_iterations = 0, rejected_steps = 0, factorizations = 0, pattern_changes = 0;
   int frames = 0;
   double wall_s = 0, assembly_s = 0, contact_s = 0, factorization_s = 0, solve_s = 0;
+  /// Parts of assembly_s (wall): element loops and their summation, all
+  /// surface terms together (elements included), surface <-> system copies.
+  double elements_s = 0, element_scatter_s = 0, surfaces_s = 0, coupling_copy_s = 0;
+  long evaluations = 0, tangent_evaluations = 0;  ///< residual evaluations, those with a tangent
   double final_residual_N = 0, residual_tolerance_N = 0;  ///< last accepted step
   // mesh_contact only:
   double max_penetration_m = 0;        ///< largest interpenetration of any step

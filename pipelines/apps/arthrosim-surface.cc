@@ -62,6 +62,10 @@ int main(int argc, char** argv) {
                 "solve %.2f s\n",
                 r.wall_s, r.assembly_s, r.contact_s, r.factorization_s,
                 r.factorizations > 0 ? r.factorization_s / r.factorizations : 0.0, r.solve_s);
+    std::printf("assembly: %ld evaluations (%ld with the tangent); surfaces %.2f s (elements %.2f s, their "
+                "summation %.2f s, other terms %.2f s), contact %.2f s, surface/system copies %.2f s\n",
+                r.evaluations, r.tangent_evaluations, r.surfaces_s, r.elements_s, r.element_scatter_s,
+                r.surfaces_s - r.elements_s - r.element_scatter_s, r.contact_s, r.coupling_copy_s);
     if (r.contact_steps > 0)
       std::printf("contact: %ld steps in contact, %.1f active contacts per such step, max interpenetration %.4g mm, "
                   "%ld steps broke the accuracy rule (worst penetration/deflection %.3g), %ld pattern changes\n",

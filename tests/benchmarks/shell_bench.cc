@@ -23,6 +23,11 @@
 //                          residual_rtol = 10^-r.
 // Each prints wall time, steps, Newton iterations per step, time per
 // factorisation, and the max deflection along the reference normal.
+//   ElementInternalForce/K - one element's internal force (K = 0) or force
+//                          and consistent tangent (K = 1), on a warped,
+//                          stretched and rotated element: the per-element
+//                          cost behind every assembly (docs/contact.md,
+//                          "Cost of a Newton iteration").
 #include <benchmark/benchmark.h>
 
 #include <chrono>
@@ -135,6 +140,33 @@ void BM_OsmoticHht(benchmark::State& state) {
     report(state, name.c_str(), p, s, wall, cpu_seconds() - c0);
   }
 }
+void BM_ElementInternalForce(benchmark::State& state) {
+  ShellMaterial m;
+  const std::array<Eigen::Vector3d, 4> X = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1.1e-3, 0.1e-3, 0.05e-3),
+                                            Eigen::Vector3d(1.3e-3, 0.9e-3, -0.04e-3),
+                                            Eigen::Vector3d(-0.1e-3, 1.0e-3, 0.02e-3)};
+  std::array<Eigen::Vector3d, 4> D;
+  for (auto& d : D) d = Eigen::Vector3d(0.05, -0.03, 1.0).normalized();
+  const ShellElement el(X, D, {1e-3, 1.1e-3, 0.9e-3, 1e-3}, m, "bench element");
+  // A deterministic deformed state: 2 % stretch, a rotation, a transverse bump.
+  Vector24 q = el.reference();
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  for (int s = 0; s < 8; ++s) {
+    Eigen::Vector3d v = q.segment<3>(3 * s);
+    if (s % 2 == 0) v = 1.02 * v + Eigen::Vector3d(0, 0, 1e-5 * s);
+    q.segment<3>(3 * s) = R * v;
+  }
+  const bool want_K = state.range(0) == 1;
+  Vector24 f;
+  Matrix24 K;
+  for (auto _ : state) {
+    el.internal_force(q, f, want_K ? &K : nullptr);
+    benchmark::DoNotOptimize(f.data());
+    benchmark::DoNotOptimize(K.data());
+  }
+}
+BENCHMARK(BM_ElementInternalForce)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
 BENCHMARK(BM_OsmoticHht)
     ->Args({10, 0, 0, 8})
     ->Args({10, 1, 0, 8})

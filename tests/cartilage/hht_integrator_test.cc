@@ -38,7 +38,9 @@ class Oscillator final : public TimeIntegrable {
       Ma->resize(1);
       (*Ma)(0) = r.a ? m_ * (*r.a)(0) : 0.0;
     }
+    ++evaluations_;
     if (K) {
+      ++tangent_evaluations_;
       *K = pattern_;
       K->valuePtr()[0] = r.force_scale * r.kq * (k_ + 3 * cubic_ * u * u) + r.ka * m_;
     }
@@ -50,6 +52,7 @@ class Oscillator final : public TimeIntegrable {
   const Eigen::VectorXd& increment_weights() const override { return weights_; }
   std::string describe_dof(int) const override { return "u"; }
   double fail_above_ = 0;
+  long evaluations_ = 0, tangent_evaluations_ = 0;
 
  private:
   double m_, k_, cubic_;
@@ -313,6 +316,35 @@ TEST(Hht, FactorizationReuseSameSolutionFewerFactorizations) {
   // trajectories then agree to ~1e-10 after 200 steps.
   EXPECT_NEAR(a.q()(0), b.q()(0), 1e-9);
   EXPECT_LT(b.statistics().factorizations, a.statistics().factorizations / 2);
+}
+
+// A tangent is assembled only where Newton goes on from the iterate: every
+// tangent evaluation is factorised, none is spent on a step's converged
+// iterate (whose increment already passed its test, so it is evaluated
+// without the tangent first). Full Newton with and without the line search
+// on the cubic oscillator (nonlinear: several iterations per step). Before
+// this, tangent evaluations were factorisations + accepted steps.
+TEST(Hht, NoTangentIsAssembledAtTheConvergedIterate) {
+  for (int halvings : {0, 4}) {
+    Oscillator osc(1.0, 1.0, 5.0);
+    IntegratorOptions o;
+    o.dt_s = 0.05;
+    o.residual_rtol = 1e-10;
+    o.increment_rtol = 1e-8;
+    o.line_search_halvings = halvings;
+    HhtIntegrator s(osc, o);
+    s.initialize(0, Eigen::VectorXd::Constant(1, 0.8));
+    s.advance_to(2.0);
+    const IntegratorStatistics& st = s.statistics();
+    SCOPED_TRACE("line_search_halvings " + std::to_string(halvings));
+    EXPECT_EQ(st.steps, 40);
+    EXPECT_GT(st.newton_iterations, 2 * st.steps);  // nonlinear enough to iterate
+    EXPECT_EQ(osc.tangent_evaluations_, st.factorizations);
+    // Residual-only evaluations: initialize() and one per step (its converged
+    // iterate), plus one for each guess that did not converge after all.
+    EXPECT_GE(osc.evaluations_ - osc.tangent_evaluations_, 1 + st.steps);
+    EXPECT_LE(osc.evaluations_ - osc.tangent_evaluations_, 1 + st.steps + st.steps / 4);
+  }
 }
 
 // advance_to_steady_state on the linear oscillator u'' + omega^2 u = 0 from
