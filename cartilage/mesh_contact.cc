@@ -265,11 +265,14 @@ struct VertexHit {
 std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Points3& Xv, const common::Points3& vnv,
                                    const ContactSurface& Sf, const common::Points3& Xf, const common::Points3& tnf,
                                    const common::Points3& vnf, double radius, double min_opposition,
-                                   bool skip_rim, bool rim_contacts, long* candidates) {
+                                   bool skip_rim, bool rim_contacts, long* candidates,
+                                   common::CachedOverlaps* cache) {
   std::vector<common::Box3> vb(Sv.num_nodes), fb(Sf.F.rows());
   for (int i = 0; i < Sv.num_nodes; ++i) vb[i] = point_box(row(Xv, i), radius);
   for (int t = 0; t < Sf.F.rows(); ++t) fb[t] = triangle_box(Sf, Xf, t, 0.0);
-  const auto pairs = common::overlapping_boxes(vb, fb);
+  // With a cache: the same pairs as overlapping_boxes(vb, fb), from a
+  // superset kept while the surfaces move less than the cache's margin.
+  const auto pairs = cache ? cache->pairs(vb, fb, Xv, Xf) : common::overlapping_boxes(vb, fb);
   if (candidates) *candidates += static_cast<long>(pairs.size());
   // Group by vertex (pairs are sorted by vertex, then triangle).
   std::vector<size_t> starts;
@@ -384,6 +387,7 @@ MeshContact::MeshContact(std::string name, const ContactSurface& a, const Contac
   if (!(opts_.min_opposition >= -1 && opts_.min_opposition < 1))
     bad("min_opposition must be in [-1, 1), found " + std::to_string(opts_.min_opposition));
   if (a_.F.rows() == 0 || b_.F.rows() == 0) bad("both surfaces need triangles");
+  for (auto& c : broad_phase_) c = std::make_unique<common::CachedOverlaps>(0.2 * opts_.max_depth_m);
 }
 
 std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const common::Points3& xb,
@@ -391,6 +395,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
                                               ContactCounts* counts) const {
   check_positions(a_, xa, "a", name_);
   check_positions(b_, xb, "b", name_);
+  const std::lock_guard<std::mutex> lock(broad_phase_mutex_);
   const ContactSurface* S[2] = {&a_, &b_};
   const common::Points3* X[2] = {&xa, &xb};
   const common::Points3* V[2] = {va, vb};
@@ -410,7 +415,8 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf], dmax,
                                           opts_.min_opposition, !opts_.rim_vertices,
-                                          opts_.rim == RimTreatment::kRimContacts, &cnt.candidate_vertex_face)) {
+                                          opts_.rim == RimTreatment::kRimContacts, &cnt.candidate_vertex_face,
+                                          broad_phase_[pass].get())) {
       if (!(h.signed_distance < 0)) continue;  // in front: no contact
       ContactPoint c;
       const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
@@ -582,7 +588,7 @@ std::vector<std::pair<int, int>> MeshContact::coupling_candidates(const common::
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf],
                                           std::max(opts_.max_depth_m, margin), opts_.min_opposition,
-                                          !opts_.rim_vertices, opts_.rim == RimTreatment::kRimContacts, nullptr)) {
+                                          !opts_.rim_vertices, opts_.rim == RimTreatment::kRimContacts, nullptr, nullptr)) {
       if (!(h.signed_distance < margin)) continue;
       for (int k = 0; k < 3; ++k)
         for (int t : Sf.vertex_triangles[Sf.F(h.triangle, k)])

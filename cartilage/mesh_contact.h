@@ -70,9 +70,12 @@
 // triangle nodes the other way, distributed by the triangle's shape functions.
 #include <Eigen/Core>
 #include <array>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
+#include "common/broad_phase.h"
 #include "common/mesh.h"
 
 namespace arthrosim::cartilage {
@@ -219,6 +222,14 @@ class MeshContact {
   std::string name_;
   ContactSurface a_, b_;
   ContactOptions opts_;
+  /// Broad phase of the two vertex-face passes (vertices of a against the
+  /// faces of b, then b against a), each reusing its candidate pairs while
+  /// the surfaces move less than a fifth of max_depth_m
+  /// (common::CachedOverlaps: the same pairs, hence the same contacts, as a
+  /// fresh search). They change how fast detect() is, not what it returns;
+  /// the mutex makes detect() safe to call from several threads.
+  mutable std::array<std::unique_ptr<common::CachedOverlaps>, 2> broad_phase_;
+  mutable std::mutex broad_phase_mutex_;
 };
 
 /// The gap function and its exact gradient for four points (for tests):
