@@ -54,8 +54,23 @@ void HhtIntegrator::sync_pattern() {
       const int i = P.innerIndexPtr()[k];
       if (c[i] || c[j]) (i == j ? diag_index_ : zero_index_).push_back(k);
     }
+  // The transpose map (CHOLMOD on the symmetric part) is rebuilt when it is
+  // needed: with UMFPACK it never is, and the walks change the pattern
+  // dozens of times (2 % of a walk's time went into this map).
+  transpose_index_.clear();
+  if (solver_ && pattern_revision_ != sys_.pattern_revision()) {
+    // A new pattern needs a new symbolic analysis (counted when it is done).
+    solver_ = std::make_unique<SparseDirectSolver>(solver_->kind());
+    factor_valid_ = false;
+    ++stats_.pattern_changes;
+  }
+  pattern_revision_ = sys_.pattern_revision();
+}
+
+void HhtIntegrator::build_transpose_index() {
   // Transpose map of the (structurally symmetric) pattern, for the symmetric
   // part (K + K^T)/2 handed to CHOLMOD when the tangent is not symmetric.
+  const auto& P = sys_.tangent_pattern();
   transpose_index_.resize(P.nonZeros());
   for (int j = 0; j < P.outerSize(); ++j)
     for (int k = P.outerIndexPtr()[j]; k < P.outerIndexPtr()[j + 1]; ++k) {
@@ -66,13 +81,6 @@ void HhtIntegrator::sync_pattern() {
       if (it == end || *it != j) throw common::InputError("HHT: tangent pattern is not structurally symmetric");
       transpose_index_[k] = static_cast<int>(it - P.innerIndexPtr());
     }
-  if (solver_ && pattern_revision_ != sys_.pattern_revision()) {
-    // A new pattern needs a new symbolic analysis (counted when it is done).
-    solver_ = std::make_unique<SparseDirectSolver>(solver_->kind());
-    factor_valid_ = false;
-    ++stats_.pattern_changes;
-  }
-  pattern_revision_ = sys_.pattern_revision();
 }
 
 HhtIntegrator::~HhtIntegrator() = default;
@@ -88,6 +96,7 @@ bool HhtIntegrator::factorize(Eigen::SparseMatrix<double>& K, std::string& reaso
   if (solver_->kind() == LinearSolverKind::kCholmod && !sys_.tangent_symmetric()) {
     // Symmetric approximation of a non-symmetric tangent: (K + K^T)/2.
     // Newton then converges linearly at a rate set by the skew part.
+    if (transpose_index_.size() != static_cast<size_t>(K.nonZeros())) build_transpose_index();
     double* v = K.valuePtr();
     for (size_t k = 0; k < transpose_index_.size(); ++k) {
       const size_t t = static_cast<size_t>(transpose_index_[k]);

@@ -164,6 +164,8 @@ class HhtIntegrator {
   /// (Re)computes the pattern-dependent indices; a changed pattern also
   /// discards the symbolic analysis.
   void sync_pattern();
+  /// transpose_index_ for the current pattern (CHOLMOD on (K + K^T)/2).
+  void build_transpose_index();
 
   TimeIntegrable& sys_;
   IntegratorOptions opts_;
