@@ -216,8 +216,9 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
     // Tangent reuse (modified Newton): assemble the matrix only when a new
     // factorisation will be needed.
     const bool reuse = opts_.reuse_factorization && factor_valid_ && factor_h_ == h && !refactor_next_;
-    if (!evaluated) {
-      const bool tangent = !reuse && !(k > 0 && increment_passes(last_inc, q));
+    // F (and M a, and K_ with `tangent`) at the iterate; false (reason set)
+    // when the system reports a numerical error there.
+    auto evaluate_iterate = [&](bool tangent) {
       auto ta = Clock::now();
       try {
         sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, tangent ? &K_ : nullptr);
@@ -229,7 +230,13 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
         return false;
       }
       stats_.assembly_s += since(ta);
-      have_K = tangent;
+      if (tangent) have_K = true;
+      return true;
+    };
+    if (!evaluated) {
+      const bool tangent = !reuse && !(k > 0 && increment_passes(last_inc, q));
+      have_K = false;
+      if (!evaluate_iterate(tangent)) return false;
     }
     evaluated = false;
     const double r = residual(F, Ma, G);
@@ -267,30 +274,13 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
       reason = s.str();
       return false;
     }
-    if (!reuse && !have_K) {
-      // Not converged after all: the tangent at this iterate.
-      auto tb = Clock::now();
-      try {
-        sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
-        if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
-      } catch (const common::NumericalError& e) {
-        stats_.assembly_s += since(tb);
-        factor_valid_ = false;
-        reason = e.what();
-        return false;
-      }
-      stats_.assembly_s += since(tb);
-      have_K = true;
-    }
+    // Not converged after all: the tangent at this iterate.
+    if (!reuse && !have_K && !evaluate_iterate(true)) return false;
     if (reuse && k > 0 && r > opts_.refactor_ratio * rec.residual_norms[k - 1]) {
       // Contraction too slow with the old factorisation: re-evaluate the
       // tangent at this iterate and refactorise.
-      auto tb = Clock::now();
-      sys_.evaluate(req, F, opts_.quasi_static ? nullptr : &Ma, &K_);
-      if (sys_.pattern_revision() != pattern_revision_) sync_pattern();
-      stats_.assembly_s += since(tb);
+      if (!evaluate_iterate(true)) return false;
       refactor_next_ = true;
-      have_K = true;
     }
     if (!reuse || refactor_next_) {
       if (!have_K) throw common::NumericalError("HHT: internal error: no tangent to factorise");
