@@ -26,7 +26,10 @@
 // jacobian_skip_unmoved_terms = false; the behaviour before 2026-12-02) to
 // compare timings; ARTHROSIM_COMAK_BENCH_NO_MOVE_LIMITS=1 solves attempt 1
 // and the second start without step control (ComakOptions::
-// move_limits_first = false; the behaviour before 2026-12-03).
+// move_limits_first = false; the behaviour before 2026-12-03);
+// ARTHROSIM_COMAK_BENCH_SINGLE_START=1 solves each frame from the previous
+// frame's solution only (ComakOptions::second_start = false, as
+// arthrosim-comak --single-start; the behaviour of the third session).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -79,6 +82,10 @@ void run_trial(benchmark::State& state, const char* model_file, bool ankle, bool
   if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_NO_MOVE_LIMITS"); s && std::atoi(s)) {
     options.move_limits_first = false;  // as arthrosim-comak --no-move-limits
     std::printf("  attempt 1 and the second start without moving limits\n");
+  }
+  if (const char* s = std::getenv("ARTHROSIM_COMAK_BENCH_SINGLE_START"); s && std::atoi(s)) {
+    options.second_start = false;  // as arthrosim-comak --single-start
+    std::printf("  one start per frame (no second start from the passive settle)\n");
   }
   const auto trial = msk::load_gait_trial(root + "/data/trials/synthetic_gait");
   const msk::LegModel leg = msk::leg_model_for_trial(trial);
