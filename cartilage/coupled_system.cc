@@ -155,6 +155,7 @@ bool CoupledShellSystem::tangent_symmetric() const {
 void CoupledShellSystem::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
                                   Eigen::SparseMatrix<double>* K) {
   ++stats_.evaluations;
+  if (K) ++stats_.tangent_evaluations;
   const Eigen::VectorXd& q = *req.q;
   if (q.size() != n_) throw common::InputError("coupled shell system: q has the wrong size");
   // ---- contacts first: they may change the pattern ---------------------------

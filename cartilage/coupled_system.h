@@ -48,6 +48,7 @@ struct ContactPairReport {
 
 struct CoupledSystemStatistics {
   long evaluations = 0;
+  long tangent_evaluations = 0;  ///< evaluations that assembled the tangent
   long pattern_rebuilds = 0;
   double contact_time_s = 0;   ///< detection + contact forces/tangents
   double models_time_s = 0;    ///< the models' own evaluations

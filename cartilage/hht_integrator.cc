@@ -248,9 +248,7 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
     }
     if (k == 0) r_ref = r;
     const bool res_ok = r <= std::max(opts_.residual_rtol * r_ref, opts_.residual_atol_N);
-    const double change = weighted_max(q - q_, w);
-    const bool inc_ok = (k == 0) ? r <= opts_.residual_atol_N
-                                 : last_inc <= opts_.increment_rtol * change + opts_.increment_atol_m;
+    const bool inc_ok = (k == 0) ? r <= opts_.residual_atol_N : increment_passes(last_inc, q);
     const bool roundoff = k > 0 && !res_ok && last_inc <= opts_.roundoff_increment_rel * q_scale_ &&
                           r <= opts_.roundoff_residual_drop * r_ref;
     if ((res_ok && inc_ok) || roundoff) {

@@ -937,8 +937,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     elements_s += m->statistics().element_time_s;
     element_scatter_s += m->statistics().scatter_time_s;
   }
-  const long evaluations = model_ptrs.empty() ? 0 : model_ptrs.front()->statistics().evaluations;
-  const long tangent_evaluations = model_ptrs.empty() ? 0 : model_ptrs.front()->statistics().tangent_evaluations;
+  const long evaluations = cs.evaluations, tangent_evaluations = cs.tangent_evaluations;
   out.set_attribute("/solver", "evaluations", static_cast<std::int64_t>(evaluations));
   out.set_attribute("/solver", "tangent_evaluations", static_cast<std::int64_t>(tangent_evaluations));
   out.set_attribute("/solver", "elements_s", elements_s);
