@@ -472,6 +472,19 @@ struct EmOutcome {
   bool truncated = false;
 };
 
+// The EM loop's outcome into the result (status, iterations, sigma2, ...).
+void copy_em_outcome(const EmOutcome& em, CpdResult& res) {
+  res.status = em.status;
+  res.iterations = em.iterations;
+  res.sigma2 = em.sigma2;
+  res.negative_log_likelihood = em.nll;
+  res.relative_change = em.rel;
+  res.match_weight = em.P1;
+  res.truncated_estep = em.truncated;
+  res.unmatched_points = em.unmatched;
+  res.binned_estep_iterations = em.binned;
+}
+
 template <class MStep, class Reg>
 EmOutcome run_em(const MatrixXd& X, MatrixXd& TY, const CpdOptions& opt, MStep&& mstep, Reg&& regularizer) {
   const Index N = X.rows(), M = TY.rows();
@@ -761,15 +774,7 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
     if (opt.method != CpdMethod::kRigid && opt.sigma2_initial <= 0.0) stage2.sigma2_initial =
         std::max(rr.em.sigma2, std::max(opt.sigma2_floor, std::numeric_limits<double>::min()));
     if (opt.method == CpdMethod::kRigid) {
-      res.status = rr.em.status;
-      res.iterations = rr.em.iterations;
-      res.sigma2 = rr.em.sigma2;
-      res.negative_log_likelihood = rr.em.nll;
-      res.relative_change = rr.em.rel;
-      res.match_weight = rr.em.P1;
-      res.truncated_estep = rr.em.truncated;
-      res.unmatched_points = rr.em.unmatched;
-      res.binned_estep_iterations = rr.em.binned;
+      copy_em_outcome(rr.em, res);
     }
   }
   {
@@ -799,15 +804,7 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
       return (mo.xPx - (mo.A * B.transpose()).trace()) / (mo.Np * D);
     };
     const EmOutcome em = run_em(X, TY, stage2, mstep, [] { return 0.0; });
-    res.status = em.status;
-    res.iterations = em.iterations;
-    res.sigma2 = em.sigma2;
-    res.negative_log_likelihood = em.nll;
-    res.relative_change = em.rel;
-    res.match_weight = em.P1;
-    res.truncated_estep = em.truncated;
-    res.unmatched_points = em.unmatched;
-    res.binned_estep_iterations = em.binned;
+    copy_em_outcome(em, res);
     to_data_linear(B, t, res.affine, res.translation);
     res.transform.A = res.affine;
     res.transform.b = res.translation;
@@ -861,15 +858,7 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
       return num / (Np * D);
     };
     const EmOutcome em = run_em(X, TY, stage2, mstep, [&] { return reg; });
-    res.status = em.status;
-    res.iterations = em.iterations;
-    res.sigma2 = em.sigma2;
-    res.negative_log_likelihood = em.nll;
-    res.relative_change = em.rel;
-    res.match_weight = em.P1;
-    res.truncated_estep = em.truncated;
-    res.unmatched_points = em.unmatched;
-    res.binned_estep_iterations = em.binned;
+    copy_em_outcome(em, res);
     // Transform: u = s R (y - my)/sy + t, T = sx (u + sum_k g(u, c_k) w_k) + mx.
     res.transform.A = (pre.s / ny.scale) * pre.R;
     res.transform.b = pre.t - res.transform.A * ny.mean.transpose();

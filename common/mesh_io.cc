@@ -498,11 +498,14 @@ double ply_binary_value(const std::string& data, size_t* offset, PlyType t, cons
   return v;
 }
 
-TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, const MeshReadOptions& options) {
-  // --- header (text, one statement per line) ---
+// Reads a text (LF or CRLF line ends) line by line, counting lines for error
+// messages; pos is where the next line starts, so a binary payload or a token
+// reader can go on from there.
+struct LineReader {
+  const std::string& data;
   size_t pos = 0;
   int line_no = 0;
-  auto next_line = [&](std::string* out) {
+  bool next(std::string* out) {
     if (pos >= data.size()) return false;
     size_t e = data.find('\n', pos);
     if (e == std::string::npos) e = data.size();
@@ -511,7 +514,15 @@ TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, co
     pos = std::min(e + 1, data.size());
     ++line_no;
     return true;
-  };
+  }
+};
+
+TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, const MeshReadOptions& options) {
+  // --- header (text, one statement per line) ---
+  LineReader lines{data};
+  size_t& pos = lines.pos;
+  int& line_no = lines.line_no;
+  auto next_line = [&](std::string* out) { return lines.next(out); };
   std::string text;
   if (!next_line(&text) || text != "ply") {
     throw InputError(name, 1, "PLY: expected 'ply' on the first line, found " + shown(text));
@@ -721,18 +732,10 @@ TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, co
 TriangleMesh parse_vtk_impl(const std::string& data, const std::string& name, const MeshReadOptions& options,
                             std::vector<VtkField>* fields) {
   // Lines 1-4: version, title, ASCII, DATASET POLYDATA.
-  size_t pos = 0;
-  int line_no = 0;
-  auto next_line = [&](std::string* out) {
-    if (pos >= data.size()) return false;
-    size_t e = data.find('\n', pos);
-    if (e == std::string::npos) e = data.size();
-    *out = data.substr(pos, e - pos);
-    if (!out->empty() && out->back() == '\r') out->pop_back();
-    pos = std::min(e + 1, data.size());
-    ++line_no;
-    return true;
-  };
+  LineReader lines{data};
+  size_t& pos = lines.pos;
+  int& line_no = lines.line_no;
+  auto next_line = [&](std::string* out) { return lines.next(out); };
   std::string text;
   if (!next_line(&text) || text.rfind("# vtk DataFile Version", 0) != 0)
     throw InputError(name, 1, "VTK: expected '# vtk DataFile Version ...', found " + shown(text));
