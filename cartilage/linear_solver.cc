@@ -5,10 +5,15 @@
 
 #include <dlfcn.h>
 #include <malloc.h>
+#include <unsupported/Eigen/SparseExtra>
 
+#include <atomic>
+#include <cstdlib>
 #include <mutex>
+#include <string>
 
 #include "common/error.h"
+#include "common/log.h"
 
 namespace arthrosim::cartilage {
 
@@ -52,6 +57,34 @@ void retain_freed_memory() {
   });
 #endif
 }
+// Diagnostic: ARTHROSIM_SAVE_TANGENT=N:FILE saves the N-th matrix this
+// process factorises (counted over every solver, from 1) to FILE in Matrix
+// Market form, e.g. a walking tangent for tests/benchmarks/factorization_bench.cc
+// (docs/contact.md, "Cost of a Newton iteration").
+void save_matrix_if_asked(const Eigen::SparseMatrix<double>& A) {
+  static const char* spec = std::getenv("ARTHROSIM_SAVE_TANGENT");
+  if (!spec) return;
+  static long wanted = -1;
+  static std::string path;
+  static std::once_flag once;
+  std::call_once(once, [] {
+    const std::string s(spec);
+    const size_t colon = s.find(':');
+    char* end = nullptr;
+    const long n = colon == std::string::npos ? 0 : std::strtol(s.c_str(), &end, 10);
+    if (colon == std::string::npos || end != s.c_str() + colon || n < 1 || colon + 1 >= s.size())
+      throw common::InputError("ARTHROSIM_SAVE_TANGENT: expected N:FILE with N >= 1 (e.g. 60:/tmp/tangent.mtx), found '" +
+                               s + "'");
+    wanted = n;
+    path = s.substr(colon + 1);
+  });
+  static std::atomic<long> count{0};
+  if (++count != wanted) return;
+  if (!Eigen::saveMarket(A, path))
+    throw common::InputError("ARTHROSIM_SAVE_TANGENT: could not write " + path);
+  common::log_info("saved factorisation " + std::to_string(wanted) + " (" + std::to_string(A.rows()) + " unknowns, " +
+                   std::to_string(A.nonZeros()) + " non-zeros) to " + path);
+}
 }  // namespace
 
 const char* to_string(LinearSolverKind kind) {
@@ -92,6 +125,7 @@ void SparseDirectSolver::analyze(const Eigen::SparseMatrix<double>& A) {
 
 bool SparseDirectSolver::factorize(const Eigen::SparseMatrix<double>& A) {
   if (!analyzed_) analyze(A);
+  save_matrix_if_asked(A);
   if (kind_ == LinearSolverKind::kCholmod) {
     impl_->cholmod.factorize(A);
     if (impl_->cholmod.info() != Eigen::Success) {
