@@ -9,6 +9,9 @@
 #include <fstream>
 #include <iterator>
 
+#include <Eigen/SparseCore>
+#include <unsupported/Eigen/SparseExtra>
+
 #include "common/effects.h"
 #include "common/error.h"
 #include "common/hdf5.h"
@@ -499,10 +502,16 @@ TEST(SurfaceStage, ImposedKinematicsMoveTheSurfaceRigidly) {
 
 /// Runs build/bin/arthrosim-surface (the executable, as a user would) and
 /// returns its exit code.
-int run_executable(const std::string& args) {
+int run_executable_prefixed(const std::string& prefix, const std::string& args) {
   const std::string exe = std::string(ARTHROSIM_BINARY_DIR) + "/bin/arthrosim-surface";
   EXPECT_TRUE(fs::exists(exe)) << exe << " not built";
-  return std::system((exe + " --quiet " + args + " > /dev/null 2>&1").c_str());
+  return std::system((prefix + exe + " --quiet " + args + " > /dev/null 2>&1").c_str());
+}
+int run_executable(const std::string& args) { return run_executable_prefixed("", args); }
+
+/// The same with an environment assignment ("NAME=value") in front.
+int run_executable_with_env(const std::string& env, const std::string& args) {
+  return run_executable_prefixed(env + " ", args);
 }
 
 /// OBJ of an L x W plate (mm), nx x 1 quads in z = 0.
@@ -513,6 +522,35 @@ std::string write_plate_obj(const std::string& name, int nx, double L_mm, double
     for (int i = 0; i <= nx; ++i) f << "v " << i * L_mm / nx << " " << j * W_mm << " 0\n";
   for (int i = 0; i < nx; ++i) f << "f " << i + 1 << " " << i + 2 << " " << nx + i + 3 << " " << nx + i + 2 << "\n";
   return p;
+}
+
+// Diagnostic hook of SparseDirectSolver (tests/benchmarks/factorization_bench.cc):
+// ARTHROSIM_SAVE_TANGENT=N:FILE saves the N-th factorised matrix in Matrix
+// Market form. On the bundled cantilever (17 x 2 nodes, 6 coordinates each,
+// 4 factorisations) the first one is the Newton matrix at the reference
+// state: 204 x 204, and symmetric (fixed point loads, no follower term; the
+// element tangent is assembled from its lower half, so to round-off). A
+// malformed value stops the program with a non-zero exit code; an N beyond
+// the run's factorisations writes nothing.
+TEST(SurfaceStageGeneric, SaveTangentHookWritesTheRequestedMatrix) {
+  const std::string scene = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/cantilever_plate.yaml";
+  const std::string mtx = work_dir() + "/tangent_1.mtx", none = work_dir() + "/tangent_99.mtx";
+  fs::remove(mtx);
+  fs::remove(none);
+  auto run_with = [&](const std::string& value, const std::string& out) {
+    return run_executable_with_env("ARTHROSIM_SAVE_TANGENT='" + value + "'", "--scene " + scene + " --out " + out);
+  };
+  ASSERT_EQ(run_with("1:" + mtx, work_dir() + "/cantilever_save.h5"), 0);
+  Eigen::SparseMatrix<double> K;
+  ASSERT_TRUE(Eigen::loadMarket(K, mtx)) << mtx;
+  EXPECT_EQ(K.rows(), 204);
+  EXPECT_EQ(K.cols(), 204);
+  const Eigen::SparseMatrix<double> Kt = K.transpose();
+  EXPECT_LT((K - Kt).norm(), 1e-12 * K.norm());
+  EXPECT_EQ(run_with("99:" + none, work_dir() + "/cantilever_save99.h5"), 0);
+  EXPECT_FALSE(fs::exists(none));
+  EXPECT_NE(run_with("first", work_dir() + "/cantilever_save_bad.h5"), 0);
+  EXPECT_NE(run_with("0:" + none, work_dir() + "/cantilever_save_bad.h5"), 0);
 }
 
 // Generic case through the executable: the bundled cantilever plate scene
