@@ -72,15 +72,19 @@ const SpMat* saved_matrix(std::string* why) {
   return A.get();
 }
 
+// The saved matrix, or nullptr after marking the benchmark skipped with the reason.
+const SpMat* saved_matrix_or_skip(benchmark::State& state) {
+  std::string why;
+  const SpMat* A = saved_matrix(&why);
+  if (!A) state.SkipWithError(why.c_str());
+  return A;
+}
+
 SpMat symmetric_part(const SpMat& A) { return 0.5 * (A + SpMat(A.transpose())); }
 
 void Umfpack(benchmark::State& state) {
-  std::string why;
-  const SpMat* A = saved_matrix(&why);
-  if (!A) {
-    state.SkipWithError(why.c_str());
-    return;
-  }
+  const SpMat* A = saved_matrix_or_skip(state);
+  if (!A) return;
   arthrosim::cartilage::SparseDirectSolver lu(arthrosim::cartilage::LinearSolverKind::kUmfpack);
   lu.analyze(*A);
   bool ok = true;
@@ -97,12 +101,8 @@ void Umfpack(benchmark::State& state) {
 BENCHMARK(Umfpack)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void CholmodSymmetricPart(benchmark::State& state) {
-  std::string why;
-  const SpMat* A = saved_matrix(&why);
-  if (!A) {
-    state.SkipWithError(why.c_str());
-    return;
-  }
+  const SpMat* A = saved_matrix_or_skip(state);
+  if (!A) return;
   SpMat S = symmetric_part(*A);
   const double sigma = state.range(0) < 0 ? 0.0 : std::pow(10.0, static_cast<double>(state.range(0)));
   for (int i = 0; i < S.rows(); ++i) S.coeffRef(i, i) += sigma;
@@ -116,12 +116,8 @@ void CholmodSymmetricPart(benchmark::State& state) {
 BENCHMARK(CholmodSymmetricPart)->Arg(-1)->Arg(0)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void SymmetricPartInertia(benchmark::State& state) {
-  std::string why;
-  const SpMat* A = saved_matrix(&why);
-  if (!A) {
-    state.SkipWithError(why.c_str());
-    return;
-  }
+  const SpMat* A = saved_matrix_or_skip(state);
+  if (!A) return;
   const SpMat S = symmetric_part(*A);
   int negative = 0;
   bool ok = false;
