@@ -501,17 +501,11 @@ TEST(SurfaceStage, ImposedKinematicsMoveTheSurfaceRigidly) {
 }
 
 /// Runs build/bin/arthrosim-surface (the executable, as a user would) and
-/// returns its exit code.
-int run_executable_prefixed(const std::string& prefix, const std::string& args) {
+/// returns its exit code; env: an environment assignment ("NAME=value") in front, if any.
+int run_executable(const std::string& args, const std::string& env = "") {
   const std::string exe = std::string(ARTHROSIM_BINARY_DIR) + "/bin/arthrosim-surface";
   EXPECT_TRUE(fs::exists(exe)) << exe << " not built";
-  return std::system((prefix + exe + " --quiet " + args + " > /dev/null 2>&1").c_str());
-}
-int run_executable(const std::string& args) { return run_executable_prefixed("", args); }
-
-/// The same with an environment assignment ("NAME=value") in front.
-int run_executable_with_env(const std::string& env, const std::string& args) {
-  return run_executable_prefixed(env + " ", args);
+  return std::system(((env.empty() ? "" : env + " ") + exe + " --quiet " + args + " > /dev/null 2>&1").c_str());
 }
 
 /// OBJ of an L x W plate (mm), nx x 1 quads in z = 0.
@@ -538,7 +532,7 @@ TEST(SurfaceStageGeneric, SaveTangentHookWritesTheRequestedMatrix) {
   fs::remove(mtx);
   fs::remove(none);
   auto run_with = [&](const std::string& value, const std::string& out) {
-    return run_executable_with_env("ARTHROSIM_SAVE_TANGENT='" + value + "'", "--scene " + scene + " --out " + out);
+    return run_executable("--scene " + scene + " --out " + out, "ARTHROSIM_SAVE_TANGENT='" + value + "'");
   };
   ASSERT_EQ(run_with("1:" + mtx, work_dir() + "/cantilever_save.h5"), 0);
   Eigen::SparseMatrix<double> K;
