@@ -265,7 +265,7 @@ struct VertexHit {
 std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Points3& Xv, const common::Points3& vnv,
                                    const ContactSurface& Sf, const common::Points3& Xf, const common::Points3& tnf,
                                    const common::Points3& vnf, double radius, double min_opposition,
-                                   bool skip_rim, bool rim_contacts, long* candidates,
+                                   const Eigen::VectorXd& weight, bool rim_contacts, long* candidates,
                                    common::CachedOverlaps* cache) {
   std::vector<common::Box3> vb(Sv.num_nodes), fb(Sf.F.rows());
   for (int i = 0; i < Sv.num_nodes; ++i) vb[i] = point_box(row(Xv, i), radius);
@@ -284,7 +284,7 @@ std::vector<VertexHit> vertex_hits(const ContactSurface& Sv, const common::Point
 #pragma omp parallel for schedule(dynamic, 64) if (ng > 256)
   for (int gi = 0; gi < ng; ++gi) {
     const int i = pairs[starts[gi]].first;
-    if (skip_rim && Sv.boundary_vertex[i]) continue;
+    if (!(weight(i) > 0)) continue;  // not a penetrating vertex
     const Eigen::Vector3d p = row(Xv, i);
     double best = std::numeric_limits<double>::infinity();
     VertexHit h;
@@ -367,6 +367,22 @@ double contact_gap(ContactKind kind, const std::array<Eigen::Vector3d, 4>& x, do
   return c.g;
 }
 
+Eigen::VectorXd faded_vertex_weights(const ContactSurface& s) {
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(s.num_nodes);
+  for (int t = 0; t < s.F.rows(); ++t) {
+    const double A = s.triangle_area(t);
+    int rim = 0;
+    for (int k = 0; k < 3; ++k) rim += s.boundary_vertex[s.F(t, k)] ? 1 : 0;
+    // Integrals of s(r) N_i over the triangle (docs/contact.md, "Rims"): with
+    // r = lambda_j (one interior node j) or 1 - lambda_i (one rim node i) and
+    // lambda's density 2 (1 - lambda) on the triangle.
+    static constexpr double kInterior[4] = {1.0 / 3, 4.0 / 15, 1.0 / 6, 0};
+    static constexpr double kRim[4] = {0, 1.0 / 6, 1.0 / 15, 0};
+    for (int k = 0; k < 3; ++k) w(s.F(t, k)) += A * (s.boundary_vertex[s.F(t, k)] ? kRim[rim] : kInterior[rim]);
+  }
+  return w;
+}
+
 MeshContact::MeshContact(std::string name, const ContactSurface& a, const ContactSurface& b,
                          const ContactOptions& options)
     : name_(std::move(name)), a_(a), b_(b), opts_(options) {
@@ -388,6 +404,19 @@ MeshContact::MeshContact(std::string name, const ContactSurface& a, const Contac
     bad("min_opposition must be in [-1, 1), found " + std::to_string(opts_.min_opposition));
   if (a_.F.rows() == 0 || b_.F.rows() == 0) bad("both surfaces need triangles");
   for (auto& c : broad_phase_) c = std::make_unique<common::CachedOverlaps>(0.2 * opts_.max_depth_m);
+  if (opts_.faded_vertex_weights && opts_.rim != RimTreatment::kFadeInside)
+    bad("faded vertex weights need the fade_inside rim treatment");
+  for (int side = 0; side < 2; ++side) {
+    const ContactSurface& s = side == 0 ? a_ : b_;
+    if (opts_.faded_vertex_weights) {
+      vertex_weight_[side] = faded_vertex_weights(s);
+    } else {
+      vertex_weight_[side] = s.vertex_area;
+      if (!opts_.rim_vertices)
+        for (int i = 0; i < s.num_nodes; ++i)
+          if (s.boundary_vertex[i]) vertex_weight_[side](i) = 0;
+    }
+  }
 }
 
 std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const common::Points3& xb,
@@ -414,7 +443,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     const int sv = pass, sf = 1 - pass;  // vertex side, face side
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf], dmax,
-                                          opts_.min_opposition, !opts_.rim_vertices,
+                                          opts_.min_opposition, vertex_weight_[sv],
                                           opts_.rim == RimTreatment::kRimContacts, &cnt.candidate_vertex_face,
                                           broad_phase_[pass].get())) {
       if (!(h.signed_distance < 0)) continue;  // in front: no contact
@@ -437,7 +466,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
            (c.kind == ContactKind::kVertexFace && Sf.boundary_vertex[c.node[3]])))
         c.fade_edge = 0;  // a face (or its edge / corner) touching the rim: faded
       c.side = {sv, sf, sf, sf};
-      c.area = 0.5 * S[sv]->vertex_area(h.vertex);
+      c.area = 0.5 * vertex_weight_[sv](h.vertex);
       vf_active[sv][h.vertex] = 1;
       out.push_back(std::move(c));
     }
@@ -588,7 +617,7 @@ std::vector<std::pair<int, int>> MeshContact::coupling_candidates(const common::
     const ContactSurface& Sf = *S[sf];
     for (const VertexHit& h : vertex_hits(*S[sv], *X[sv], vn[sv], Sf, *X[sf], tn[sf], vn[sf],
                                           std::max(opts_.max_depth_m, margin), opts_.min_opposition,
-                                          !opts_.rim_vertices, opts_.rim == RimTreatment::kRimContacts, nullptr, nullptr)) {
+                                          vertex_weight_[sv], opts_.rim == RimTreatment::kRimContacts, nullptr, nullptr)) {
       if (!(h.signed_distance < margin)) continue;
       for (int k = 0; k < 3; ++k)
         for (int t : Sf.vertex_triangles[Sf.F(h.triangle, k)])

@@ -141,6 +141,15 @@ struct ContactOptions {
   /// tibial eminence slopes otherwise end up 3 mm deep in the condyles' flanks
   /// (docs/contact.md, "Rims").
   bool rim_vertices = true;
+  /// kFadeInside only: a node's weight as the penetrating vertex is its
+  /// fade-weighted tributary area, sum over its triangles of the integral of
+  /// phi N_i dA (phi the rim fade that the other surface's vertices see on
+  /// that triangle, N_i its linear shape function), instead of a third of
+  /// each triangle's area. Each surface then samples itself with the same
+  /// fade near its rim as the other surface's vertices do; rim nodes get a
+  /// nonzero weight (1/15 or 1/6 of a rim-row triangle's area) and so
+  /// support the rim; rim_vertices is then ignored (docs/contact.md, "Rims").
+  bool faded_vertex_weights = false;
   /// Cut-off depth of rim contacts [m] (a vertex beside the other surface's
   /// open boundary and behind its boundary triangle's plane), with the same
   /// depth fade over its last quarter; 0: max_depth_m. A rim contact stands
@@ -222,6 +231,9 @@ class MeshContact {
   std::string name_;
   ContactSurface a_, b_;
   ContactOptions opts_;
+  /// Per surface: a node's weight as the penetrating vertex [m^2] (0: not a
+  /// penetrating vertex), from the options (rim_vertices, faded_vertex_weights).
+  std::array<Eigen::VectorXd, 2> vertex_weight_;
   /// Broad phase of the two vertex-face passes (vertices of a against the
   /// faces of b, then b against a), each reusing its candidate pairs while
   /// the surfaces move less than a fifth of max_depth_m
@@ -231,6 +243,14 @@ class MeshContact {
   mutable std::array<std::unique_ptr<common::CachedOverlaps>, 2> broad_phase_;
   mutable std::mutex broad_phase_mutex_;
 };
+
+/// The weights of a surface's nodes as penetrating vertices [m^2] under
+/// ContactOptions::faded_vertex_weights: per triangle, the integrals of
+/// phi N_i over it, phi = s(r) the rim fade (s(r) = r^2 (3 - 2 r), r the
+/// interpolation of 0 on rim nodes and 1 elsewhere). Closed forms per
+/// triangle of area A: no rim node A/3 each; one rim node: it A/6, the others
+/// 4A/15; two rim nodes: they A/15, the other A/6; three: 0.
+Eigen::VectorXd faded_vertex_weights(const ContactSurface& s);
 
 /// The gap function and its exact gradient for four points (for tests):
 /// vertex-face (x0 = vertex, x1..x3 = triangle) or edge-edge (x0, x1 = first

@@ -177,6 +177,11 @@ const std::vector<OptionSpec>& schema_table() {
       {"surface", "contact_rim_vertices", T::kFlag, U::kNone, "false", false, 0, 0, "", true,
        "nodes on a surface's rim may be penetrating vertices; by default they only carry their triangles, "
        "as stage 1 samples the casting surface at triangle centres, never at its rim (docs/contact.md)"},
+      {"surface", "contact_vertex_weights", T::kText, U::kNone, "tributary", false, 0, 0, "tributary|faded", true,
+       "a node's weight as the penetrating vertex of a contact: tributary = a third of its triangles' areas "
+       "(rim nodes per contact_rim_vertices); faded = the integral of the rim fade times its shape function over "
+       "its triangles, so each surface samples itself with the fade the other surface's vertices see, and rim nodes "
+       "carry a reduced weight (fade_inside only, not with contact_rim_vertices; docs/contact.md, \"Rims\")"},
       {"surface", "predictor", T::kText, U::kNone, "extrapolated", false, 0, 0, "rigid|extrapolated", true,
        "imposed_kinematics: Newton start of a step: the surfaces carried rigidly by their bones (rigid), "
        "plus the bone-relative deformation change of the step before, extrapolated linearly in time"},

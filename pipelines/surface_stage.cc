@@ -521,6 +521,11 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   copt.rim_max_depth_m = o.si("contact_rim_max_depth_mm");
   copt.rim = o.text("contact_rim") == "rim_contacts" ? cartilage::RimTreatment::kRimContacts
                                                       : cartilage::RimTreatment::kFadeInside;
+  copt.faded_vertex_weights = o.text("contact_vertex_weights") == "faded";
+  if (copt.faded_vertex_weights && copt.rim_vertices)
+    throw common::InputError(options.scene + ": error: scenario '" + sc->name +
+                             "': contact_rim_vertices applies to contact_vertex_weights: tributary only (faded "
+                             "weights give rim nodes their own, reduced weight)");
   for (size_t k = 0; k < pair_index.size(); ++k)
     system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
   ledger.require_only(sc->effects);

@@ -603,6 +603,56 @@ TEST(MeshContact, RimNodesCanBeExcludedAsPenetratingVertices) {
   EXPECT_EQ(small_vertices[1], small_vertices[0] - 16);  // the 9 interior nodes remain
 }
 
+// Faded vertex weights (ContactOptions::faded_vertex_weights) against an
+// independent quadrature of their definition, the integral of s(r) N_i over
+// each triangle (s the rim fade, r the interpolation of 0 on rim nodes and 1
+// elsewhere, N_i the linear shape function): the midpoint rule on 160^2
+// sub-triangles per triangle, whose error for these smooth cubics is of
+// order (1/160)^2 ~ 4e-5 of a triangle's area, so 2e-4 of it is asked. The
+// plate is skewed so that its triangles differ. Interior nodes away from
+// the rim keep their tributary area; rim nodes get a weight (they support
+// the rim) but less than theirs; the total is the faded area.
+TEST(MeshContact, FadedVertexWeightsAreTheFadeIntegrals) {
+  common::QuadMesh plate = testing::plate_mesh(5, 4, 5e-3, 4e-3);
+  for (int i = 0; i < plate.V.rows(); ++i) plate.V(i, 0) += 0.3 * plate.V(i, 1) + 1e-4 * std::sin(7.0 * i);
+  const ContactSurface s(plate);
+  const Eigen::VectorXd w = faded_vertex_weights(s);
+  Eigen::VectorXd ref = Eigen::VectorXd::Zero(s.num_nodes);
+  const int n = 160;
+  for (int t = 0; t < s.F.rows(); ++t) {
+    const double A = s.triangle_area(t);
+    double rho[3];
+    for (int k = 0; k < 3; ++k) rho[k] = s.boundary_vertex[s.F(t, k)] ? 0.0 : 1.0;
+    // Sub-triangles of the barycentric grid: centroids of the n^2 cells.
+    for (int a = 0; a < n; ++a)
+      for (int b = 0; a + b < n; ++b)
+        for (int up = 0; up < 2; ++up) {
+          if (up == 1 && a + b + 1 >= n) continue;
+          const double l0 = (a + (up ? 2.0 : 1.0) / 3) / n, l1 = (b + (up ? 2.0 : 1.0) / 3) / n;
+          const double lam[3] = {l0, l1, 1 - l0 - l1};
+          const double r = lam[0] * rho[0] + lam[1] * rho[1] + lam[2] * rho[2];
+          const double fade = r * r * (3 - 2 * r);
+          for (int k = 0; k < 3; ++k) ref(s.F(t, k)) += fade * lam[k] * A / (double(n) * n);
+        }
+  }
+  double max_tri = s.triangle_area.maxCoeff(), faded_area = 0;
+  for (int i = 0; i < s.num_nodes; ++i) EXPECT_NEAR(w(i), ref(i), 2e-4 * max_tri) << "node " << i;
+  for (int i = 0; i < s.num_nodes; ++i) {
+    faded_area += ref(i);
+    bool next_to_rim = s.boundary_vertex[i];
+    for (int t : s.vertex_triangles[i])
+      for (int k = 0; k < 3; ++k) next_to_rim = next_to_rim || s.boundary_vertex[s.F(t, k)];
+    if (!next_to_rim) EXPECT_NEAR(w(i), s.vertex_area(i), 1e-12 * max_tri) << "interior node " << i;
+    if (s.boundary_vertex[i]) EXPECT_LT(w(i), s.vertex_area(i)) << "rim node " << i;
+  }
+  // Every rim node but the corners has a rim-row triangle with an interior node.
+  int supported_rim = 0;
+  for (int i = 0; i < s.num_nodes; ++i) supported_rim += s.boundary_vertex[i] && w(i) > 0;
+  EXPECT_GE(supported_rim, 2 * (5 + 4) - 4);
+  EXPECT_NEAR(w.sum(), faded_area, 2e-4 * max_tri);
+  EXPECT_LT(w.sum(), s.vertex_area.sum());
+}
+
 TEST(MeshContact, RejectsBadOptions) {
   const common::QuadMesh plate = testing::plate_mesh(2, 2, 1e-3, 1e-3);
   ContactOptions o;
@@ -613,6 +663,10 @@ TEST(MeshContact, RejectsBadOptions) {
   EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
   o = ContactOptions();
   o.damping_N_s_m3 = std::nan("");
+  EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
+  o = ContactOptions();
+  o.faded_vertex_weights = true;  // the weights are those of fade_inside's fade
+  o.rim = RimTreatment::kRimContacts;
   EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
 }
 

@@ -394,6 +394,40 @@ TEST(SurfaceStage, ContactPairWithoutItsSurfacesStopsWithClearError) {
   EXPECT_FALSE(fs::exists(o.out));
 }
 
+// contact_vertex_weights: faded is the fade_inside fade's own weighting and
+// gives rim nodes their own weight: with contact_rim_vertices or the
+// rim_contacts treatment it stops before anything is written, naming what
+// conflicts.
+TEST(SurfaceStage, FadedVertexWeightsRefusedWithConflictingRimKeys) {
+  const std::string scene = write_scene("faded_weights_bad", R"(surface:
+  scenarios:
+    with_rim_vertices:
+      end_time_s: 1e-3
+      contact_vertex_weights: faded
+      contact_rim_vertices: true
+      effects: [foundation_springs, periphery_fixed, mesh_contact]
+    with_rim_contacts:
+      end_time_s: 1e-3
+      contact_vertex_weights: faded
+      contact_rim: rim_contacts
+      effects: [foundation_springs, periphery_fixed, mesh_contact]
+)");
+  for (const char* sc : {"with_rim_vertices", "with_rim_contacts"}) {
+    const SurfaceStageOptions o = stage_options(scene, sc, std::string("faded_weights_bad_") + sc + ".h5");
+    fs::remove(o.out);
+    try {
+      run_surface_stage(o);
+      ADD_FAILURE() << sc << " must not be accepted";
+    } catch (const common::InputError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(sc == std::string("with_rim_vertices") ? "contact_rim_vertices" : "fade_inside"),
+                std::string::npos)
+          << m;
+    }
+    EXPECT_FALSE(fs::exists(o.out)) << sc;
+  }
+}
+
 TEST(SurfaceStage, UnknownSurfaceNamesWhatThePreparedModelHas) {
   const std::string scene = write_scene("unknown_surface", R"(surface:
   scenarios:
