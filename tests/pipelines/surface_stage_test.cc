@@ -341,6 +341,21 @@ TEST(SurfaceStage, DynamicOsmoticStopsAtTheStaticSteadyState) {
   EXPECT_DOUBLE_EQ(fq.attribute_double("/solver", "stop_time_s"), 0.01);
 }
 
+// Scenario `scenario` of `scene` is refused with an input error whose message
+// names `needle`, before its output file (removed first) is written.
+void expect_refused(const std::string& scene, const std::string& scenario, const std::string& out,
+                    const std::string& needle) {
+  const SurfaceStageOptions o = stage_options(scene, scenario, out);
+  fs::remove(o.out);
+  try {
+    run_surface_stage(o);
+    ADD_FAILURE() << scenario << " must not be accepted";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(o.out)) << scenario;
+}
+
 // The opt-in keys are refused where they cannot apply: the stop with the
 // direct steady-state solve, a ramp longer than the run.
 TEST(SurfaceStage, DynamicOsmoticKeysRefusedWhereMeaningless) {
@@ -359,17 +374,8 @@ TEST(SurfaceStage, DynamicOsmoticKeysRefusedWhereMeaningless) {
       osmotic_ramp_s: 0.02
       effects: [foundation_springs, osmotic_pressure, periphery_fixed]
 )");
-  for (const char* sc : {"stop_static", "long_ramp"}) {
-    try {
-      run_surface_stage(stage_options(scene, sc, std::string("osmotic_dynamic_bad_") + sc + ".h5"));
-      ADD_FAILURE() << sc << " must not be accepted";
-    } catch (const common::InputError& e) {
-      const std::string m = e.what();
-      EXPECT_NE(m.find(sc == std::string("stop_static") ? "steady_state_change_mm" : "osmotic_ramp_s"),
-                std::string::npos)
-          << m;
-    }
-  }
+  expect_refused(scene, "stop_static", "osmotic_dynamic_bad_stop_static.h5", "steady_state_change_mm");
+  expect_refused(scene, "long_ramp", "osmotic_dynamic_bad_long_ramp.h5", "osmotic_ramp_s");
 }
 
 // mesh_contact needs both surfaces of each contact pair: a scenario that
@@ -412,20 +418,8 @@ TEST(SurfaceStage, FadedVertexWeightsRefusedWithConflictingRimKeys) {
       contact_rim: rim_contacts
       effects: [foundation_springs, periphery_fixed, mesh_contact]
 )");
-  for (const char* sc : {"with_rim_vertices", "with_rim_contacts"}) {
-    const SurfaceStageOptions o = stage_options(scene, sc, std::string("faded_weights_bad_") + sc + ".h5");
-    fs::remove(o.out);
-    try {
-      run_surface_stage(o);
-      ADD_FAILURE() << sc << " must not be accepted";
-    } catch (const common::InputError& e) {
-      const std::string m = e.what();
-      EXPECT_NE(m.find(sc == std::string("with_rim_vertices") ? "contact_rim_vertices" : "fade_inside"),
-                std::string::npos)
-          << m;
-    }
-    EXPECT_FALSE(fs::exists(o.out)) << sc;
-  }
+  expect_refused(scene, "with_rim_vertices", "faded_weights_bad_rim_vertices.h5", "contact_rim_vertices");
+  expect_refused(scene, "with_rim_contacts", "faded_weights_bad_rim_contacts.h5", "fade_inside");
 }
 
 TEST(SurfaceStage, UnknownSurfaceNamesWhatThePreparedModelHas) {
