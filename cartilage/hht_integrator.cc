@@ -267,8 +267,11 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
     if (k >= opts_.max_newton_iterations) {
       factor_valid_ = false;
       std::ostringstream s;
+      int worst = 0;
+      const double worst_N = G.cwiseAbs().maxCoeff(&worst);
       s << "Newton did not converge in " << opts_.max_newton_iterations << " iterations (residual " << r
-        << " N, first " << r_ref << " N, last increment " << last_inc << " m)";
+        << " N, first " << r_ref << " N, last increment " << last_inc << " m; largest residual " << worst_N
+        << " N at " << sys_.describe_dof(worst) << ")";
       reason = s.str();
       return false;
     }

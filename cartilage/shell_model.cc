@@ -618,7 +618,9 @@ bool ShellModel::tangent_symmetric() const {
 
 std::string ShellModel::describe_dof(int i) const {
   static const char* names[6] = {"r_x", "r_y", "r_z", "d_x", "d_y", "d_z"};
-  return "node " + std::to_string(i / 6) + " " + names[i % 6];
+  const std::vector<int> rim = boundary_nodes();  // messages only: not on a hot path
+  const bool on_rim = std::binary_search(rim.begin(), rim.end(), i / 6);
+  return "node " + std::to_string(i / 6) + (on_rim ? " (rim) " : " ") + names[i % 6];
 }
 
 void ShellModel::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,

@@ -199,6 +199,11 @@ TEST(Hht, RejectionHalvingAndFailureReport) {
               st.newton_iterations);
   EXPECT_GT(st.rejected_steps, 0);
   EXPECT_EQ(static_cast<long>(st.rejections.size()), st.rejected_steps);
+  // Each rejection says why, with the coordinate of the largest residual.
+  ASSERT_FALSE(st.rejections.empty());
+  std::printf("first rejection: %s\n", st.rejections[0].c_str());
+  EXPECT_NE(st.rejections[0].find("did not converge"), std::string::npos);
+  EXPECT_NE(st.rejections[0].find(" N at u)"), std::string::npos);
   EXPECT_NEAR(hht.time(), 2.0, 1e-12);
 
   Oscillator bad(1.0, 1.0);

@@ -5,6 +5,7 @@
 #include <omp.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cstdio>
 #include <random>
 
@@ -296,6 +297,22 @@ TEST(ShellTerms, NonFiniteInputNamesTermAndCoordinate) {
     EXPECT_NE(std::string(e.what()).find("internal_forces"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("node"), std::string::npos) << e.what();
   }
+}
+
+// Messages name a coordinate by node and component, and say when the node is
+// on the surface's rim (where contact and foundation support end: the first
+// place to look when Newton stalls, docs/contact.md "Stiff contact").
+TEST(ShellTerms, DescribeDofMarksRimNodes) {
+  Fixture f;
+  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+  const std::vector<int> rim = m.boundary_nodes();
+  ASSERT_FALSE(rim.empty());
+  int interior = -1;
+  for (int i = 0; i < m.num_nodes() && interior < 0; ++i)
+    if (!std::binary_search(rim.begin(), rim.end(), i)) interior = i;
+  ASSERT_GE(interior, 0);
+  EXPECT_EQ(m.describe_dof(6 * rim[0] + 2), "node " + std::to_string(rim[0]) + " (rim) r_z");
+  EXPECT_EQ(m.describe_dof(6 * interior + 4), "node " + std::to_string(interior) + " d_y");
 }
 
 TEST(ShellTerms, RejectsBadInput) {
