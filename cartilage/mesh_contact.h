@@ -113,8 +113,8 @@ enum class RimTreatment {
   /// rim edge or corner as gap, weighted by how squarely it lies behind the
   /// rim (phi = clamp(n . n_T / cos 45 deg, 0, 1)). Its force points along
   /// p - c, up to 45 deg off the rim's normal with the penalty of the whole
-  /// distance; with stiff penalties Newton stalls at rims
-  /// (ContactStability.ContactStiffnessThousandTimesTheDefault).
+  /// distance; with stiff penalties Newton stalls at rims (docs/contact.md,
+  /// "Stiff contact").
   kRimContacts,
 };
 

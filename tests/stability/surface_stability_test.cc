@@ -2,8 +2,8 @@
 // ANCF shell model (cartilage/shell_model.h) and the HHT / quasi-static
 // integrator (cartilage/hht_integrator.h). Each case asserts finite values, an
 // explicit integrator status, a bound and, where one exists, agreement with a
-// closed-form reference. Contact stiffness x1000 is not here: mesh contact
-// does not exist yet.
+// closed-form reference. Contact stiffness x1000 and a rigid rotation of a
+// pressed contact are in contact_stability_test.cc.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
