@@ -603,11 +603,22 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
       throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
                                              std::to_string(tv.size()) + " values for " +
                                              std::to_string(mesh.num_vertices()) + " vertices");
+    // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
+    for (int t = 0; t < mesh.num_triangles(); ++t)
+      for (int k = 0; k < 3; ++k)
+        if (mesh.F(t, k) < 0 || mesh.F(t, k) >= mesh.num_vertices())
+          throw InputError(prepared_path, 0, g + "faces: expected vertex indices in [0, " +
+                                                 std::to_string(mesh.num_vertices()) + "), found " +
+                                                 std::to_string(mesh.F(t, k)) + " in triangle " + std::to_string(t));
+    if (!mesh.V.allFinite())
+      throw InputError(prepared_path, 0, g + "vertices: expected finite coordinates, found NaN or Inf");
+    if (!tv.allFinite() || (tv.array() < 0).any())
+      throw InputError(prepared_path, 0, g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
     // Same place as the model's own mesh (in the file frame): the centroids
     // of the two surfaces must agree to within 2 mm, else the prepared file
     // belongs to another geometry.
     const double offset = centroid_offset(s, mesh);
-    if (offset > 2e-3) {
+    if (!(offset <= 2e-3)) {
       std::ostringstream m;
       m << g << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";

@@ -1,0 +1,156 @@
+// Inputs found by fuzzing the musculoskeletal readers (tests/fuzz, docs/testing.md):
+// each test is the minimised input of one defect, rebuilt here so that the
+// normal suite keeps it fixed; the raw fuzz input is in
+// tests/fuzz/corpus/<target>/regression-*.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/hdf5.h"
+#include "musculoskeletal/model_io.h"
+
+namespace msk = arthrosim::musculoskeletal;
+namespace common = arthrosim::common;
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kSource = ARTHROSIM_SOURCE_DIR;
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+fs::path scratch(const std::string& name) {
+  const fs::path dir = fs::path(ARTHROSIM_BINARY_DIR) / "msk_fuzz_inputs";
+  fs::create_directories(dir);
+  return dir / name;
+}
+
+// The fuzz targets' model: two contact surfaces of the bundled coarse knee.
+msk::Model small_knee() {
+  return msk::parse_model(read_text(kSource + "/tests/fuzz/knee_small.urdf"), "knee_small.urdf",
+                          kSource + "/data/models/knee_parametric");
+}
+
+struct PreparedSurface {
+  std::string name, source_file;
+  Eigen::MatrixXd V;
+  Eigen::MatrixXi F;
+  Eigen::VectorXd thickness;
+};
+
+// One triangle centred on the model mesh's centroid (as the fuzz corpus
+// entry small_one_triangle.h5spec, tests/fuzz/make_corpus.py).
+PreparedSurface one_triangle(const msk::Model& m, const std::string& surface, const std::string& name) {
+  for (const auto& pair : m.contacts) {
+    for (const msk::ContactSurface* s : {&pair.casting(), &pair.target()}) {
+      if (s->name != surface) continue;
+      const Eigen::Vector3d c = s->X_BM.inverse() * Eigen::Vector3d(s->mesh.V.colwise().mean().transpose());
+      PreparedSurface p;
+      p.name = name;
+      p.source_file = "coarse/" + fs::path(s->mesh_file).filename().string();
+      p.V.resize(3, 3);
+      p.V.row(0) = (c + Eigen::Vector3d(0.002, 0, 0)).transpose();
+      p.V.row(1) = (c + Eigen::Vector3d(-0.001, 0.002, 0)).transpose();
+      p.V.row(2) = (c + Eigen::Vector3d(-0.001, -0.002, 0)).transpose();
+      p.F.resize(1, 3);
+      p.F << 0, 1, 2;
+      p.thickness = Eigen::VectorXd::Constant(3, 0.002);
+      return p;
+    }
+  }
+  throw std::logic_error("no surface " + surface);
+}
+
+std::string write_prepared(const std::string& file, const std::vector<PreparedSurface>& surfaces) {
+  const std::string path = scratch(file).string();
+  common::H5File f(path, common::H5File::Mode::kTruncate);
+  std::vector<std::string> names;
+  for (const auto& s : surfaces) names.push_back(s.name);
+  f.write("/surfaces/names", names);
+  for (const auto& s : surfaces) {
+    const std::string g = "/surfaces/" + s.name;
+    f.write(g + "/triangles/vertices", s.V);
+    f.write(g + "/triangles/faces", s.F);
+    f.write(g + "/triangles/thickness", s.thickness);
+    f.set_attribute(g, "source_file", s.source_file);
+  }
+  return path;
+}
+
+std::vector<PreparedSurface> valid_prepared(const msk::Model& m) {
+  return {one_triangle(m, "patella_cartilage", "patella"),
+          one_triangle(m, "tibia_lateral_cartilage", "tibia_lateral")};
+}
+
+std::string error_of(msk::Model& m, const std::string& path) {
+  try {
+    msk::use_prepared_surfaces(m, path);
+  } catch (const common::InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+// The fixture itself is accepted, so the tests below fail for their own reason.
+TEST(PreparedSurfacesFuzz, OneTrianglePerSurfaceIsAccepted) {
+  msk::Model m = small_knee();
+  const std::string path = write_prepared("valid.h5", valid_prepared(m));
+  const auto report = msk::use_prepared_surfaces(m, path);
+  EXPECT_EQ(report.lines.size(), 2u);
+}
+
+// fuzz_prepared, regression-face-index-beyond-vertices.h5spec: a face
+// indexing past the vertices read the thickness (and vertex) arrays out of
+// bounds (Eigen assertion / heap read) in use_prepared_surfaces.
+TEST(PreparedSurfacesFuzz, FaceIndexBeyondTheVerticesIsAnInputError) {
+  msk::Model m = small_knee();
+  auto s = valid_prepared(m);
+  s[0].F(0, 2) = 7;
+  const std::string message = error_of(m, write_prepared("face_index.h5", s));
+  EXPECT_NE(message.find("/surfaces/patella/triangles/faces: expected vertex indices in [0, 3), found 7"),
+            std::string::npos)
+      << message;
+}
+
+TEST(PreparedSurfacesFuzz, NegativeFaceIndexIsAnInputError) {
+  msk::Model m = small_knee();
+  auto s = valid_prepared(m);
+  s[1].F(0, 0) = -1;
+  const std::string message = error_of(m, write_prepared("face_negative.h5", s));
+  EXPECT_NE(message.find("tibia_lateral/triangles/faces: expected vertex indices in [0, 3), found -1"),
+            std::string::npos)
+      << message;
+}
+
+// A NaN vertex made the centroid NaN, and "offset > 2 mm" is false for NaN:
+// the surface was accepted with NaN geometry.
+TEST(PreparedSurfacesFuzz, NonFiniteVertexIsAnInputError) {
+  msk::Model m = small_knee();
+  auto s = valid_prepared(m);
+  s[0].V(1, 1) = std::numeric_limits<double>::quiet_NaN();
+  const std::string message = error_of(m, write_prepared("vertex_nan.h5", s));
+  EXPECT_NE(message.find("patella/triangles/vertices: expected finite coordinates"), std::string::npos) << message;
+}
+
+TEST(PreparedSurfacesFuzz, NegativeOrNonFiniteThicknessIsAnInputError) {
+  for (const double bad : {-1e-3, std::numeric_limits<double>::infinity()}) {
+    msk::Model m = small_knee();
+    auto s = valid_prepared(m);
+    s[1].thickness(2) = bad;
+    const std::string message = error_of(m, write_prepared("thickness_bad.h5", s));
+    EXPECT_NE(message.find("tibia_lateral/triangles/thickness: expected finite values >= 0"), std::string::npos)
+        << bad << ": " << message;
+  }
+}
