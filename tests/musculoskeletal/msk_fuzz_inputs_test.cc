@@ -7,11 +7,13 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <sstream>
 
 #include "common/error.h"
 #include "common/hdf5.h"
+#include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/model_io.h"
 
 namespace msk = arthrosim::musculoskeletal;
@@ -152,5 +154,95 @@ TEST(PreparedSurfacesFuzz, NegativeOrNonFiniteThicknessIsAnInputError) {
     const std::string message = error_of(m, write_prepared("thickness_bad.h5", s));
     EXPECT_NE(message.find("tibia_lateral/triangles/thickness: expected finite values >= 0"), std::string::npos)
         << bad << ": " << message;
+  }
+}
+
+namespace {
+
+// The bundled synthetic trial cut to 10 rows per file, in a folder of its
+// own; `edit` may change the rows of ik.mot / grf.mot (tab-separated, after
+// the label line) before they are written.
+std::string small_trial(const std::string& folder,
+                        const std::function<void(std::vector<std::string>& ik, std::vector<std::string>& grf)>& edit) {
+  const fs::path dir = scratch(folder);
+  fs::create_directories(dir);
+  auto head = [](const std::string& file, std::vector<std::string>* rows) {
+    std::istringstream in(read_text(kSource + "/data/trials/synthetic_gait/" + file));
+    std::string header, line;
+    bool data = false;
+    int n = 0;
+    while (std::getline(in, line)) {
+      if (data) {
+        if (n++ < 10) rows->push_back(line);
+        continue;
+      }
+      if (line.rfind("nRows=", 0) == 0) continue;  // the row count changes
+      header += line + "\n";
+      if (line == "endheader") {
+        std::getline(in, line);
+        header += line + "\n";  // labels
+        data = true;
+      }
+    }
+    return header;
+  };
+  std::vector<std::string> ik, grf;
+  const std::string ik_header = head("ik.mot", &ik), grf_header = head("grf.mot", &grf);
+  edit(ik, grf);
+  auto write = [&](const std::string& file, const std::string& header, const std::vector<std::string>& rows) {
+    std::ofstream out(dir / file);
+    out << header;
+    for (const auto& r : rows) out << r << "\n";
+  };
+  write("ik.mot", ik_header, ik);
+  write("grf.mot", grf_header, grf);
+  std::string description = read_text(kSource + "/data/trials/synthetic_gait/trial.yaml");
+  description.replace(description.find("periodic: true"), 14, "periodic: false");
+  std::ofstream(dir / "trial.yaml") << description;
+  return (dir / "trial.yaml").string();
+}
+
+std::string set_time(const std::string& row, const std::string& time) {
+  return time + row.substr(row.find('\t'));
+}
+
+std::string trial_error(const std::string& trial) {
+  try {
+    msk::load_gait_trial(trial);
+  } catch (const common::InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(GaitTrialFuzz, TheCutTrialIsAccepted) {
+  const msk::GaitTrial t = msk::load_gait_trial(small_trial("trial_ok", [](auto&, auto&) {}));
+  EXPECT_EQ(t.num_samples(), 10);
+}
+
+// fuzz_trial, regression-kinematics-without-rows.txt: a kinematics file with
+// labels but no data row read time(0) of an empty vector (Eigen assertion;
+// a null read in Release).
+TEST(GaitTrialFuzz, KinematicsWithoutRowsIsAnInputError) {
+  const std::string message = trial_error(small_trial("trial_no_rows", [](auto& ik, auto&) { ik.clear(); }));
+  EXPECT_NE(message.find("ik.mot:9: error: expected at least 2 data rows (a time series), found 0"),
+            std::string::npos)
+      << message;
+}
+
+// fuzz_trial, regression-time-1e300.txt: a last time of 1e300 s overflowed
+// the grid size (UBSan: 1e+302 is outside the range of 'long', signal.cc);
+// regression-time-1e6-seconds.txt: 1e6 s asked for 8.8 GB.
+TEST(GaitTrialFuzz, AHugeTimeRangeIsAnInputError) {
+  for (const std::string time : {"1e300", "1000000"}) {
+    const std::string message = trial_error(small_trial("trial_long", [&](auto& ik, auto& grf) {
+      ik.back() = set_time(ik.back(), time);
+      grf.back() = set_time(grf.back(), time);
+    }));
+    EXPECT_NE(message.find("trial.yaml: error: the time range common to the trial's files"), std::string::npos)
+        << time << ": " << message;
+    EXPECT_NE(message.find("expected at most 1e+06 (times in seconds?)"), std::string::npos) << message;
   }
 }
