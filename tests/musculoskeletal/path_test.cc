@@ -134,10 +134,10 @@ TEST(Path, CylinderWrapLengthMatchesClosedForm) {
   const double R = 0.01, rho = 0.03, phi = 3.0, dz = 0.015;
   msk::Path path;
   path.points = {{0, Vec3(rho, 0, 0)}, {0, Vec3(rho * std::cos(phi), rho * std::sin(phi), dz)}};
-  msk::WrapCylinder c;
-  c.body = 0;
-  c.radius = R;
-  path.cylinder = c;
+  msk::PathWrap c;
+  c.surface.body = 0;
+  c.surface.radius = R;
+  path.wraps = {c};
   msk::KinematicsData d;
   msk::forward_kinematics(t, Eigen::VectorXd(0), d);
   const auto st = msk::evaluate_path(path, d.X_WB);
@@ -160,7 +160,7 @@ TEST(Path, WrappedMomentArmsMatchFiniteDifferencesWithCylinderOnAThirdBody) {
   // Femur origin, tibia insertion, cylinder on the patella chain body so all
   // three bodies carry forces.
   path.points = {{0, Vec3(0.0, 0.05, 0.0)}, {t.body_index("tibia"), Vec3(0.0, -0.05, 0.0)}};
-  msk::WrapCylinder c;
+  msk::WrapSurface c;
   c.body = t.body_index("patella");
   c.radius = 0.008;
   const Eigen::VectorXd q = some_q(12, 0.05);
@@ -174,9 +174,9 @@ TEST(Path, WrappedMomentArmsMatchFiniteDifferencesWithCylinderOnAThirdBody) {
     const Vec3 dir = (S - P).normalized();
     const Vec3 perp = Vec3::UnitZ().cross(dir).normalized();
     X_WC.translation() = 0.5 * (P + S) + 0.002 * perp;
-    c.X_BC = d.X_WB[c.body].inverse() * X_WC;
+    c.X_BS = d.X_WB[c.body].inverse() * X_WC;
   }
-  path.cylinder = c;
+  path.wraps = {msk::PathWrap{c}};
   msk::PathState st;
   moment_arms(t, path, q, &st);
   ASSERT_TRUE(st.wrapped) << "test geometry must wrap";
