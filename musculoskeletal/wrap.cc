@@ -1,5 +1,8 @@
 #include "musculoskeletal/wrap.h"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -291,6 +294,147 @@ Vec3 section_tangent_point(const Vec3& A, const Vec3& p, const Vec3& dir, const 
   return p + (z0s + lam * vs) * dir + (z0t + lam * vt) * side;
 }
 
+// The section of the ellipsoid by the plane through p spanned by dir and
+// side (orthonormal): x(tau) = p + z_s dir + z_t side with
+// z(tau) = z_c + V (sqrt(k / l1) cos tau, sqrt(k / l2) sin tau).
+struct Section {
+  Vec3 p, dir, side;
+  Eigen::Vector2d zc;
+  Eigen::Matrix2d V;
+  double r1 = 0, r2 = 0;
+  Vec3 point(double tau) const {
+    const Eigen::Vector2d z = zc + V * Eigen::Vector2d(r1 * std::cos(tau), r2 * std::sin(tau));
+    return p + z[0] * dir + z[1] * side;
+  }
+  double angle(const Vec3& x) const {
+    const Eigen::Vector2d w = V.transpose() * (Eigen::Vector2d((x - p).dot(dir), (x - p).dot(side)) - zc);
+    return std::atan2(w[1] / r2, w[0] / r1);
+  }
+  double t_coordinate(double tau) const { return (point(tau) - p).dot(side); }
+};
+
+Section make_section(const Vec3& A, const Vec3& p, const Vec3& dir, const Vec3& side) {
+  auto Am = [&](const Vec3& v) { return Vec3(A.cwiseProduct(v)); };
+  Eigen::Matrix2d M;
+  M << dir.dot(Am(dir)), dir.dot(Am(side)), dir.dot(Am(side)), side.dot(Am(side));
+  const Eigen::Vector2d bv(dir.dot(Am(p)), side.dot(Am(p)));
+  const double c = p.dot(Am(p)) - 1.0;
+  Section sec;
+  sec.p = p;
+  sec.dir = dir;
+  sec.side = side;
+  sec.zc = -M.ldlt().solve(bv);
+  const double k = std::max(1e-300, bv.dot(-sec.zc) - c);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(M);
+  sec.V = es.eigenvectors();
+  sec.r1 = std::sqrt(k / es.eigenvalues()[0]);
+  sec.r2 = std::sqrt(k / es.eigenvalues()[1]);
+  return sec;
+}
+
+// Residuals of all nodes of the discrete geodesic (multiple shooting): node
+// k at x_k = D normalize(y_k + E_k u_k); r_k = the tangential components of
+// unit(x_k - x_{k-1}) - unit(x_{k+1} - x_k) (x_{-1} = P, x_{N+1} = S) on the
+// projections of D E_k.
+template <class T>
+void all_node_residuals(const Vec3& D, const Vec3& A, const Vec3& P, const Vec3& S, const std::vector<Vec3>& y,
+                        const std::vector<Vec3>& e1, const std::vector<Vec3>& e2, const std::vector<T>& u,
+                        std::vector<T>& r) {
+  const int n = static_cast<int>(y.size());
+  std::vector<V3<T>> x(n);
+  for (int k = 0; k < n; ++k) {
+    V3<T> yy = lift<T>(y[k]) + scale(u[2 * k], lift<T>(e1[k])) + scale(u[2 * k + 1], lift<T>(e2[k]));
+    yy = scale(T(1.0) / dsqrt(dot(yy, yy)), yy);
+    x[k] = amul(D, yy);
+  }
+  auto unit = [](const V3<T>& v) { return scale(T(1.0) / dsqrt(dot(v, v)), v); };
+  for (int k = 0; k < n; ++k) {
+    const V3<T> a = unit(x[k] - (k == 0 ? lift<T>(P) : x[k - 1]));
+    const V3<T> b = unit((k + 1 == n ? lift<T>(S) : x[k + 1]) - x[k]);
+    const V3<T> g = amul(A, x[k]);
+    const V3<T> nn = unit(g);
+    const V3<T> diff = a - b;
+    for (int j = 0; j < 2; ++j) {
+      const V3<T> F = amul(D, lift<T>(j == 0 ? e1[k] : e2[k]));
+      const V3<T> Ft = F - scale(dot(F, nn), nn);
+      r[2 * k + j] = dot(Ft, diff);
+    }
+  }
+}
+
+// Newton on all nodes (block-tridiagonal 2x2 Jacobian from three coloured
+// dual-number passes); y: initial nodes on the unit sphere of y = x / D,
+// replaced by the solution. Returns false when it does not converge.
+bool solve_all_nodes(const Vec3& D, const Vec3& A, const Vec3& P, const Vec3& S, std::vector<Vec3>& y, int* its) {
+  const int n = static_cast<int>(y.size());
+  std::vector<Vec3> e1(n), e2(n);
+  auto charts = [&]() {
+    for (int k = 0; k < n; ++k) {
+      e1[k] = y[k].unitOrthogonal();
+      e2[k] = y[k].cross(e1[k]);
+    }
+  };
+  charts();
+  std::vector<double> u(2 * n, 0.0), r(2 * n);
+  auto norm_of = [&](const std::vector<double>& uu) {
+    all_node_residuals<double>(D, A, P, S, y, e1, e2, uu, r);
+    double m = 0;  // 2-norm: the Newton direction is a descent direction for it
+    for (double v : r) m += v * v;
+    return std::sqrt(m);
+  };
+  double rn = norm_of(u);
+  std::vector<Eigen::Matrix2d> L(n), Dg(n), U(n);
+  std::vector<D2> ud(2 * n), rd(2 * n);
+  for (int it = 0; it < 60; ++it) {
+    if (its) *its = it;
+    if (rn < 1e-11) return true;
+    for (int color = 0; color < 3; ++color) {
+      for (int k = 0; k < n; ++k) {
+        const bool seeded = k % 3 == color;
+        ud[2 * k] = D2(0.0, seeded ? 1.0 : 0.0, 0.0);
+        ud[2 * k + 1] = D2(0.0, 0.0, seeded ? 1.0 : 0.0);
+      }
+      all_node_residuals<D2>(D, A, P, S, y, e1, e2, ud, rd);
+      for (int j = 0; j < n; ++j)
+        for (int k = std::max(0, j - 1); k <= std::min(n - 1, j + 1); ++k) {
+          if (k % 3 != color) continue;
+          Eigen::Matrix2d B;
+          B << rd[2 * j].d0, rd[2 * j].d1, rd[2 * j + 1].d0, rd[2 * j + 1].d1;
+          (k == j ? Dg[j] : (k < j ? L[j] : U[j])) = B;
+        }
+    }
+    all_node_residuals<double>(D, A, P, S, y, e1, e2, u, r);  // u = 0
+    // Block Thomas algorithm.
+    std::vector<Eigen::Matrix2d> Dp(n);
+    std::vector<Eigen::Vector2d> rp(n), du(n);
+    Dp[0] = Dg[0];
+    rp[0] = Eigen::Vector2d(r[0], r[1]);
+    for (int j = 1; j < n; ++j) {
+      const Eigen::Matrix2d W = L[j] * Dp[j - 1].inverse();
+      Dp[j] = Dg[j] - W * U[j - 1];
+      rp[j] = Eigen::Vector2d(r[2 * j], r[2 * j + 1]) - W * rp[j - 1];
+    }
+    du[n - 1] = Dp[n - 1].inverse() * rp[n - 1];
+    for (int j = n - 2; j >= 0; --j) du[j] = Dp[j].inverse() * (rp[j] - U[j] * du[j + 1]);
+    double lam = 1.0, rn_new = rn;
+    std::vector<double> trial(2 * n);
+    for (int ls = 0; ls < 30; ++ls, lam *= 0.5) {
+      for (int k = 0; k < n; ++k) {
+        trial[2 * k] = -lam * du[k][0];
+        trial[2 * k + 1] = -lam * du[k][1];
+      }
+      rn_new = norm_of(trial);
+      if (std::isfinite(rn_new) && rn_new < rn) break;
+    }
+    if (!(rn_new < rn)) return false;
+    for (int k = 0; k < n; ++k)
+      y[k] = (y[k] + trial[2 * k] * e1[k] + trial[2 * k + 1] * e2[k]).normalized();
+    charts();
+    rn = rn_new;
+  }
+  return false;
+}
+
 SegmentWrap ellipsoid_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b, int N, std::vector<Vec3>* arc,
                            const Vec3* hint) {
   SegmentWrap w;
@@ -322,116 +466,211 @@ SegmentWrap ellipsoid_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b
   Vec3 side = (Q - mpt) - (Q - mpt).dot(dir) * dir;  // in the plane, normal to the segment
   if (!(side.norm() > 1e-12 * D.maxCoeff())) side = any_perpendicular(dir);
   side.normalize();
-  const Vec3 pn = dir.cross(side);  // plane normal
+  const Vec3 T1 = section_tangent_point(A, a, dir, side);
   const Vec3 T2 = section_tangent_point(A, b, -dir, side);
-  Vec3 x0_guess;
-  if (hint) {
-    x0_guess = *hint;
-  } else {
-    // The discrete x_0 lies past the tangent point T1 by half a chord angle:
-    // delta = theta / (N + 1) with theta the planar guess's turning angle,
-    // i.e. by an arc length delta / (2 kappa) (kappa the normal curvature).
-    const Vec3 T1 = section_tangent_point(A, a, dir, side);
-    const Vec3 t1 = (T1 - a).normalized();
-    const double theta = std::acos(std::clamp(t1.dot((b - T2).normalized()), -1.0, 1.0));
-    const double kappa = t1.dot(A.cwiseProduct(t1)) / A.cwiseProduct(T1).norm();
-    const Vec3 x = T1 + (theta / (N + 1) / (2 * kappa)) * t1;
-    x0_guess = x / std::sqrt(quad(x));
-  }
+  const Vec3 t1 = (T1 - a).normalized();
+  // u_N - w is (nearly) normal to the exit direction: measure it on the
+  // surface normal and the binormal at the guessed exit.
   {
-    const Vec3 y0 = x0_guess.cwiseQuotient(D).normalized();
-    s.y0 = y0;
-    // Chart directions in y: images of the travel direction and the plane
-    // normal, made tangent to the unit sphere at y0.
-    Vec3 ta = dir.cwiseQuotient(D);
-    ta = (ta - ta.dot(y0) * y0).normalized();
-    s.ea = ta;
-    s.eb = y0.cross(ta);
-    // u_N - w is (nearly) normal to the exit direction ~ t: measure it on
-    // the surface normal and the binormal at the guessed exit.
     const Vec3 n = A.cwiseProduct(T2).normalized();
     const Vec3 t = (dir - dir.dot(n) * n).normalized();
     s.r1 = n;
     s.r2 = n.cross(t);
-    (void)pn;
   }
+  auto set_chart = [&](const Vec3& x0) {
+    const Vec3 y0 = x0.cwiseQuotient(D).normalized();
+    s.y0 = y0;
+    // Chart directions in y: the image of the travel direction and its
+    // normal, tangent to the unit sphere at y0.
+    Vec3 ta = dir.cwiseQuotient(D);
+    ta = (ta - ta.dot(y0) * y0).normalized();
+    s.ea = ta;
+    s.eb = y0.cross(ta);
+  };
+  // The discrete x_0 lies past the tangent point T1 by half a chord angle:
+  // delta = theta / (n + 1) with theta the planar guess's turning angle,
+  // i.e. by an arc length delta / (2 kappa) (kappa the normal curvature).
+  auto planar_guess = [&](int n) {
+    const double theta = std::acos(std::clamp(t1.dot((b - T2).normalized()), -1.0, 1.0));
+    const double kappa = t1.dot(A.cwiseProduct(t1)) / A.cwiseProduct(T1).norm();
+    const Vec3 x = T1 + (theta / (n + 1) / (2 * kappa)) * t1;
+    return Vec3(x / std::sqrt(quad(x)));
+  };
+  set_chart(hint ? *hint : planar_guess(N));
 
-  // Newton on (alpha, beta); each iteration costs one dual-number shot (a
-  // halving line search on |r| only when a full step does not reduce it).
-  double al = 0.0, be = 0.0;
-  D2 rd[2];
-  shoot<D2>(s, D2(al, 1, 0), D2(be, 0, 1), rd);
-  double rn = std::hypot(rd[0].v, rd[1].v);
-  int it = 0;
-  bool converged = false;
-  for (; it < 50 && std::isfinite(rn); ++it) {
-    if (rn < 1e-11) {  // the initial guess is already converged
-      converged = true;
-      break;
-    }
-    const double j00 = rd[0].d0, j01 = rd[0].d1, j10 = rd[1].d0, j11 = rd[1].d1;
-    const double det = j00 * j11 - j01 * j10;
-    if (!(std::abs(det) > 0) || !std::isfinite(det)) break;
-    const double da = -(j11 * rd[0].v - j01 * rd[1].v) / det;
-    const double db = -(-j10 * rd[0].v + j00 * rd[1].v) / det;
-    const double step = std::hypot(da, db);
-    D2 rn_d[2];
-    shoot<D2>(s, D2(al + da, 1, 0), D2(be + db, 0, 1), rn_d);
-    double rn_new = std::hypot(rn_d[0].v, rn_d[1].v);
-    double lam = 1.0;
-    if (!(rn_new < rn)) {
-      if (rn < 1e-12) {  // no decrease possible at rounding level
-        converged = true;
-        break;
+  // Newton on (alpha, beta) (single shooting); each iteration costs one
+  // dual-number shot (a halving line search on |r| only when a full step
+  // does not reduce it).
+  double al = 0.0, be = 0.0, rn = 0.0;
+  int it = 0, total_its = 0;
+  auto single = [&](int max_its) {
+    al = be = 0.0;
+    D2 rd[2];
+    shoot<D2>(s, D2(al, 1, 0), D2(be, 0, 1), rd);
+    rn = std::hypot(rd[0].v, rd[1].v);
+    for (it = 0; it < max_its && std::isfinite(rn); ++it) {
+      if (rn < 1e-11) return true;  // the initial guess is already converged
+      const double j00 = rd[0].d0, j01 = rd[0].d1, j10 = rd[1].d0, j11 = rd[1].d1;
+      const double det = j00 * j11 - j01 * j10;
+      if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
+      const double da = -(j11 * rd[0].v - j01 * rd[1].v) / det;
+      const double db = -(-j10 * rd[0].v + j00 * rd[1].v) / det;
+      const double step = std::hypot(da, db);
+      D2 rn_d[2];
+      shoot<D2>(s, D2(al + da, 1, 0), D2(be + db, 0, 1), rn_d);
+      double rn_new = std::hypot(rn_d[0].v, rn_d[1].v);
+      double lam = 1.0;
+      if (!(rn_new < rn)) {
+        if (rn < 1e-12) return true;  // no decrease possible at rounding level
+        double r[2];
+        for (int ls = 0; ls < 40; ++ls) {
+          lam *= 0.5;
+          shoot<double>(s, al + lam * da, be + lam * db, r);
+          rn_new = std::hypot(r[0], r[1]);
+          if (rn_new < rn) break;
+        }
+        if (!(rn_new < rn)) return false;
+        shoot<D2>(s, D2(al + lam * da, 1, 0), D2(be + lam * db, 0, 1), rn_d);
+        rn_new = std::hypot(rn_d[0].v, rn_d[1].v);
       }
-      double r[2];
-      for (int ls = 0; ls < 40; ++ls) {
-        lam *= 0.5;
-        shoot<double>(s, al + lam * da, be + lam * db, r);
-        rn_new = std::hypot(r[0], r[1]);
-        if (rn_new < rn) break;
+      rd[0] = rn_d[0];
+      rd[1] = rn_d[1];
+      al += lam * da;
+      be += lam * db;
+      rn = rn_new;
+      // Converged when the residual (a difference of unit vectors, i.e. an
+      // angle) is below 1e-11 rad: the length is then stationary to ~1e-11
+      // x its straight parts, far below any moment-arm tolerance.
+      if (rn < 1e-11 || (lam == 1.0 && step < 1e-9)) {
+        ++it;
+        return true;
       }
-      if (!(rn_new < rn)) break;
-      shoot<D2>(s, D2(al + lam * da, 1, 0), D2(be + lam * db, 0, 1), rn_d);
-      rn_new = std::hypot(rn_d[0].v, rn_d[1].v);
     }
-    rd[0] = rn_d[0];
-    rd[1] = rn_d[1];
-    al += lam * da;
-    be += lam * db;
-    rn = rn_new;
-    // Converged when the residual (a difference of unit vectors, i.e. an
-    // angle) is below 1e-11 rad: the length is then stationary to ~1e-11 x
-    // its straight parts, far below the tolerance of any moment-arm use.
-    if (rn < 1e-11 || (lam == 1.0 && step < 1e-9)) {
-      converged = true;
-      ++it;
-      break;
-    }
+    return false;
+  };
+  // A discrete geodesic is not longer than the geodesic, which is not longer
+  // than the planar path over the section through a, b and Q (straight to
+  // T1, the section's arc on the Q side, straight from T2). The arc is
+  // integrated by 16-point Gauss-Legendre quadrature of the ellipse's speed;
+  // a result longer than 1.001 x this bound is another branch (e.g. one
+  // spiralling round the body) and is rejected.
+  const Section sec = make_section(A, a, dir, side);
+  const double tau1 = sec.angle(T1), tau2 = sec.angle(T2);
+  double span = mod_two_pi(tau2 - tau1);
+  if (sec.t_coordinate(tau1 + 0.5 * span) < 0) span -= 2 * kPi;
+  double planar_arc = 0.0;
+  {
+    static const double gx[8] = {0.0950125098376374, 0.2816035507792589, 0.4580167776572274, 0.6178762444026438,
+                                 0.7554044083550030, 0.8656312023878318, 0.9445750230732326, 0.9894009349916499};
+    static const double gw[8] = {0.1894506104550685, 0.1826034150449236, 0.1691565193950025, 0.1495959888165767,
+                                 0.1246289712555339, 0.0951585116824928, 0.0622535239386479, 0.0271524594117541};
+    auto speed = [&](double tau) { return std::hypot(sec.r1 * std::sin(tau), sec.r2 * std::cos(tau)); };
+    const double mid = tau1 + 0.5 * span, half = 0.5 * std::abs(span);
+    for (int i = 0; i < 8; ++i)
+      planar_arc += gw[i] * half * (speed(mid + gx[i] * 0.5 * span) + speed(mid - gx[i] * 0.5 * span));
   }
-  if (!converged || !std::isfinite(rn) || rn > 1e-9) {
-    std::ostringstream msg;
-    msg << "Newton iteration of the discrete geodesic (" << N << " chords) did not converge (" << it
-        << " iterations, residual " << rn << ")";
-    ellipsoid_failure(surf, msg.str());
-  }
-  double r[2];
+  const double bound = 1.001 * ((T1 - a).norm() + (b - T2).norm() + planar_arc) + 1e-12;
+  const double tiny = 1e-12 * D.maxCoeff();
   std::vector<Vec3> nodes;
   std::vector<double> steps;
   nodes.reserve(N + 1);
   steps.reserve(N);
-  double first = 0, last = 0;
-  shoot<double>(s, al, be, r, &nodes, &steps, &first, &last);
   double arc_len = 0.0;
-  for (double t : steps) {
-    if (!(t > 0)) {
-      std::ostringstream msg;
-      msg << "the discrete geodesic has a chord of length " << t
-          << " m although the segment enters the ellipsoid (wrong branch)";
-      ellipsoid_failure(surf, msg.str());
+  // Evaluates the converged polyline; valid = all chords positive (the
+  // wrapped side); short = within the planar bound.
+  double total = 0.0;
+  auto valid = [&]() {
+    nodes.clear();
+    steps.clear();
+    double r[2], first = 0, last = 0;
+    shoot<double>(s, al, be, r, &nodes, &steps, &first, &last);
+    arc_len = 0.0;
+    for (double t : steps) {
+      // Chords are positive on the wrapped side; at engagement they shrink
+      // to zero, where rounding may leave ~1e-17 m of either sign.
+      if (!(t > -tiny)) return false;
+      arc_len += t;
     }
-    arc_len += t;
+    total = first + arc_len + last;
+    return std::isfinite(total);
+  };
+  // Candidates with N chords that are valid but longer than the bound (a
+  // locally shortest path of another family); the shortest is used when no
+  // solution within the bound is found.
+  bool have_candidate = false;
+  double cand_total = 0, cand_al = 0, cand_be = 0;
+  Vec3 cand_y0, cand_ea, cand_eb;
+  auto done = [&](bool converged) {
+    if (!(converged && valid())) return false;
+    if (total <= bound) return true;
+    if (s.N == N && (!have_candidate || total < cand_total)) {
+      have_candidate = true;
+      cand_total = total;
+      cand_al = al;
+      cand_be = be;
+      cand_y0 = s.y0;
+      cand_ea = s.ea;
+      cand_eb = s.eb;
+    }
+    return false;
+  };
+  // First attempt: at most 12 iterations (a good guess converges in 2-4).
+  bool ok = single(12);
+  total_its = it;
+  if (!done(ok)) {
+    // Continuation in the number of chords: solve with n_0 <= 4 chords
+    // (multiple shooting from nodes on the planar section, or else single
+    // shooting from the planar guess), then double n up to N, each solve
+    // started from the previous first node moved back by the change of half
+    // a chord.
+    std::vector<int> seq{N};
+    while (seq.back() > 4) seq.push_back((seq.back() + 1) / 2);
+    std::reverse(seq.begin(), seq.end());
+    s.N = seq[0];
+    std::vector<Vec3> y(s.N + 1);
+    for (int k = 0; k <= s.N; ++k)
+      y[k] = sec.point(tau1 + (k + 0.5) * span / (s.N + 1)).cwiseQuotient(D).normalized();
+    int ms_its = 0;
+    ok = solve_all_nodes(D, A, a, b, y, &ms_its);
+    total_its += ms_its;
+    if (ok) {
+      set_chart(D.cwiseProduct(y[0]));
+      ok = single(50);
+      total_its += it;
+    }
+    bool found = done(ok);
+    if (!found && !(ok && valid())) {
+      set_chart(planar_guess(s.N));
+      ok = single(50);
+      total_its += it;
+      found = done(ok);
+    }
+    for (size_t i = 1; i < seq.size() && (found || (ok && valid())); ++i) {
+      const double shift = 0.5 * (1.0 - double(s.N + 1) / (seq[i] + 1));
+      const Vec3 guess = nodes[0] - shift * (nodes[1] - nodes[0]);
+      s.N = seq[i];
+      set_chart(guess);
+      ok = single(50);
+      total_its += it;
+      found = done(ok);
+    }
+    if (!(found && s.N == N)) {
+      if (!have_candidate) {
+        std::ostringstream msg;
+        msg << "the discrete geodesic (" << N << " chords) was not found (Newton residual " << rn
+            << " after continuation in the number of chords, " << total_its << " iterations)";
+        ellipsoid_failure(surf, msg.str());
+      }
+      s.N = N;
+      s.y0 = cand_y0;
+      s.ea = cand_ea;
+      s.eb = cand_eb;
+      al = cand_al;
+      be = cand_be;
+      valid();
+    }
   }
+  it = total_its;
   // Turning angle: at every node the direction turns by 2 asin(|u . n|).
   double turn = 0.0;
   for (int k = 0; k <= N; ++k) {
@@ -446,6 +685,79 @@ SegmentWrap ellipsoid_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b
   w.arc_angle = turn;
   w.iterations = it;
   if (arc) arc->insert(arc->end(), nodes.begin(), nodes.end());
+  return w;
+}
+
+// ------------------------------------------------------------------- torus --
+// Frame of the local cylinder at angle phi of the centre circle: origin on the
+// circle, z along its tangent, x towards the torus axis (the allowed side).
+Pose torus_section(double ring, double phi) {
+  const double c = std::cos(phi), s = std::sin(phi);
+  Pose X = Pose::Identity();
+  X.linear().col(0) = Vec3(-c, -s, 0.0);
+  X.linear().col(1) = Vec3(0.0, 0.0, 1.0);
+  X.linear().col(2) = Vec3(-s, c, 0.0);
+  X.translation() = Vec3(ring * c, ring * s, 0.0);
+  return X;
+}
+
+SegmentWrap torus_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b, std::vector<Vec3>* arc) {
+  // Through the hole: the segment crosses z = 0 inside the centre circle.
+  if (!((a.z() > 0) != (b.z() > 0))) return SegmentWrap{};
+  const double f = a.z() / (a.z() - b.z());
+  const Vec3 cross = a + f * (b - a);
+  if (!(std::hypot(cross.x(), cross.y()) < surf.ring_radius)) return SegmentWrap{};
+  const double R = surf.radius, ring = surf.ring_radius;
+  auto length_at = [&](double phi, SegmentWrap* out, std::vector<Vec3>* pts) {
+    const Pose X = torus_section(ring, phi);
+    const Pose Xi = X.inverse();
+    const Vec3 ac = Xi * a, bc = Xi * b;
+    const SegmentWrap w = cylinder_wrap(ac, bc, R, std::numeric_limits<double>::infinity(), kPi, pts);
+    if (out) *out = w;
+    return w.active ? (w.entry - ac).norm() + w.arc_length + (bc - w.exit).norm() : (bc - ac).norm();
+  };
+  const double phi_c = std::atan2(cross.y(), cross.x());
+  SegmentWrap w0;
+  length_at(phi_c, &w0, nullptr);
+  if (!w0.active) return SegmentWrap{};
+  // Maximise l(phi) (Danskin: the most constraining section) by Newton on
+  // l'(phi) = 0 with central differences (h = 1e-6 rad: l is a closed form
+  // smooth in phi, rounding ~1e-17 m gives l'' to ~1e-5 relative), steps
+  // limited to 0.05 rad, within a quarter turn of phi_c.
+  const double h = 1e-6, window = kPi / 4;
+  double phi = phi_c;
+  int it = 0;
+  bool converged = false;
+  for (; it < 100; ++it) {
+    const double lp = length_at(phi + h, nullptr, nullptr), l0 = length_at(phi, nullptr, nullptr),
+                 lm = length_at(phi - h, nullptr, nullptr);
+    const double d1 = (lp - lm) / (2 * h), d2 = (lp - 2 * l0 + lm) / (h * h);
+    double step = d2 < 0 ? -d1 / d2 : (d1 > 0 ? 0.05 : -0.05);
+    step = std::clamp(step, -0.05, 0.05);
+    phi = std::clamp(phi + step, phi_c - window, phi_c + window);
+    if (std::abs(step) < 1e-10 && d2 < 0) {
+      converged = true;
+      ++it;
+      break;
+    }
+  }
+  if (!converged) {
+    std::ostringstream m;
+    m << "wrap torus '" << surf.name << "': the most constraining section was not found (" << it
+      << " iterations, phi = " << phi << " rad)";
+    throw common::NumericalError(m.str());
+  }
+  SegmentWrap w;
+  std::vector<Vec3> pts;
+  length_at(phi, &w, arc ? &pts : nullptr);
+  if (!w.active) return SegmentWrap{};
+  const Pose X = torus_section(ring, phi);
+  w.entry = X * w.entry;
+  w.exit = X * w.exit;
+  w.X_SC = X;
+  w.iterations = it;
+  if (arc)
+    for (const Vec3& p : pts) arc->push_back(X * p);
   return w;
 }
 
@@ -498,9 +810,9 @@ SegmentWrap wrap_segment(const WrapSurface& s, const Vec3& a, const Vec3& b, int
     case WrapShape::kEllipsoid:
       return ellipsoid_wrap(s, a, b, std::max(2, ellipsoid_chords), arc, first_node_guess);
     case WrapShape::kTorus:
-      break;
+      return torus_wrap(s, a, b, arc);
   }
-  throw common::InputError("wrap torus '" + s.name + "': not implemented yet");
+  throw common::InputError("wrap '" + s.name + "': unknown shape");
 }
 
 }  // namespace arthrosim::musculoskeletal
