@@ -732,6 +732,14 @@ SegmentWrap torus_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b, st
     const double lp = length_at(phi + h, nullptr, nullptr), l0 = length_at(phi, nullptr, nullptr),
                  lm = length_at(phi - h, nullptr, nullptr);
     const double d1 = (lp - lm) / (2 * h), d2 = (lp - 2 * l0 + lm) / (h * h);
+    // Converged when l' is at its rounding level (~1e-11 m/rad): phi* is
+    // then known to |l'| / |l''|, and the envelope error of the moment arms
+    // is of the order of l' itself.
+    if (d2 < 0 && std::abs(d1) < 5e-11) {
+      converged = true;
+      ++it;
+      break;
+    }
     double step = d2 < 0 ? -d1 / d2 : (d1 > 0 ? 0.05 : -0.05);
     step = std::clamp(step, -0.05, 0.05);
     phi = std::clamp(phi + step, phi_c - window, phi_c + window);
