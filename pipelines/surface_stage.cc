@@ -12,7 +12,7 @@
 #include <sstream>
 
 #include "cartilage/coupled_system.h"
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
@@ -27,7 +27,7 @@
 namespace arthrosim::pipelines {
 namespace {
 
-using cartilage::HhtIntegrator;
+using numerics::HhtIntegrator;
 using cartilage::ShellModel;
 using common::H5File;
 
@@ -323,14 +323,14 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   if (steady) interval = end_time;
   if (interval < dt) interval = dt;
 
-  cartilage::IntegratorOptions iopt;
+  numerics::IntegratorOptions iopt;
   iopt.quasi_static = quasi_static;
   iopt.alpha = o.si("hht_alpha");
   iopt.dt_s = steady ? end_time : dt;
   const std::string& solver = o.text("linear_solver");
-  iopt.solver = solver == "cholmod"   ? cartilage::LinearSolverChoice::kCholmod
-                : solver == "umfpack" ? cartilage::LinearSolverChoice::kUmfpack
-                                      : cartilage::LinearSolverChoice::kAuto;
+  iopt.solver = solver == "cholmod"   ? numerics::LinearSolverChoice::kCholmod
+                : solver == "umfpack" ? numerics::LinearSolverChoice::kUmfpack
+                                      : numerics::LinearSolverChoice::kAuto;
   // Opt-in keys of the dynamic path (docs/scenes.md; all off by default).
   // osmotic_ramp_s: without imposed kinematics the osmotic pressure rises
   // over this time, by the same smoothstep the seating ramp uses with
@@ -724,8 +724,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   // Imposed kinematics: each step starts from the surfaces carried by their
   // bones (rigid predictor), so Newton only finds the deformation change.
   if (moving)
-    iopt.predictor = o.text("predictor") == "extrapolated" ? cartilage::IntegratorOptions::Predictor::kSystemExtrapolated
-                                                           : cartilage::IntegratorOptions::Predictor::kSystem;
+    iopt.predictor = o.text("predictor") == "extrapolated" ? numerics::IntegratorOptions::Predictor::kSystemExtrapolated
+                                                           : numerics::IntegratorOptions::Predictor::kSystem;
   Eigen::VectorXd q0(system.num_dofs());
   for (int k = 0; k < system.num_models(); ++k)
     q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();
@@ -746,7 +746,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     common::log_warn("surface " + sc->name + ": step rejected and halved (" + std::to_string(++rejections_logged) +
                      " so far): " + rejection);
   };
-  HhtIntegrator integrator(system, iopt);
+  numerics::HhtIntegrator integrator(system, iopt);
   integrator.initialize(0.0, q0);
   common::log_info("scenario " + sc->name + ": " +
                    (steady ? std::string("steady state (static equilibrium at t = ") + std::to_string(end_time) + " s)"
@@ -791,8 +791,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           integrator.advance_to(t_next);
         }
         const double wall = now_s() - w0;
-        const cartilage::IntegratorStatistics& s = integrator.statistics();
-        const cartilage::StepRecord& rec = s.log.back();
+        const numerics::IntegratorStatistics& s = integrator.statistics();
+        const numerics::StepRecord& rec = s.log.back();
         const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
         if (common::log_level() >= common::LogLevel::kDebug) {  // --verbose: the step's Newton history
           std::ostringstream m;
@@ -921,7 +921,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   }
   if (osmotic_ramp > 0) out.set_attribute("/", "osmotic_ramp_s", osmotic_ramp);
   for (auto& a : contact_out) a.close();
-  const cartilage::IntegratorStatistics& s = integrator.statistics();
+  const numerics::IntegratorStatistics& s = integrator.statistics();
   const cartilage::CoupledSystemStatistics& cs = system.statistics();
   out.set_attribute("/solver", "steps", static_cast<std::int64_t>(s.steps));
   out.set_attribute("/solver", "newton_iterations", static_cast<std::int64_t>(s.newton_iterations));

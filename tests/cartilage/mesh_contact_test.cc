@@ -13,7 +13,7 @@
 #include <cstdlib>
 
 #include "cartilage/coupled_system.h"
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/mesh_contact.h"
 #include "cartilage/shell_model.h"
 #include "common/effects.h"
@@ -373,14 +373,14 @@ TEST(MeshContact, UncoupledSystemIsItsModels) {
   Eigen::VectorXd q(sys.num_dofs());
   q << A->reference_state(), B->reference_state();
   for (int i = 0; i < q.size(); ++i) q(i) += 1e-5 * std::cos(1.3 * i);
-  EvalRequest r;
+  numerics::EvalRequest r;
   r.q = &q;
   Eigen::VectorXd F;
   Eigen::SparseMatrix<double> K;
   sys.evaluate(r, F, nullptr, &K);
   Eigen::VectorXd qa = sys.segment(0, q), qb = sys.segment(1, q), Fa, Fb;
   Eigen::SparseMatrix<double> Ka, Kb;
-  EvalRequest ra = r, rb = r;
+  numerics::EvalRequest ra = r, rb = r;
   ra.q = &qa;
   rb.q = &qb;
   A->evaluate(ra, Fa, nullptr, &Ka);
@@ -402,15 +402,15 @@ void fix_in_plane(ShellModel& m) {
 }
 
 /// Solves the quasi-static contact problem in `steps` load steps to t = 1.
-void solve_quasi_static(CoupledShellSystem& sys, int steps, Eigen::VectorXd& q, IntegratorStatistics* stats = nullptr) {
-  IntegratorOptions opt;
+void solve_quasi_static(CoupledShellSystem& sys, int steps, Eigen::VectorXd& q, numerics::IntegratorStatistics* stats = nullptr) {
+  numerics::IntegratorOptions opt;
   opt.quasi_static = true;
   opt.dt_s = 1.0 / steps;
   opt.max_newton_iterations = 25;
   opt.line_search_halvings = 8;
   opt.residual_rtol = 1e-9;
   opt.residual_atol_N = 1e-8;
-  HhtIntegrator hht(sys, opt);
+  numerics::HhtIntegrator hht(sys, opt);
   hht.initialize(0.0, q);
   try {
     hht.advance_to(1.0);
@@ -469,7 +469,7 @@ TEST(MeshContact, RigidSphereOnFoundationMatchesClosedForm) {
     sys.add_contact("plate-sphere", 0, 1, o);
     Eigen::VectorXd q(sys.num_dofs());
     q << P->reference_state(), S->reference_state();
-    IntegratorStatistics st;
+    numerics::IntegratorStatistics st;
     solve_quasi_static(sys, 4, q, &st);
     const ContactPairReport rep = sys.contact_report(0, q);
     const double F = -rep.total_force_a.z();  // the sphere pushes the plate down
