@@ -123,6 +123,11 @@ bool is_ext(const XMLElement* e, const char* local) {
 // --- URDF structure pre-check (urdfdom reports no line numbers) -------------
 void precheck_urdf(const Reader& rd, const XMLElement* robot, std::map<std::string, int>& link_line,
                    std::map<std::string, int>& joint_line) {
+  // The joint whose child each link is: a tree has one per link (but the
+  // root) and no loop. urdfdom refuses other graphs too, but only after
+  // building them with owning pointers in a cycle, which it never frees.
+  std::map<std::string, const XMLElement*> parent_joint;
+  std::map<std::string, std::string> parent_link;
   for (const XMLElement* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
     const std::string n = rd.attr(l, "name");
     if (!link_line.emplace(n, l->GetLineNum()).second)
@@ -148,12 +153,30 @@ void precheck_urdf(const Reader& rd, const XMLElement* robot, std::map<std::stri
       const std::string link = rd.attr(pc, "link");
       if (!link_line.count(link)) rd.fail(pc, "joint '" + n + "': unknown " + role + " link '" + link + "'");
     }
+    const std::string parent = rd.attr(j->FirstChildElement("parent"), "link");
+    const std::string child = rd.attr(j->FirstChildElement("child"), "link");
+    if (parent == child) rd.fail(j, "joint '" + n + "' expected different parent and child links, found '" + child + "' for both");
+    if (const auto [it, added] = parent_joint.emplace(child, j); !added)
+      rd.fail(j, "joint '" + n + "': link '" + child + "' is already the child of joint '" +
+                     rd.attr(it->second, "name") + "' (line " + std::to_string(it->second->GetLineNum()) +
+                     "); a kinematic tree gives each link one parent");
+    parent_link[child] = parent;
     if ((type == "revolute" || type == "prismatic") && !j->FirstChildElement("limit"))
       rd.fail(j, "joint '" + n + "' (" + type + ") expected a <limit> element, found none");
     if (const XMLElement* lim = j->FirstChildElement("limit")) {
       if (rd.has(lim, "lower") && rd.has(lim, "upper") &&
           rd.number(lim, "lower") > rd.number(lim, "upper"))
         rd.fail(lim, "joint '" + n + "' expected lower <= upper limit");
+    }
+  }
+  // No loop: going up from any link must reach a link without a parent.
+  for (const auto& [start, joint] : parent_joint) {
+    std::string link = start;
+    for (std::size_t steps = 0; parent_link.count(link); ++steps) {
+      if (steps > parent_link.size())
+        rd.fail(joint, "joint '" + std::string(rd.attr(joint, "name")) + "' is part of a loop of joints through link '" +
+                           start + "'; a kinematic tree has none");
+      link = parent_link[link];
     }
   }
 }
