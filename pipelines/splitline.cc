@@ -7,6 +7,7 @@
 #include <map>
 #include <numbers>
 #include <sstream>
+#include <stdexcept>
 
 #include "common/error.h"
 
@@ -87,7 +88,13 @@ class NumberScanner {
       throw InputError(file_, line_, "expected a number in " + what + ", found '" +
                                          s_.substr(start, std::min<size_t>(12, s_.size() - start)) + "'");
     }
-    const double v = std::stod(s_.substr(start, i_ - start));
+    const std::string text = s_.substr(start, i_ - start);
+    double v = 0;
+    try {
+      v = std::stod(text);
+    } catch (const std::out_of_range&) {
+      throw InputError(file_, line_, "number out of range in " + what + ": '" + text.substr(0, 24) + "'");
+    }
     if (!std::isfinite(v)) throw InputError(file_, line_, "non-finite number in " + what);
     return v;
   }
@@ -413,7 +420,17 @@ void sample_split_lines(SplitLineMap& map, double spacing) {
     for (Eigen::Index i = 1; i < P.rows(); ++i) s[i] = s[i - 1] + (P.row(i) - P.row(i - 1)).norm();
     const double L = s.back();
     if (!(L > 0)) continue;
-    const int n = std::max(1, static_cast<int>(std::floor(L / spacing)));
+    // A map is a drawing of one cartilage: a million samples is far beyond
+    // any real one (the bundled map has ~1,000); more means a split line far
+    // longer than the outline (a typo'd coordinate), refused before sampling.
+    constexpr double kMaxSamples = 1e6;
+    const double count = std::floor(L / spacing);
+    if (!(count + static_cast<double>(pts.size()) <= kMaxSamples)) {
+      throw InputError(map.source, 0,
+                       "split lines of total length " + std::to_string(L) + " would give more than 1e6 samples at spacing " +
+                           std::to_string(spacing) + " (outline diagonal / 100 by default); is a coordinate wrong?");
+    }
+    const int n = std::max(1, static_cast<int>(count));
     const double step = L / n;
     Eigen::Index seg = 1;
     for (int k = 0; k < n; ++k) {

@@ -357,6 +357,17 @@ def hdf5(out):
     s = h.group(0, "solver")
     h.dataset(s, "status", "i32", [4], [0, 0, 1, 0])
     h.dataset(s, "faces", "i32", [1, 3], [0, 1, 2])
+    # Run metadata (common/metadata.h) and the effect ledger (common/effects.h).
+    for key, value in (("arthrosim_version", "0.1.0"), ("arthrosim_git_revision", "a3d9dcd"),
+                       ("program", "arthrosim-comak"), ("scene_path", "demo.yaml"), ("scene_sha256", "00"),
+                       ("command_line", "arthrosim-comak --out k.h5"), ("options", "comak.x = 1"),
+                       ("version_eigen", "3.4.0")):
+        h.attribute(0, key, "str", [value])
+    e = h.group(0, "effects")
+    h.attribute(h.objects.index(h.groups[e]), "stage", "str", ["musculoskeletal"])
+    h.dataset(e, "built", "str", [2], ["ligaments", "muscles"])
+    h.dataset(e, "part", "str", [2], ["MCL", "vasmed"])
+    h.dataset(e, "count", "i32", [2], [6, 1])
     write(os.path.join(out, "hdf5", "kinematics_like.h5spec"), bytes(h.data))
     h = H5Spec()
     h.attribute(0, "fixed", "fixed", ["abcdefgh"], fixed_size=8)
@@ -383,6 +394,29 @@ def hdf5(out):
     write(os.path.join(out, "hdf5_raw", "h5py_interop.h5"), open(src, "rb").read())
 
 
+def splitlines(out):
+    """The bundled SYNTHETIC split-line maps cut short: the SVG's outline and
+    its first split lines (each cut to 12 points) inside their transformed
+    group; the CSV's first samples and every 20th outline point."""
+    svg = open(os.path.join(ROOT, "data", "splitlines", "synthetic_femur.svg")).read().splitlines()
+    keep, lines = [], 0
+    for line in svg:
+        if "<polyline" in line or "<line" in line or ("<path" in line and "outline" not in line):
+            lines += 1
+            if lines > 3:
+                continue
+            if 'points="' in line:
+                head, rest = line.split('points="', 1)
+                pts, tail = rest.split('"', 1)
+                line = head + 'points="' + " ".join(pts.split()[:12]) + '"' + tail
+        keep.append(line)
+    write(os.path.join(out, "splitline", "femur_short.svg"), "\n".join(keep) + "\n")
+    csv = open(os.path.join(ROOT, "data", "splitlines", "synthetic_femur.csv")).read().splitlines()
+    outline_at = csv.index("[outline]")
+    short = csv[:4 + 20] + csv[outline_at:outline_at + 2] + csv[outline_at + 2::20]
+    write(os.path.join(out, "splitline", "femur_short.csv"), "\n".join(short) + "\n")
+
+
 def test_data():
     """tests/common/data/hdf5_sparse.h5 for tests/common/fuzz_inputs_test.cc:
     datasets declaring far more elements than the file stores (never
@@ -401,7 +435,7 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "tests", "fuzz", "corpus"),
                     help="corpus root (default: tests/fuzz/corpus)")
     a = ap.parse_args()
-    for make in (meshes, storage, trials, scenes, urdf, prepared, hdf5):
+    for make in (meshes, storage, trials, scenes, urdf, prepared, hdf5, splitlines):
         make(a.out)
     test_data()
     for target in sorted(os.listdir(a.out)):

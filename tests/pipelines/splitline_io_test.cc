@@ -107,6 +107,21 @@ TEST(SplitlineSvg, ErrorsNameFileAndLine) {
   EXPECT_NE(msg.find("expected a split-line map ending in .svg or .csv"), std::string::npos) << msg;
 }
 
+// Found by fuzz_splitline: a number beyond the double range (1e999) made
+// std::stod throw std::out_of_range out of the reader.
+TEST(SplitlineSvg, NumberOutOfRangeIsAnInputError) {
+  const auto msg = error_of([] { parse_splitline_svg(svg("<polyline points=\"0,0 1e999,1\"/>"), "big.svg"); });
+  EXPECT_NE(msg.find("big.svg:4: error: number out of range in <polyline> points: '1e999'"), std::string::npos) << msg;
+}
+
+// Found by fuzz_splitline: a split line 10^5 times longer than the outline
+// was sampled at 1/100 of the outline's diagonal (10^7 samples, a timeout).
+TEST(SplitlineSvg, SplitLinesFarLongerThanTheOutlineAreRefused) {
+  const auto msg = error_of([] { parse_splitline_svg(svg("<polyline points=\"0,0 1e7,0\"/>"), "long.svg"); });
+  EXPECT_NE(msg.find("long.svg: error: split lines of total length"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("would give more than 1e6 samples"), std::string::npos) << msg;
+}
+
 const char* kCsv =
     "# test map\n"
     "[samples]\n"
