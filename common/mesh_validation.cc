@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <queue>
@@ -289,19 +290,41 @@ std::vector<int> merge_vertices(const Points3& V, double tol) {
     }
     return rep;
   }
+  // Grid of cells at least `tol` wide (so vertices within tol lie in the
+  // same or adjacent cells), indexed from the lower corner of the finite
+  // vertices. The cell is widened when the extent would need more than 2^40
+  // cells per axis, so every index is a non-negative integer far below the
+  // int64 range (no overflow for any finite coordinate; a coordinate so large
+  // that x - lo overflows is clamped into the last cell, where candidates are
+  // still compared by their true distance). Hashing in unsigned arithmetic.
+  constexpr double kMaxCells = 1099511627776.0;  // 2^40
+  Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
+  for (int i = 0; i < n; ++i) {
+    if (!V.row(i).allFinite()) continue;
+    lo = lo.cwiseMin(V.row(i).transpose());
+    hi = hi.cwiseMax(V.row(i).transpose());
+  }
+  double span = 0.0;
+  for (int k = 0; k < 3; ++k)
+    if (hi[k] >= lo[k]) span = std::max(span, hi[k] - lo[k]);  // inf if the extent overflows
+  const double cell = std::isfinite(span) ? std::max(tol, span / kMaxCells) : std::numeric_limits<double>::max();
+  auto index = [&](double x, int k) -> int64_t {
+    const double r = std::floor((x - lo[k]) / cell);
+    if (!(r >= 0.0)) return 0;  // NaN from inf - inf as well
+    return r >= kMaxCells ? static_cast<int64_t>(kMaxCells) : static_cast<int64_t>(r);
+  };
   using Cell = std::array<int64_t, 3>;
   struct CellHash {
     size_t operator()(const Cell& c) const {
-      return static_cast<size_t>(c[0] * 73856093LL) ^ static_cast<size_t>(c[1] * 19349663LL) ^
-             static_cast<size_t>(c[2] * 83492791LL);
+      return static_cast<size_t>(static_cast<uint64_t>(c[0]) * 73856093ULL ^ static_cast<uint64_t>(c[1]) * 19349663ULL ^
+                                 static_cast<uint64_t>(c[2]) * 83492791ULL);
     }
   };
   std::unordered_map<Cell, std::vector<int>, CellHash> grid;
   const double tol2 = tol * tol;
   for (int i = 0; i < n; ++i) {
     if (!V.row(i).allFinite()) continue;
-    const Cell c{static_cast<int64_t>(std::floor(V(i, 0) / tol)), static_cast<int64_t>(std::floor(V(i, 1) / tol)),
-                 static_cast<int64_t>(std::floor(V(i, 2) / tol))};
+    const Cell c{index(V(i, 0), 0), index(V(i, 1), 1), index(V(i, 2), 2)};
     int best = -1;
     for (int64_t dx = -1; dx <= 1; ++dx)
       for (int64_t dy = -1; dy <= 1; ++dy)
