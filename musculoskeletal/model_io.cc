@@ -578,12 +578,15 @@ PreparedSurfacesReport replace_contact_surfaces(
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
   common::H5File f(prepared_path, common::H5File::Mode::kRead);
   const std::vector<std::string> names = f.read_strings("/surfaces/names");
-  // Prepared surfaces by the file name of their source mesh.
-  std::map<std::string, std::string> by_file;
+  // Prepared surfaces by the file name of their source mesh; several for one
+  // file when prepare split it into compartments (a tibial cartilage mesh
+  // holding both plateaus): the model's surface is then their union.
+  std::map<std::string, std::vector<std::string>> by_file;
   for (const auto& n : names)
     by_file[std::filesystem::path(f.attribute_string("/surfaces/" + n, "source_file"))
                 .filename()
-                .string()] = n;
+                .string()]
+        .push_back(n);
   auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
@@ -594,26 +597,38 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
                        "contact pair '" + pair + "': expected a prepared surface made from '" +
                            file + "' (surface '" + s.name + "'), found surfaces from: " + list);
     }
-    const std::string g = "/surfaces/" + it->second + "/triangles/";
     common::TriangleMesh mesh;
-    mesh.V = f.read_matrix(g + "vertices", 3);
-    mesh.F = f.read_matrix_int(g + "faces", 3);
-    const Eigen::VectorXd tv = f.read_vector(g + "thickness");
-    if (tv.size() != mesh.num_vertices() || mesh.num_triangles() == 0)
-      throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
-                                             std::to_string(tv.size()) + " values for " +
-                                             std::to_string(mesh.num_vertices()) + " vertices");
+    Eigen::VectorXd tv;
+    std::string groups;
+    for (const std::string& part : it->second) {
+      const std::string g = "/surfaces/" + part + "/triangles/";
+      const Eigen::MatrixXd V = f.read_matrix(g + "vertices", 3);
+      const Eigen::MatrixXi F = f.read_matrix_int(g + "faces", 3);
+      const Eigen::VectorXd t = f.read_vector(g + "thickness");
+      if (t.size() != V.rows() || F.rows() == 0)
+        throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
+                                               std::to_string(t.size()) + " values for " +
+                                               std::to_string(V.rows()) + " vertices");
+      const int n0 = mesh.num_vertices(), t0 = mesh.num_triangles();
+      mesh.V.conservativeResize(n0 + V.rows(), 3);
+      mesh.V.bottomRows(V.rows()) = V;
+      mesh.F.conservativeResize(t0 + F.rows(), 3);
+      mesh.F.bottomRows(F.rows()) = F.array() + n0;
+      tv.conservativeResize(n0 + t.size());
+      tv.tail(t.size()) = t;
+      groups += (groups.empty() ? "" : "+") + g;
+    }
     // Same place as the model's own mesh (in the file frame): the centroids
     // of the two surfaces must agree to within 2 mm, else the prepared file
     // belongs to another geometry.
     const double offset = centroid_offset(s, mesh);
     if (offset > 2e-3) {
       std::ostringstream m;
-      m << g << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
+      m << groups << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";
       throw InputError(prepared_path, 0, m.str());
     }
-    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + g);
+    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + groups);
   };
   return replace_contact_surfaces(model, make);
 }
