@@ -666,10 +666,12 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
     using common::XdmfCenter;
     series.surfaces.push_back({s.name + "_cartilage", t + "/vertices", t + "/faces", common::XdmfCellType::kTriangle,
                                {{"thickness_m", t + "/thickness", XdmfCenter::kNode, false},
+                                {"thickness_measured_m", t + "/thickness_measured", XdmfCenter::kNode, false},
                                 {"thickness_source", t + "/thickness_source", XdmfCenter::kNode, false},
                                 {"normal", t + "/normals", XdmfCenter::kNode, false}}});
     series.surfaces.push_back({s.name + "_quads", q + "/nodes", q + "/quads", common::XdmfCellType::kQuadrilateral,
                                {{"thickness_m", q + "/thickness", XdmfCenter::kNode, false},
+                                {"thickness_measured_m", q + "/thickness_measured", XdmfCenter::kNode, false},
                                 {"thickness_source", q + "/thickness_source", XdmfCenter::kNode, false},
                                 {"on_periphery", q + "/on_periphery", XdmfCenter::kNode, false},
                                 {"normal", q + "/normals", XdmfCenter::kNode, false}}});
