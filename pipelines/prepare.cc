@@ -249,38 +249,53 @@ ModelFiles find_model_files(const std::string& path) {
   return files;
 }
 
-void cast_thickness(const TriangleMesh& bone, bool bone_closed, const Points3& points, const Points3& normals,
-                    double max_distance, Eigen::VectorXd* thickness, Eigen::VectorXi* source,
-                    Eigen::VectorXd* overlap) {
-  const common::TriangleTree tree(bone);
-  std::unique_ptr<common::ClosedSurfaceSide> side;
-  if (bone_closed) side = std::make_unique<common::ClosedSurfaceSide>(bone);
+namespace {
+
+// The queries thickness casting needs on one bone, built once per bone.
+struct BoneQueries {
+  common::TriangleTree tree;
+  std::unique_ptr<common::ClosedSurfaceSide> side;  // closed bones only
+  BoneQueries(const TriangleMesh& bone, bool closed) : tree(bone) {
+    if (closed) side = std::make_unique<common::ClosedSurfaceSide>(bone);
+  }
+};
+
+void cast_with(const BoneQueries& q, const Points3& points, const Points3& normals, double max_distance,
+               Eigen::VectorXd* thickness, Eigen::VectorXi* source, Eigen::VectorXd* overlap) {
   const int n = static_cast<int>(points.rows());
   thickness->resize(n);
   source->resize(n);
   if (overlap) overlap->setZero(n);
   for (int i = 0; i < n; ++i) {
     const Vec3 p = points.row(i).transpose();
-    if (side && side->inside(p)) {
+    if (q.side && q.side->inside(p)) {
       // The articular surface lies inside the bone here (overlapping
       // segmentations): no cartilage between the two surfaces.
       (*thickness)[i] = 0.0;
       (*source)[i] = static_cast<int>(ThicknessSource::kInsideBone);
-      if (overlap) (*overlap)[i] = tree.closest_point(p).distance;
+      if (overlap) (*overlap)[i] = q.tree.closest_point(p).distance;
       continue;
     }
     const Vec3 dir = -normals.row(i).transpose();
     // The first entry into the bone: a ray leaving a closed bone's back face
     // first cannot start outside it, so only front faces count there.
-    const auto hit = tree.first_hit(p, dir, max_distance, bone_closed ? common::HitSide::kFront : common::HitSide::kBoth);
+    const auto hit = q.tree.first_hit(p, dir, max_distance, q.side ? common::HitSide::kFront : common::HitSide::kBoth);
     if (hit) {
       (*thickness)[i] = hit->distance;
       (*source)[i] = static_cast<int>(ThicknessSource::kRay);
       continue;
     }
-    (*thickness)[i] = tree.closest_point(p).distance;
+    (*thickness)[i] = q.tree.closest_point(p).distance;
     (*source)[i] = static_cast<int>(ThicknessSource::kClosestPoint);
   }
+}
+
+}  // namespace
+
+void cast_thickness(const TriangleMesh& bone, bool bone_closed, const Points3& points, const Points3& normals,
+                    double max_distance, Eigen::VectorXd* thickness, Eigen::VectorXi* source,
+                    Eigen::VectorXd* overlap) {
+  cast_with(BoneQueries(bone, bone_closed), points, normals, max_distance, thickness, source, overlap);
 }
 
 std::pair<TriangleMesh, TriangleMesh> split_compartments(const TriangleMesh& mesh, const Vec3& lateral,
@@ -340,8 +355,8 @@ namespace {
 
 // Steps 4-6 for one cartilage surface (its input already loaded, oriented
 // and, if declared, split).
-void prepare_surface(PreparedSurface& s, const TriangleMesh& input, const PreparedBone& bone, double target,
-                     const PrepareOptions& options, std::vector<std::string>* warnings) {
+void prepare_surface(PreparedSurface& s, const TriangleMesh& input, const PreparedBone& bone, const BoneQueries& queries,
+                     double target, const PrepareOptions& options, std::vector<std::string>* warnings) {
   auto& st = s.stats;
   st.input_triangles = input.num_triangles();
   st.target_edge_length = target;
@@ -390,10 +405,10 @@ void prepare_surface(PreparedSurface& s, const TriangleMesh& input, const Prepar
 
   // Thickness (step 6).
   Eigen::VectorXd overlap;
-  cast_thickness(bone.mesh, bone.closed, s.triangles.V, s.vertex_normals, options.max_cast_distance,
-                 &s.thickness_measured, &s.thickness_source, &overlap);
-  cast_thickness(bone.mesh, bone.closed, s.quads.V, s.node_normals, options.max_cast_distance,
-                 &s.node_thickness_measured, &s.node_thickness_source);
+  cast_with(queries, s.triangles.V, s.vertex_normals, options.max_cast_distance, &s.thickness_measured,
+            &s.thickness_source, &overlap);
+  cast_with(queries, s.quads.V, s.node_normals, options.max_cast_distance, &s.node_thickness_measured,
+            &s.node_thickness_source, nullptr);
   s.thickness = s.thickness_measured.cwiseMax(options.min_thickness);
   s.node_thickness = s.node_thickness_measured.cwiseMax(options.min_thickness);
   st.max_overlap = overlap.size() ? overlap.maxCoeff() : 0.0;
@@ -498,8 +513,11 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
     bone_index[name] = static_cast<int>(model.bones.size());
     model.bones.push_back(std::move(bone));
   }
+  std::vector<std::unique_ptr<BoneQueries>> queries;
+  for (const PreparedBone& b : model.bones) queries.push_back(std::make_unique<BoneQueries>(b.mesh, b.closed));
   for (const auto& [name, path] : files.cartilage) {
-    const PreparedBone& bone = model.bones[bone_index.at(files.cartilage_bone.at(name))];
+    const int bi = bone_index.at(files.cartilage_bone.at(name));
+    const PreparedBone& bone = model.bones[bi];
     std::vector<std::string> repairs;
     const auto u = files.cartilage_unit.find(name);
     const common::LengthUnit unit = u != files.cartilage_unit.end() ? u->second : options.unit;
@@ -510,7 +528,7 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
     // Outward = away from the bone: flip a patch whose normals mostly point
     // in. The same distances tell whether the cartilage lies on its bone.
     {
-      const common::TriangleTree tree(bone.mesh);
+      const common::TriangleTree& tree = queries[bi]->tree;
       const Points3 vn = common::vertex_normals(input);
       int inward = 0;
       std::vector<double> gap(input.num_vertices());
@@ -562,7 +580,7 @@ PreparedModel prepare_model(const ModelFiles& files, const PrepareOptions& optio
       const double target = own != options.surface_edge_length.end()      ? own->second
                              : parent != options.surface_edge_length.end() ? parent->second
                                                                            : options.edge_length;
-      prepare_surface(s, mesh, bone, target, options, &model.warnings);
+      prepare_surface(s, mesh, bone, *queries[bi], target, options, &model.warnings);
       model.surfaces.push_back(std::move(s));
     }
   }
