@@ -80,13 +80,13 @@ struct PrepareOptions {
 
   /// Thickness floor [m]: measured values below it (a rim on the bone, a
   /// vertex inside the bone) are raised to it and counted, so the foundation
-  /// and contact stiffness K/h stay finite. Range 0 .. 2e-3; default 0.2 mm
-  /// (about half the in-plane voxel size of knee MR, 0.3-0.5 mm).
-  double min_thickness = 0.2e-3;
+  /// and contact stiffness K/h stay finite. Default 0.2 mm (about half the
+  /// in-plane voxel size of knee MR, 0.3-0.5 mm).
+  double min_thickness = 0.2 * common::units::mm;
   /// Largest estimated triangle count of one remeshed surface
   /// (common::estimate_remesh_triangles); above it the surface is refused
-  /// before remeshing. Range >= 100; default 1e6 (the lenhart2015 femoral
-  /// cartilage at the smallest edge length, 0.2 mm, estimates ~4e5).
+  /// before remeshing. Default 1e6 (the lenhart2015 femoral cartilage at the
+  /// smallest edge length, 0.2 mm, estimates 4.1e5).
   double max_triangles = 1e6;
   /// Limits of the element check of every triangle and quad written.
   common::ElementQualityLimits quality;

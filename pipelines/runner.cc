@@ -350,6 +350,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
                    "--unit", prepare.value("mesh_unit").canonical,
                    "--max-cast-distance-mm", prepare.value("max_cast_distance_mm").canonical,
                    "--remesh-iterations", prepare.value("remesh_iterations").canonical,
+                   "--min-thickness-mm", prepare.value("min_thickness_mm").canonical,
+                   "--max-triangles", prepare.value("max_triangles").canonical,
                    "--out", (out_dir / kPrepared).string()};
     const common::OptionValue& per_surface = prepare.value("surface_edge_length_mm");
     for (std::size_t i = 0; i < per_surface.list.size(); ++i)
