@@ -34,6 +34,8 @@ const std::vector<std::string> kLegKeys = {"thigh_length_m", "shank_length_m", "
                                            "foot_length_m",  "hip_x_m",        "hip_y_m",
                                            "hip_z_m"};
 constexpr const char* kLabFrame = "opensim_x_forward_y_up_z_right";
+// Most samples a trial may have on its uniform grid (2.8 hours at 100 Hz).
+constexpr double kMaxTrialSamples = 1e6;
 
 std::string trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t\r");
@@ -312,6 +314,10 @@ LoadedTable load_columns(const TrialDescription& d, const std::string& file,
   }
   const int labels_at = label_line(file);
   auto line_of = [&](Eigen::Index r) { return labels_at > 0 ? labels_at + 1 + static_cast<int>(r) : 0; };
+  if (out.time.size() < 2) {
+    throw InputError(file, line_of(out.time.size()),
+                     "expected at least 2 data rows (a time series), found " + std::to_string(out.time.size()));
+  }
   for (Eigen::Index r = 0; r < out.values.rows(); ++r) {
     if (!std::isfinite(out.time(r))) throw InputError(file, line_of(r), "non-finite time");
     if (r > 0 && !(out.time(r) > out.time(r - 1))) {
@@ -378,6 +384,19 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
     t0 = std::max(t0, tab->time(0));
     t1 = std::min(t1, tab->time(tab->time.size() - 1));
   }
+  // Bounded work: a time column in the wrong unit or a damaged time value
+  // (1e6 s, 1e300 s) would make the uniform grid need gigabytes or overflow
+  // its size.
+  auto check_grid = [&](double a, double b) {
+    if (!((b - a) * options.rate_hz <= kMaxTrialSamples)) {
+      std::ostringstream s;
+      s << "the time range common to the trial's files, [" << a << ", " << b << "] s, needs "
+        << (b - a) * options.rate_hz << " samples at " << options.rate_hz << " Hz; expected at most "
+        << kMaxTrialSamples << " (times in seconds?)";
+      throw InputError(d.path, 0, s.str());
+    }
+  };
+  check_grid(t0, t1);
   if (bad) {
     // The grid of the whole trial had the value been finite (for the frame
     // selection; its rows after the bad value are not checked).
@@ -387,6 +406,7 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
       t1_full = std::min(t1_full, bad_loads ? bad_loads->file_end
                                             : loads->time(loads->time.size() - 1));
     const Eigen::Index kept = t1 >= t0 ? uniform_grid(t0, t1, options.rate_hz).size() : 0;
+    check_grid(t0, t1_full);
     const Eigen::Index full = t1_full >= t0 ? uniform_grid(t0, t1_full, options.rate_hz).size() : 0;
     if (kept < full) {  // else the bad value lies outside the common time range
       if (kept < 4)

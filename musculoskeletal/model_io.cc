@@ -123,6 +123,11 @@ bool is_ext(const XMLElement* e, const char* local) {
 // --- URDF structure pre-check (urdfdom reports no line numbers) -------------
 void precheck_urdf(const Reader& rd, const XMLElement* robot, std::map<std::string, int>& link_line,
                    std::map<std::string, int>& joint_line) {
+  // The joint whose child each link is: a tree has one per link (but the
+  // root) and no loop. urdfdom refuses other graphs too, but only after
+  // building them with owning pointers in a cycle, which it never frees.
+  std::map<std::string, const XMLElement*> parent_joint;
+  std::map<std::string, std::string> parent_link;
   for (const XMLElement* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
     const std::string n = rd.attr(l, "name");
     if (!link_line.emplace(n, l->GetLineNum()).second)
@@ -148,12 +153,30 @@ void precheck_urdf(const Reader& rd, const XMLElement* robot, std::map<std::stri
       const std::string link = rd.attr(pc, "link");
       if (!link_line.count(link)) rd.fail(pc, "joint '" + n + "': unknown " + role + " link '" + link + "'");
     }
+    const std::string parent = rd.attr(j->FirstChildElement("parent"), "link");
+    const std::string child = rd.attr(j->FirstChildElement("child"), "link");
+    if (parent == child) rd.fail(j, "joint '" + n + "' expected different parent and child links, found '" + child + "' for both");
+    if (const auto [it, added] = parent_joint.emplace(child, j); !added)
+      rd.fail(j, "joint '" + n + "': link '" + child + "' is already the child of joint '" +
+                     rd.attr(it->second, "name") + "' (line " + std::to_string(it->second->GetLineNum()) +
+                     "); a kinematic tree gives each link one parent");
+    parent_link[child] = parent;
     if ((type == "revolute" || type == "prismatic") && !j->FirstChildElement("limit"))
       rd.fail(j, "joint '" + n + "' (" + type + ") expected a <limit> element, found none");
     if (const XMLElement* lim = j->FirstChildElement("limit")) {
       if (rd.has(lim, "lower") && rd.has(lim, "upper") &&
           rd.number(lim, "lower") > rd.number(lim, "upper"))
         rd.fail(lim, "joint '" + n + "' expected lower <= upper limit");
+    }
+  }
+  // No loop: going up from any link must reach a link without a parent.
+  for (const auto& [start, joint] : parent_joint) {
+    std::string link = start;
+    for (std::size_t steps = 0; parent_link.count(link); ++steps) {
+      if (steps > parent_link.size())
+        rd.fail(joint, "joint '" + std::string(rd.attr(joint, "name")) + "' is part of a loop of joints through link '" +
+                           start + "'; a kinematic tree has none");
+      link = parent_link[link];
     }
   }
 }
@@ -776,6 +799,17 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
         throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
                                                std::to_string(t.size()) + " values for " +
                                                std::to_string(V.rows()) + " vertices");
+      // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
+      for (int r = 0; r < F.rows(); ++r)
+        for (int k = 0; k < 3; ++k)
+          if (F(r, k) < 0 || F(r, k) >= V.rows())
+            throw InputError(prepared_path, 0, g + "faces: expected vertex indices in [0, " +
+                                                   std::to_string(V.rows()) + "), found " +
+                                                   std::to_string(F(r, k)) + " in triangle " + std::to_string(r));
+      if (!V.allFinite())
+        throw InputError(prepared_path, 0, g + "vertices: expected finite coordinates, found NaN or Inf");
+      if (!t.allFinite() || (t.array() < 0).any())
+        throw InputError(prepared_path, 0, g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
       const int n0 = mesh.num_vertices(), t0 = mesh.num_triangles();
       mesh.V.conservativeResize(n0 + V.rows(), 3);
       mesh.V.bottomRows(V.rows()) = V;
@@ -789,7 +823,7 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
     // of the two surfaces must agree to within 2 mm, else the prepared file
     // belongs to another geometry.
     const double offset = centroid_offset(s, mesh);
-    if (offset > 2e-3) {
+    if (!(offset <= 2e-3)) {
       std::ostringstream m;
       m << groups << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";

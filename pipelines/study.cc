@@ -78,6 +78,9 @@ std::string csv_field(const std::string& s) {
 // true/false/null). Errors name the file and the byte offset.
 // ---------------------------------------------------------------------------
 struct JsonValue {
+  // Declared (not an aggregate): clang with libstdc++ would otherwise need
+  // std::pair<std::string, JsonValue> complete inside this class.
+  JsonValue() = default;
   enum class Kind { kNull, kBool, kNumber, kString, kArray, kObject } kind = Kind::kNull;
   bool boolean = false;
   double number = 0.0;
