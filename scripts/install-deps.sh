@@ -8,7 +8,7 @@ PACKAGES=(
   coinor-libipopt-dev libeigen3-dev liburdfdom-dev libtinyxml2-dev libcgal-dev
   libsuitesparse-dev libopenblas-dev libhdf5-dev libyaml-cpp-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  hdf5-tools python3 python3-numpy python3-h5py
+  hdf5-tools python3 python3-numpy python3-h5py python3-matplotlib
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

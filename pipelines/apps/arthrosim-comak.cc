@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -22,6 +23,7 @@
 #include "common/metadata.h"
 #include "common/progress.h"
 #include "common/scene.h"
+#include "common/storage.h"
 #include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
@@ -88,6 +90,11 @@ int main(int argc, char** argv) {
   app.add_option("--first-frame", first, "first trial frame (0-based)")->capture_default_str();
   app.add_option("--last-frame", last, "last trial frame (-1 = the last)")->capture_default_str();
   app.add_option("--stride", stride, "use every stride-th frame")->capture_default_str();
+  double start_time = std::numeric_limits<double>::quiet_NaN(), end_time = start_time;
+  app.add_option("--start-time", start_time,
+                 "first time of the trial to solve [s] (the frames from the first at or after it; "
+                 "the whole trial is still filtered and differentiated)");
+  app.add_option("--end-time", end_time, "last time of the trial to solve [s] (frames at or before it)");
   app.add_option("--tolerance", o.force_tolerance,
                  "equilibrium tolerance of the force rows [N]; moment rows x length scale 0.03 m")
       ->capture_default_str();
@@ -112,6 +119,10 @@ int main(int argc, char** argv) {
                "muscle force a F_max f_L(l~) (Thelen 2003 active force-length; every muscle of the "
                "model must give optimal_fiber_length and tendon_slack_length, docs/model_format.md)");
   bool single_start = false;
+  bool no_damping = false;
+  app.add_flag("--no-coordinate-damping", no_damping,
+               "leave the model's coordinate dampers (SpringGeneralizedForce viscosity on the secondary "
+               "coordinates' frame-to-frame speed) out: each frame static (docs/comak.md)");
   app.add_flag("--single-start", single_start,
                "solve each frame from the previous frame's solution only (no second start from the "
                "passive settle; about half the time, may keep a worse local optimum)");
@@ -169,6 +180,7 @@ int main(int argc, char** argv) {
       }
     }
     if (single_start) o.second_start = false;
+    if (no_damping) o.coordinate_damping = false;
     if (no_move_limits) o.move_limits_first = false;
     for (const std::string& wa : weight_args) {
       const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
@@ -186,7 +198,10 @@ int main(int argc, char** argv) {
     o.forces.contact = wants("tibiofemoral_contact");
     model_path = resolve_model(model_path);
     msk::Model model = msk::load_model(model_path);
-    if (o.ankle_equilibrium) {
+    // A model with its own leg to the ground (an imported OpenSim model)
+    // takes the trial's coordinates by name and its forces on its bodies.
+    const bool model_dynamics = model.role_body("ground") >= 0;
+    if (o.ankle_equilibrium && !model_dynamics) {
       // Uniarticular ankle muscles so that the ankle row can be balanced in
       // both directions (musculoskeletal/ankle_muscles.h).
       msk::add_ankle_muscles(model);
@@ -205,13 +220,43 @@ int main(int argc, char** argv) {
     // A non-finite trial value: run the frames before it, then stop naming
     // the frame, file, line and column (exit 1; the file keeps those frames).
     to.truncate_at_non_finite = true;
-    const msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+    if (model_dynamics) {
+      // Angles are the model's revolute coordinates (translations by its prismatic ones).
+      to.is_rotational = [&model](const std::string& label) {
+        const int c = model.tree.coordinate_index(label);
+        if (c < 0) return common::default_is_rotational(label);
+        for (const msk::Joint& j : model.tree.joints)
+          if (j.coordinate == c) return j.type == msk::JointType::kRevolute;
+        return false;
+      };
+    }
+    msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+    if (!(trial.body_mass_kg > 0)) {
+      trial.body_mass_kg = model.subject_mass_kg;
+      common::log_info("subject mass from the model: " + std::to_string(model.subject_mass_kg) + " kg");
+    }
+    if (!std::isnan(start_time) || !std::isnan(end_time)) {
+      // The time window: frames of the trial's grid inside [start, end].
+      const auto [f0, f1] = msk::frames_in_window(trial, start_time, end_time);
+      if (app.count("--first-frame") || app.count("--last-frame"))
+        throw common::InputError("arthrosim-comak: give --start-time/--end-time or --first-frame/--last-frame, "
+                                 "not both");
+      first = f0;
+      last = f1;
+    }
     if (trial.side != msk::Side::kRight)
       throw common::InputError(trial_path + ": error: the bundled knee models are right knees; "
                                "this trial is of the left leg");
-    const msk::LegModel leg = msk::leg_model_for_trial(trial);
-    const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
-    const auto frames = msk::comak_frame_inputs(loads, first, last, stride, &leg);
+    std::vector<msk::ComakFrameInput> frames;
+    if (model_dynamics) {
+      std::vector<std::string> ignored;
+      frames = msk::comak_model_frame_inputs(model, trial, first, last, stride, &ignored);
+      for (const auto& i : ignored) common::log_info("external force not applied: " + i);
+    } else {
+      const msk::LegModel leg = msk::leg_model_for_trial(trial);
+      const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
+      frames = msk::comak_frame_inputs(loads, first, last, stride, &leg);
+    }
     msk::ComakProblem problem(model, o);
 
     std::ostringstream opts;
@@ -230,6 +275,8 @@ int main(int argc, char** argv) {
          << "\nmove_limits_first: " << (o.move_limits_first ? "true" : "false")
          << "\nmove_limit_m: " << o.move_limit_m << "\nmove_limit_rad: " << o.move_limit_rad
          << "\nsecond_start_move_limit_scale: " << o.second_start_move_limit_scale
+         << "\ncoordinate_damping: " << (o.coordinate_damping ? "true" : "false")
+         << "\nloads: " << (model_dynamics ? "model dynamics (the model's own leg)" : "generic leg chain (knee_loads.h)")
          << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
     for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
@@ -242,7 +289,7 @@ int main(int argc, char** argv) {
     common::EffectLedger ledger("comak");
     if (o.forces.ligaments) ledger.record("ligaments", model.num_bundles());
     ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
-    const int tibia = model.tree.body_index("tibia"), patella = model.tree.body_index("patella");
+    const int tibia = model.role_body("tibia"), patella = model.role_body("patella");
     for (const auto& c : model.contacts) {
       if (!o.forces.contact) break;
       if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());
