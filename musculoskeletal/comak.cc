@@ -177,7 +177,7 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
   for (int i = 0; i < nm; ++i) {
     const Muscle& mu = model.muscles[i];
     const double l = mu.optimal_fiber_length > 0 ? mu.optimal_fiber_length
-                                                 : evaluate_path(mu.path, kin.X_WB).length;
+                                                 : evaluate_path(mu.path, kin.X_WB, q_ref).length;
     V_[i] = mu.max_isometric_force * l / options.muscle_stress;
   }
   if (options.ankle_equilibrium) {
@@ -190,7 +190,8 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
     d0.kinematics = k0;
     bool plantar = false, dorsi = false;
     for (int i = 0; i < nm; ++i) {
-      const double r = moment_arms(model, d0, evaluate_path(model.muscles[i].path, k0.X_WB))[ankle_];
+      const double r = moment_arms(
+          model, d0, evaluate_path(model.muscles[i].path, k0.X_WB, q_ref))[ankle_];
       plantar = plantar || r < -1e-3;
       dorsi = dorsi || r > 1e-3;
     }
