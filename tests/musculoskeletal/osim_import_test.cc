@@ -101,9 +101,24 @@ TEST(OsimImport, LenhartCounts) {
   EXPECT_EQ(import_osim(kOsim.string(), scratch("leg").string(), o).muscles, 44);
 }
 
-// The written model loads: roles, free and prescribed coordinates, defaults,
-// subject mass, muscles with their fibre lengths, the contact pairs.
+// The bundled model is what the importer writes from the bundled .osim
+// (data/models/lenhart2015/README.md: regenerated bit for bit).
+TEST(OsimImport, BundledModelIsTheImportersOutput) {
+  const OsimImportSummary& s = imported(true);
+  EXPECT_EQ(read_text(s.urdf_path), read_text(kModelDir / "lenhart2015.urdf"));
+  EXPECT_EQ(read_text(s.report_path), read_text(kModelDir / "import_report.md"));
+}
+
+// The written model loads (with its wrap objects, and without them on
+// request): roles, free and prescribed coordinates, defaults, subject mass,
+// muscles with their fibre lengths, the contact pairs.
 TEST(OsimImport, ImportedModelLoads) {
+  const Model wrapped = load_model((kModelDir / "lenhart2015.urdf").string());
+  int wraps = 0;
+  for (const Muscle& mu : wrapped.muscles) wraps += static_cast<int>(mu.path.wraps.size());
+  for (const Ligament& l : wrapped.ligaments)
+    for (const LigamentBundle& b : l.bundles) wraps += static_cast<int>(b.path.wraps.size());
+  EXPECT_EQ(wraps, 37);
   const Model m = load_model(imported(false).urdf_path);
   EXPECT_EQ(m.num_coordinates(), 24);
   EXPECT_EQ(m.free_coordinates.size(), 12u);
