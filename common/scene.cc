@@ -45,6 +45,11 @@ const std::vector<OptionSpec>& schema_table() {
       {"scene", "trial", T::kPath, U::kNone, "", false, 0, 0, "", false,
        "walking trial (folder or file) for the musculoskeletal stage; needed when that stage "
        "runs"},
+      {"scene", "trial.start_s", T::kNumber, U::kSecond, "", false, -1e6, 1e6, "", false,
+       "first time of the trial that the musculoskeletal stage solves (the whole trial is still "
+       "filtered and differentiated); absent: the trial's first time"},
+      {"scene", "trial.end_s", T::kNumber, U::kSecond, "", false, -1e6, 1e6, "", false,
+       "last time of the trial that the musculoskeletal stage solves; absent: the trial's last time"},
       {"scene", "outputs", T::kOutputList, U::kNone, "", true, 0, 0, "", false,
        "what to produce: prepared_model, kinematics, surface (every scenario), report; the "
        "stages these need run, nothing else"},

@@ -361,6 +361,11 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.inputs.emplace_back("trial", *scene.trial);
     s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
     s.options = scene.comak->canonical();
+    // The trial window (top-level trial.start_s / trial.end_s) decides which
+    // frames the stage solves.
+    for (const auto& kv : scene.top.canonical())
+      if (kv.first.rfind("scene.trial.", 0) == 0) s.options.push_back(kv);
+    std::sort(s.options.begin(), s.options.end());
     s.effects = scene.comak->list("effects");
     add_path_inputs(*scene.comak, s);
     s.outputs = {out_dir / kKinematics};

@@ -165,6 +165,11 @@ int main(int argc, char** argv) {
                                         "patellofemoral_contact"};
     if (!scene_path.empty()) {
       const common::Scene scene = common::load_scene(scene_path);
+      // The trial window of the scene (explicit flags win).
+      if (scene.top.has("trial.start_s") && !app.count("--start-time") && !app.count("--first-frame"))
+        start_time = scene.top.si("trial.start_s");
+      if (scene.top.has("trial.end_s") && !app.count("--end-time") && !app.count("--last-frame"))
+        end_time = scene.top.si("trial.end_s");
       if (scene.comak) {
         const common::OptionBlock& c = *scene.comak;
         effects = c.list("effects");
@@ -238,7 +243,8 @@ int main(int argc, char** argv) {
     if (!std::isnan(start_time) || !std::isnan(end_time)) {
       // The time window: frames of the trial's grid inside [start, end].
       const auto [f0, f1] = msk::frames_in_window(trial, start_time, end_time);
-      if (app.count("--first-frame") || app.count("--last-frame"))
+      if ((app.count("--start-time") || app.count("--end-time")) &&
+          (app.count("--first-frame") || app.count("--last-frame")))
         throw common::InputError("arthrosim-comak: give --start-time/--end-time or --first-frame/--last-frame, "
                                  "not both");
       first = f0;
