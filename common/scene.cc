@@ -81,6 +81,9 @@ const std::vector<OptionSpec>& schema_table() {
       {"comak", "ipopt_tolerance", T::kNumber, U::kNone, "1e-4", false, 1e-14, 1e-2, "", false,
        "Ipopt's convergence tolerance (its option 'tol', scaled NLP) per frame; 1e-4 because the "
        "faceted contact stalls the scaled dual infeasibility at 1e-3..1e-2 (docs/comak.md)"},
+      {"comak", "ipopt_acceptable_iterations", T::kInteger, U::kNone, "5", false, 1, 1e6, "", false,
+       "consecutive iterates at Ipopt's acceptable level (acceptable_tol 1e-2) that end a solve as "
+       "'acceptable'; more keeps iterating towards ipopt_tolerance (docs/comak.md)"},
       {"comak", "ipopt_max_iterations", T::kInteger, U::kNone, "300", false, 1, 1e6, "", false,
        "Ipopt iteration limit per attempt of a frame (the last retry gets twice as many)"},
       {"comak", "activation_min", T::kNumber, U::kNone, "0.01", false, 0, 1, "", false,
@@ -90,6 +93,12 @@ const std::vector<OptionSpec>& schema_table() {
       {"comak", "ankle_equilibrium", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
        "add the ankle moment balance (gastrocnemii plus soleus and tibialis anterior stand-ins) "
        "as a constraint (docs/comak.md)"},
+      {"comak", "hip_equilibrium", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
+       "add the leg's moment balance about the hip's three axes (a model with its own leg and its "
+       "hip muscles, e.g. arthrosim import-osim --muscles leg) (docs/comak.md)"},
+      {"comak", "coordinate_damping", T::kFlag, U::kNone, "true", false, 0, 0, "", false,
+       "the model's coordinate dampers act on the secondary coordinates' speed from the previous "
+       "frame (OpenSim-JAM's SpringGeneralizedForce; docs/comak.md)"},
       {"comak", "body_inertia", T::kFlag, U::kNone, "false", false, 0, 0, "", false,
        "add the weight and d'Alembert forces of the tibia and patella bodies (URDF inertials, "
        "moving with the model; the shank's terms leave the external load) (docs/comak.md)"},

@@ -160,6 +160,31 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
     rows_.push_back(ankle_);
     revolute_.push_back(true);
   }
+  if (options.hip_equilibrium) {
+    if (!model_dynamics_)
+      throw common::InputError(model.source + ": error: COMAK hip equilibrium needs a model with its own leg "
+                               "to the ground (a 'ground' role, e.g. an imported OpenSim model)");
+    for (int k = 0; k < 3; ++k) {
+      if (hip_[k] < 0)
+        throw common::InputError(model.source + ": error: COMAK hip equilibrium needs the coordinates "
+                                 "hip_flexion, hip_adduction and hip_rotation (roles)");
+      const Joint* j = joint_of(model, hip_[k]);
+      if (!j || j->type != JointType::kRevolute)
+        throw common::InputError(model.source + ": error: COMAK hip equilibrium: '" +
+                                 model.tree.coordinates[hip_[k]] + "' is not a revolute joint");
+      hip_rows_.push_back(hip_[k]);
+      hip_joints_.push_back(static_cast<int>(j - model.tree.joints.data()));
+      rows_.push_back(hip_[k]);
+      revolute_.push_back(true);
+    }
+    // The leg: every body the hip coordinates do not move (the root's side).
+    const std::vector<int> pelvis_side = bodies_moved_by(model.tree, hip_rows_);
+    for (int b = 0; b < static_cast<int>(model.tree.bodies.size()); ++b)
+      if (std::find(pelvis_side.begin(), pelvis_side.end(), b) == pelvis_side.end()) leg_bodies_.push_back(b);
+    for (int b : leg_bodies_)
+      if (std::find(inertial_bodies_.begin(), inertial_bodies_.end(), b) == inertial_bodies_.end())
+        inertial_bodies_.push_back(b);
+  }
   const int nr = static_cast<int>(rows_.size());
   row_scale_.resize(nr);
   for (int k = 0; k < nr; ++k) row_scale_[k] = revolute_[k] ? 1.0 / options.length_scale : 1.0;
@@ -236,7 +261,9 @@ Eigen::VectorXd ComakProblem::external_generalized_force(const ModelData& data,
   if (in.model_dynamics) {
     // The trial's forces on the model's own bodies (the foot's ground
     // reaction where the trial puts it); weight and inertia: inertial_generalized_force.
-    add_lab_forces(model_.tree, data.kinematics, ground_, in.lab_forces, Q);
+    const std::vector<BodyWrench> w = lab_force_wrenches(data.kinematics, ground_, in.lab_forces);
+    add_wrenches(model_.tree, data.kinematics, w, Q);
+    add_hip_moments(data.kinematics, w, Q);
     return Q;
   }
   const Pose& X_WT = data.kinematics.X_WB[tibia_];
@@ -265,7 +292,12 @@ Eigen::VectorXd ComakProblem::inertial_generalized_force(const Eigen::VectorXd& 
     for (int c : model_.prescribed_coordinates) qd[c] = in.qd_trial[c], qdd[c] = in.qdd_trial[c];
     qd[flexion_] = in.qd_trial[flexion_];
     qdd[flexion_] = in.qdd_trial[flexion_];
-    add_lab_inertial_forces(model_.tree, ground_, q, qd, qdd, inertial_bodies_, Q);
+    KinematicsData centre;
+    const std::vector<BodyWrench> w =
+        lab_inertial_wrenches(model_.tree, ground_, q, qd, qdd, inertial_bodies_, Vec3(0.0, -9.80665, 0.0), 1e-4,
+                              &centre);
+    add_wrenches(model_.tree, centre, w, Q);
+    add_hip_moments(centre, w, Q);
     return Q;
   }
   if (!options_.body_inertia) return Q;
@@ -276,6 +308,23 @@ Eigen::VectorXd ComakProblem::inertial_generalized_force(const Eigen::VectorXd& 
   m.coordinate = flexion_;
   add_inertial_forces(model_.tree, q, inertial_bodies_, m, Q);
   return Q;
+}
+
+void ComakProblem::add_hip_moments(const KinematicsData& k, const std::vector<BodyWrench>& w,
+                                   Eigen::VectorXd& Q) const {
+  // Hip row c: the leg's balance about the hip axis. The tree measures the
+  // muscles' and ligaments' moment on the pelvis side (Q[c] through the
+  // reversed hip joint), which is minus their moment on the leg; a force on a
+  // leg body adds -a . ((x - o) x f + tau) (a, o: the joint's world axis and
+  // origin), so Q[c] = 0 says the leg's moments about the axis sum to zero.
+  if (hip_rows_.empty()) return;
+  std::vector<BodyWrench> leg;
+  for (const BodyWrench& x : w)
+    if (std::find(leg_bodies_.begin(), leg_bodies_.end(), x.body) != leg_bodies_.end()) leg.push_back(x);
+  for (std::size_t r = 0; r < hip_rows_.size(); ++r) {
+    const int ji = hip_joints_[r];
+    Q[hip_rows_[r]] -= axis_moment(leg, k.joint_origin_W[ji], k.joint_axis_W[ji]);
+  }
 }
 
 Eigen::VectorXd ComakProblem::neutral_pose(const ComakFrameInput& in) const {

@@ -143,6 +143,13 @@ struct ComakOptions {
   /// the foot (knee_loads.h), so a trial that gives knee loads directly
   /// cannot be used. The row is scaled like the other moment rows.
   bool ankle_equilibrium = false;
+  /// Hip equilibrium (off by default; a model with its own leg only,
+  /// ComakProblem::model_dynamics): three more rows, the leg's moment balance
+  /// about the hip joint's three axes under the muscles and ligaments that
+  /// span the hip and the trial's forces and the weight and d'Alembert forces
+  /// of every leg body (OpenSim-JAM's primary hip coordinates; the model must
+  /// carry the hip muscles: `arthrosim import-osim --muscles leg`).
+  bool hip_equilibrium = false;
   /// Weight and d'Alembert forces of the tibia and patella bodies (off by
   /// default; see the header): needs the foot load and the femur's lab motion
   /// of the inverse dynamics (ComakFrameInput::has_foot_load and
@@ -347,6 +354,10 @@ class ComakProblem {
   int ankle_ = -1;
   bool model_dynamics_ = false;
   int ground_ = -1;
+  /// Hip rows (hip_equilibrium): the hip coordinates, their joints, and the
+  /// leg's bodies (every body the hip coordinates do not move).
+  std::vector<int> hip_rows_, hip_joints_, leg_bodies_;
+  void add_hip_moments(const KinematicsData& k, const std::vector<BodyWrench>& w, Eigen::VectorXd& Q) const;
   Eigen::VectorXd V_, w_, row_scale_;
 };
 

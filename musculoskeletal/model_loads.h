@@ -40,6 +40,31 @@ struct LabForce {
   bool has_point = true;         ///< false: the force acts at the body origin
 };
 
+/// A force and a couple on one body, world frame (the tree's root frame).
+struct BodyWrench {
+  int body = -1;
+  Vec3 point_W = Vec3::Zero();   ///< where the force acts [m]
+  Vec3 force_W = Vec3::Zero();   ///< [N]
+  Vec3 torque_W = Vec3::Zero();  ///< couple [N m]
+};
+
+/// The wrenches of `forces` at the kinematics in `data`.
+std::vector<BodyWrench> lab_force_wrenches(const KinematicsData& data, int ground,
+                                           const std::vector<LabForce>& forces);
+/// The weight and d'Alembert wrenches of `bodies` (see the header), with the
+/// forward kinematics at q left in *centre when given.
+std::vector<BodyWrench> lab_inertial_wrenches(const KinematicTree& tree, int ground, const Eigen::VectorXd& q,
+                                              const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                                              const std::vector<int>& bodies,
+                                              const Vec3& gravity_L = Vec3(0.0, -9.80665, 0.0),
+                                              double step = 1e-4, KinematicsData* centre = nullptr);
+/// Q += J_b(point)^T force + J_rot,b^T torque for every wrench.
+void add_wrenches(const KinematicTree& tree, const KinematicsData& data, const std::vector<BodyWrench>& w,
+                  Eigen::VectorXd& Q);
+/// sum of a . ((point - o) x force + torque): the wrenches' moment about the
+/// axis through o along the unit vector a.
+double axis_moment(const std::vector<BodyWrench>& w, const Vec3& o, const Vec3& a);
+
 /// Q += generalized forces of `forces` at the kinematics in `data` (ground =
 /// the index of the ground body).
 void add_lab_forces(const KinematicTree& tree, const KinematicsData& data, int ground,

@@ -101,6 +101,10 @@ int main(int argc, char** argv) {
   app.add_option("--ipopt-tolerance", o.ipopt_tolerance, "Ipopt 'tol' (scaled NLP)")->capture_default_str();
   app.add_option("--max-iterations", o.max_iterations, "Ipopt iteration limit per attempt")
       ->capture_default_str();
+  app.add_option("--acceptable-iterations", o.acceptable_iterations,
+                 "consecutive iterates at Ipopt's acceptable level that end a solve as 'acceptable' "
+                 "(a larger value keeps iterating towards --ipopt-tolerance)")
+      ->capture_default_str();
   app.add_option("--activation-min", o.activation_min, "lower bound of the activations, 0..1")
       ->capture_default_str();
   std::vector<std::string> weight_args;
@@ -111,6 +115,9 @@ int main(int argc, char** argv) {
   app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
                "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
                "anterior stand-in to the model (docs/comak.md)");
+  app.add_flag("--hip-equilibrium", o.hip_equilibrium,
+               "also balance the leg about the hip's three axes (3 rows; a model with its own leg and the "
+               "hip muscles: arthrosim import-osim --muscles leg; docs/comak.md)");
   app.add_flag("--body-inertia", o.body_inertia,
                "weight and d'Alembert forces of the tibia and patella bodies from their URDF "
                "inertials, moving with the model (the shank's terms leave the external load; "
@@ -174,12 +181,16 @@ int main(int argc, char** argv) {
         const common::OptionBlock& c = *scene.comak;
         effects = c.list("effects");
         if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.si("ipopt_tolerance");
+        if (!app.count("--acceptable-iterations"))
+          o.acceptable_iterations = static_cast<int>(c.integer("ipopt_acceptable_iterations"));
         if (!app.count("--max-iterations"))
           o.max_iterations = static_cast<int>(c.integer("ipopt_max_iterations"));
         if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
         if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
         if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.flag("ankle_equilibrium");
         if (!app.count("--body-inertia")) o.body_inertia = c.flag("body_inertia");
+        if (!app.count("--hip-equilibrium")) o.hip_equilibrium = c.flag("hip_equilibrium");
+        if (!no_damping) o.coordinate_damping = c.flag("coordinate_damping");
         if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
         if (!single_start) o.second_start = c.flag("second_start");
       }
@@ -272,8 +283,10 @@ int main(int argc, char** argv) {
          << "\nforce_tolerance_n: " << o.force_tolerance << "\nlength_scale_m: " << o.length_scale
          << "\nipopt_tolerance: " << o.ipopt_tolerance << "\nmax_iterations: " << o.max_iterations
          << "\nactivation_min: " << o.activation_min
+         << "\nacceptable_iterations: " << o.acceptable_iterations
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
          << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
+         << "\nhip_equilibrium: " << (o.hip_equilibrium ? "true" : "false")
          << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
          << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
          << "\nsecond_start: " << (o.second_start ? "true" : "false")

@@ -466,6 +466,7 @@ TEST(Comak, SceneDefaultsAreTheSolverDefaults) {
   const msk::ComakOptions o;
   EXPECT_EQ(number("ipopt_tolerance"), o.ipopt_tolerance);
   EXPECT_EQ(number("ipopt_max_iterations"), o.max_iterations);
+  EXPECT_EQ(number("ipopt_acceptable_iterations"), o.acceptable_iterations);
   EXPECT_EQ(number("activation_min"), o.activation_min);
   EXPECT_EQ(number("lowpass_cutoff_hz"), msk::GaitTrialOptions{}.lowpass.cutoff_hz);
   const auto* reserve = arthrosim::common::find_option("comak", "reserve_actuators");
@@ -477,6 +478,13 @@ TEST(Comak, SceneDefaultsAreTheSolverDefaults) {
   const auto* inertia = arthrosim::common::find_option("comak", "body_inertia");
   ASSERT_NE(inertia, nullptr);
   EXPECT_EQ(inertia->default_value == "true", o.body_inertia);
+  for (const auto& [key, value] : {std::pair{"hip_equilibrium", o.hip_equilibrium},
+                                   std::pair{"coordinate_damping", o.coordinate_damping},
+                                   std::pair{"second_start", o.second_start}}) {
+    const auto* spec = arthrosim::common::find_option("comak", key);
+    ASSERT_NE(spec, nullptr) << key;
+    EXPECT_EQ(spec->default_value == "true", value) << key;
+  }
 }
 
 

@@ -94,17 +94,19 @@ TEST(OsimImport, LenhartCounts) {
   EXPECT_NE(report.find("| WrapEllipsoid | Gmax_at_pelvis_r | not used by an imported path |"), std::string::npos);
   EXPECT_NE(report.find("markers are for inverse kinematics"), std::string::npos);
   EXPECT_NE(report.find("lenhart2015-R-fibula-bone.stl' not found"), std::string::npos);
-  // The leg variant takes every muscle on the imported bodies (44: the
-  // right leg's).
-  OsimImportOptions o = lenhart_options(true);
-  o.muscles = ImportMuscles::kLeg;
-  EXPECT_EQ(import_osim(kOsim.string(), scratch("leg").string(), o).muscles, 44);
+  // The leg variant (the bundled model) takes every muscle on the imported
+  // bodies (44: the right leg's), and the wrap objects they use (3
+  // cylinders, 9 ellipsoids, 43 path wraps).
 }
 
-// The bundled model is what the importer writes from the bundled .osim
-// (data/models/lenhart2015/README.md: regenerated bit for bit).
+// The bundled model is what the importer writes from the bundled .osim with
+// every muscle of the leg (data/models/lenhart2015/README.md: regenerated bit
+// for bit).
 TEST(OsimImport, BundledModelIsTheImportersOutput) {
-  const OsimImportSummary& s = imported(true);
+  OsimImportOptions o = lenhart_options(true);
+  o.muscles = ImportMuscles::kLeg;
+  const OsimImportSummary s = import_osim(kOsim.string(), scratch("bundled").string(), o);
+  EXPECT_EQ(s.muscles, 44);
   EXPECT_EQ(read_text(s.urdf_path), read_text(kModelDir / "lenhart2015.urdf"));
   EXPECT_EQ(read_text(s.report_path), read_text(kModelDir / "import_report.md"));
 }
@@ -113,12 +115,13 @@ TEST(OsimImport, BundledModelIsTheImportersOutput) {
 // request): roles, free and prescribed coordinates, defaults, subject mass,
 // muscles with their fibre lengths, the contact pairs.
 TEST(OsimImport, ImportedModelLoads) {
-  const Model wrapped = load_model((kModelDir / "lenhart2015.urdf").string());
+  const Model wrapped = load_model(imported(true).urdf_path);
   int wraps = 0;
   for (const Muscle& mu : wrapped.muscles) wraps += static_cast<int>(mu.path.wraps.size());
   for (const Ligament& l : wrapped.ligaments)
     for (const LigamentBundle& b : l.bundles) wraps += static_cast<int>(b.path.wraps.size());
   EXPECT_EQ(wraps, 37);
+  EXPECT_EQ(load_model((kModelDir / "lenhart2015.urdf").string()).muscles.size(), 44u);
   const Model m = load_model(imported(false).urdf_path);
   EXPECT_EQ(m.num_coordinates(), 24);
   EXPECT_EQ(m.free_coordinates.size(), 12u);
