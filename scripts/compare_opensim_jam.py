@@ -32,6 +32,9 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REF = os.path.join(HERE, "..", "data", "trials", "lenhart2015_overground17", "opensim_jam_comak")
+KNEE_MUSCLES = ["bflh_r", "bfsh_r", "gaslat_r", "gasmed_r", "grac_r", "recfem_r", "sart_r", "semimem_r",
+                "semiten_r", "tfl_r", "vasint_r", "vaslat_r", "vasmed_r"]
+PLOT_MUSCLES = KNEE_MUSCLES + ["soleus_r", "tibant_r", "glmed1_r", "iliacus_r", "psoas_r"]
 SECONDARY = ["knee_add_r", "knee_rot_r", "knee_tx_r", "knee_ty_r", "knee_tz_r",
              "pf_flex_r", "pf_rot_r", "pf_tilt_r", "pf_tx_r", "pf_ty_r", "pf_tz_r"]
 ROTATIONS = {"knee_add_r", "knee_rot_r", "pf_flex_r", "pf_rot_r", "pf_tilt_r", "knee_flex_r"}
@@ -99,18 +102,20 @@ def main():
         return v if name in ROTATIONS else v * 1e3  # walking_values.sto: degrees, metres
 
     print(f"{len(rows)} common frames, {t[rows[0]]:.2f}-{t[rows[-1]]:.2f} s; {a.kinematics}")
-    print("secondary coordinate   unit   RMS diff   arthrosim range        opensim-jam range     max jump (ours)")
+    print("secondary coordinate   unit   RMS diff   arthrosim range        opensim-jam range     largest change between frames (ours / opensim-jam)")
     for n in SECONDARY:
         if n not in names:
             continue
         o, r = ours(n), theirs(n)
         rms = float(np.sqrt(np.mean((o - r) ** 2)))
         jump = float(np.max(np.abs(np.diff(o)))) if len(o) > 1 else 0.0
+        jump_r = float(np.max(np.abs(np.diff(r)))) if len(r) > 1 else 0.0
         unit = "deg" if n in ROTATIONS else "mm"
         out["coordinates"][n] = {"unit": unit, "rms": rms, "ours": [float(o.min()), float(o.max())],
-                                 "theirs": [float(r.min()), float(r.max())], "max_jump": jump}
+                                 "theirs": [float(r.min()), float(r.max())], "max_jump": jump,
+                                 "max_jump_theirs": jump_r}
         print(f"{n:22s} {unit:4s} {rms:9.2f}   {o.min():7.2f} .. {o.max():7.2f}     {r.min():7.2f} .. {r.max():7.2f}"
-              f"     {jump:6.2f}")
+              f"     {jump:6.2f} / {jump_r:6.2f}")
     # Activations.
     print("muscle        corr    mean ours  mean theirs")
     corrs = []
@@ -124,16 +129,25 @@ def main():
         corrs.append(c)
         out["muscles"][m] = {"corr": c, "mean_ours": float(o.mean()), "mean_theirs": float(r.mean())}
         print(f"{m:12s} {c:6.2f}   {o.mean():9.3f}  {r.mean():9.3f}")
-    # Tibiofemoral force in BW.
+    ks = [k for k, m in enumerate(mnames) if m in KNEE_MUSCLES and "/forceset/" + m in al]
+    if ks:
+        kc = [out["muscles"][mnames[k]]["corr"] for k in ks]
+        kc = [c for c in kc if c == c]
+        print(f"knee muscles: correlation median {np.median(kc):.2f}, lowest {min(kc):.2f}")
+    # Tibiofemoral force in BW: magnitude on the tibia and its axial part
+    # (-Y in the tibia frame, what opensim-jam's figure plots).
     F = np.linalg.norm(tf, axis=1) / (mass * G)
+    Fa = -tf[:, 1] / (mass * G)
     out["tf_force_bw"] = {}
     for label, lo, hi in [("first peak", 1.25, 1.55), ("second peak", 1.55, 1.95)]:
         sel = np.where((t >= lo) & (t <= hi))[0]
         if len(sel):
             i = sel[np.argmax(F[sel])]
-            out["tf_force_bw"][label] = [float(F[i]), float(t[i])]
-            print(f"tibiofemoral force {label}: {F[i]:.2f} BW at {t[i]:.2f} s (opensim-jam's figure without "
-                  f"muscle weights: about {'3.3 BW at 1.28' if label == 'first peak' else '5.1 BW at 1.79'} s)")
+            j = sel[np.argmax(Fa[sel])]
+            out["tf_force_bw"][label] = {"magnitude": [float(F[i]), float(t[i])], "axial": [float(Fa[j]), float(t[j])]}
+            print(f"tibiofemoral force {label}: {F[i]:.2f} BW at {t[i]:.2f} s (axial {Fa[j]:.2f} BW at {t[j]:.2f} s; "
+                  f"opensim-jam's figure without muscle weights: about "
+                  f"{'3.3 BW at 1.28' if label == 'first peak' else '5.1 BW at 1.79'} s)")
     conv = int(np.sum(status == 0))
     succ = int(np.sum((status == 0) & (ipopt == 0)))
     out["solver"] = {"frames": int(len(t)), "converged": conv, "solve_succeeded": succ,
@@ -148,7 +162,7 @@ def main():
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        fig, axes = plt.subplots(4, 6, figsize=(22, 12))
+        fig, axes = plt.subplots(5, 6, figsize=(22, 15))
         axes = axes.ravel()
         tt = t[rows]
         for k, n in enumerate(SECONDARY):
@@ -158,14 +172,15 @@ def main():
             ax.set_title(f"{n} [{'deg' if n in ROTATIONS else 'mm'}]")
         axes[0].legend()
         ax = axes[11]
-        ax.plot(tt, F[rows], "r-")
-        ax.set_title("tibiofemoral force [BW] (arthrosim)")
-        for k, m in enumerate(mnames[:12]):
+        ax.plot(tt, Fa[rows], "r-")
+        ax.set_title("tibiofemoral axial force [BW] (arthrosim)")
+        shown = [m for m in PLOT_MUSCLES if m in mnames][:18]
+        for k, m in enumerate(shown):
             ax = axes[12 + k]
             lab = "/forceset/" + m
             if lab in al:
                 ax.plot(tt, ad[refrows, al.index(lab)], "k-")
-            ax.plot(tt, act[rows, k], "r-")
+            ax.plot(tt, act[rows, mnames.index(m)], "r-")
             ax.set_title(f"{m} activation")
             ax.set_ylim(0, 1)
         fig.tight_layout()

@@ -112,10 +112,11 @@ int main(int argc, char** argv) {
                  "objective weight w_i of a muscle, name=value (> 0; default 1), repeatable");
   app.add_flag("--reserve-actuators", o.reserve_actuators,
                "reserve actuators on the 11 secondary coordinates (heavy weight, reported)");
-  app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
-               "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
-               "anterior stand-in to the model (docs/comak.md)");
-  app.add_flag("--hip-equilibrium", o.hip_equilibrium,
+  CLI::Option* ankle_flag = app.add_flag("--ankle-equilibrium,!--no-ankle-equilibrium", o.ankle_equilibrium,
+               "also balance the ankle moment of the foot (one more row): adds a soleus and a tibialis "
+               "anterior stand-in to the generated knee; a model with its own leg uses its own ankle "
+               "muscles (docs/comak.md)");
+  CLI::Option* hip_flag = app.add_flag("--hip-equilibrium,!--no-hip-equilibrium", o.hip_equilibrium,
                "also balance the leg about the hip's three axes (3 rows; a model with its own leg and the "
                "hip muscles: arthrosim import-osim --muscles leg; docs/comak.md)");
   app.add_flag("--body-inertia", o.body_inertia,
@@ -162,7 +163,11 @@ int main(int argc, char** argv) {
       "      # ankle moment balanced too (gastrocnemii, soleus, tibialis anterior)\n"
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --no-move-limits \\\n"
       "      --trial data/trials/synthetic_gait --out comak_plain.h5 -v\n"
-      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n");
+      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n"
+      "  arthrosim-comak --model data/models/lenhart2015 --scene data/scenes/lenhart2015_gait.yaml \\\n"
+      "      --trial data/trials/lenhart2015_overground17 --out lenhart2015.h5 -v\n"
+      "      # the real subject (OpenSim-JAM's lenhart2015, walking window 1.21-2.32 s from the scene);\n"
+      "      # then scripts/compare_opensim_jam.py lenhart2015.h5 --plot lenhart2015.png\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-comak");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -187,9 +192,9 @@ int main(int argc, char** argv) {
           o.max_iterations = static_cast<int>(c.integer("ipopt_max_iterations"));
         if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
         if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
-        if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.flag("ankle_equilibrium");
+        if (!ankle_flag->count()) o.ankle_equilibrium = c.flag("ankle_equilibrium");
         if (!app.count("--body-inertia")) o.body_inertia = c.flag("body_inertia");
-        if (!app.count("--hip-equilibrium")) o.hip_equilibrium = c.flag("hip_equilibrium");
+        if (!hip_flag->count()) o.hip_equilibrium = c.flag("hip_equilibrium");
         if (!no_damping) o.coordinate_damping = c.flag("coordinate_damping");
         if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
         if (!single_start) o.second_start = c.flag("second_start");

@@ -15,10 +15,13 @@
 // scripts/compare_opensim_jam.py compares a kinematics file of the same run
 // with OpenSim-JAM's published results (`arthrosim-comak ... --out F.h5`).
 //
-// Variants: Default (the stage's defaults: second start, step control),
-// SingleStart (comak.second_start false, as data/scenes/lenhart2015_gait.yaml),
-// NoDamping (single start, ComakOptions::coordinate_damping false: each frame
-// static). ARTHROSIM_LENHART_BENCH_FRAMES=n solves only the first n frames.
+// Variants: Scene (data/scenes/lenhart2015_gait.yaml's settings: the knee,
+// hip and ankle rows as OpenSim-JAM's primary coordinates, one start, 15
+// acceptable iterates), KneeRows (the same with the knee's rows only: hip
+// and ankle moments not balanced), NoDamping (Scene without the coordinate
+// dampers: each frame static), SecondStart (Scene with the stage's default
+// second start). ARTHROSIM_LENHART_BENCH_FRAMES=n solves only the first n
+// frames.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -26,6 +29,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "musculoskeletal/comak.h"
@@ -43,7 +47,11 @@ double median(std::vector<double> v) {
   return n == 0 ? 0.0 : (n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
 }
 
-void run(benchmark::State& state, bool second_start, bool damping) {
+struct Variant {
+  bool second_start = false, damping = true, primary = true;
+};
+
+void run(benchmark::State& state, Variant v) {
   const std::string root = ARTHROSIM_SOURCE_DIR;
   const msk::Model model = msk::load_model(root + "/data/models/lenhart2015/lenhart2015.urdf");
   msk::GaitTrialOptions to;
@@ -59,8 +67,10 @@ void run(benchmark::State& state, bool second_start, bool damping) {
     last = std::min(last, first + std::atoi(s) - 1);
   const auto frames = msk::comak_model_frame_inputs(model, trial, first, last, 1);
   msk::ComakOptions o;
-  o.second_start = second_start;
-  o.coordinate_damping = damping;
+  o.second_start = v.second_start;
+  o.coordinate_damping = v.damping;
+  o.hip_equilibrium = o.ankle_equilibrium = v.primary;
+  o.acceptable_iterations = 15;
   const msk::ComakProblem problem(model, o);
   for (auto _ : state) {
     std::vector<double> wall, cpu, iterations, force_bw, time;
@@ -83,9 +93,9 @@ void run(benchmark::State& state, bool second_start, bool damping) {
       time.push_back(in.time);
       force_bw.push_back(msk::tibiofemoral_contact(model, d).force.norm() / bw);
     });
-    std::printf("lenhart2015 overground_17 %.2f-%.2f s, %zu frames (%s, coordinate dampers %s):\n",
-                frames.front().time, frames.back().time, frames.size(),
-                second_start ? "second start" : "single start", damping ? "on" : "off");
+    std::printf("lenhart2015 overground_17 %.2f-%.2f s, %zu frames (%s rows, %s, coordinate dampers %s):\n",
+                frames.front().time, frames.back().time, frames.size(), v.primary ? "knee, hip, ankle" : "knee",
+                v.second_start ? "second start" : "single start", v.damping ? "on" : "off");
     std::printf("  converged: %d Solve_Succeeded, %d acceptable level; %d failed\n", succeeded, acceptable, failed);
     std::printf("  s/frame: wall median %.3f, worst %.3f; CPU median %.3f, worst %.3f\n", median(wall),
                 *std::max_element(wall.begin(), wall.end()), median(cpu), *std::max_element(cpu.begin(), cpu.end()));
@@ -103,12 +113,14 @@ void run(benchmark::State& state, bool second_start, bool damping) {
   }
 }
 
-void BM_LenhartWalkDefault(benchmark::State& s) { run(s, true, true); }
-void BM_LenhartWalkSingleStart(benchmark::State& s) { run(s, false, true); }
-void BM_LenhartWalkNoDamping(benchmark::State& s) { run(s, false, false); }
-BENCHMARK(BM_LenhartWalkDefault)->Iterations(1)->Unit(benchmark::kSecond);
-BENCHMARK(BM_LenhartWalkSingleStart)->Iterations(1)->Unit(benchmark::kSecond);
+void BM_LenhartWalkScene(benchmark::State& s) { run(s, {}); }
+void BM_LenhartWalkKneeRows(benchmark::State& s) { run(s, {false, true, false}); }
+void BM_LenhartWalkNoDamping(benchmark::State& s) { run(s, {false, false, true}); }
+void BM_LenhartWalkSecondStart(benchmark::State& s) { run(s, {true, true, true}); }
+BENCHMARK(BM_LenhartWalkScene)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_LenhartWalkKneeRows)->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_LenhartWalkNoDamping)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_LenhartWalkSecondStart)->Iterations(1)->Unit(benchmark::kSecond);
 
 }  // namespace
 
