@@ -91,6 +91,7 @@
 #include <vector>
 
 #include "common/error.h"
+#include "common/options.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model.h"
@@ -209,6 +210,12 @@ struct ComakOptions {
   /// Passive settle of the first frame and of retry 1 (its `fixed` is set
   /// by the solver to the flexion).
   SettleOptions settle;
+
+  /// Scene keys of the comak block (common/options.h; comak_options.cc):
+  /// ipopt_tolerance, ipopt_acceptable_iterations, ipopt_max_iterations,
+  /// activation_min, reserve_actuators, ankle_equilibrium, hip_equilibrium,
+  /// coordinate_damping, body_inertia, second_start.
+  void declare(common::OptionVisitor& v);
 };
 
 /// Inputs of one frame.

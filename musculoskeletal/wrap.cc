@@ -140,18 +140,18 @@ struct D2 {
   D2(double x) : v(x) {}  // NOLINT: constants promote implicitly
   D2(double x, double a, double b) : v(x), d0(a), d1(b) {}
 };
-inline D2 operator+(const D2& a, const D2& b) { return {a.v + b.v, a.d0 + b.d0, a.d1 + b.d1}; }
-inline D2 operator-(const D2& a, const D2& b) { return {a.v - b.v, a.d0 - b.d0, a.d1 - b.d1}; }
-inline D2 operator-(const D2& a) { return {-a.v, -a.d0, -a.d1}; }
-inline D2 operator*(const D2& a, const D2& b) {
+[[gnu::always_inline]] inline D2 operator+(const D2& a, const D2& b) { return {a.v + b.v, a.d0 + b.d0, a.d1 + b.d1}; }
+[[gnu::always_inline]] inline D2 operator-(const D2& a, const D2& b) { return {a.v - b.v, a.d0 - b.d0, a.d1 - b.d1}; }
+[[gnu::always_inline]] inline D2 operator-(const D2& a) { return {-a.v, -a.d0, -a.d1}; }
+[[gnu::always_inline]] inline D2 operator*(const D2& a, const D2& b) {
   return {a.v * b.v, a.d0 * b.v + a.v * b.d0, a.d1 * b.v + a.v * b.d1};
 }
-inline D2 operator*(double s, const D2& a) { return {s * a.v, s * a.d0, s * a.d1}; }
-inline D2 operator/(const D2& a, const D2& b) {
+[[gnu::always_inline]] inline D2 operator*(double s, const D2& a) { return {s * a.v, s * a.d0, s * a.d1}; }
+[[gnu::always_inline]] inline D2 operator/(const D2& a, const D2& b) {
   const double inv = 1.0 / b.v, q = a.v * inv;
   return {q, (a.d0 - q * b.d0) * inv, (a.d1 - q * b.d1) * inv};
 }
-inline D2 dsqrt(const D2& a) {
+[[gnu::always_inline]] inline D2 dsqrt(const D2& a) {
   const double s = std::sqrt(a.v), h = 0.5 / s;
   return {s, a.d0 * h, a.d1 * h};
 }
@@ -164,18 +164,18 @@ struct V3 {
   T x, y, z;
 };
 template <class T>
-V3<T> operator+(const V3<T>& a, const V3<T>& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+[[gnu::always_inline]] inline V3<T> operator+(const V3<T>& a, const V3<T>& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
 template <class T>
-V3<T> operator-(const V3<T>& a, const V3<T>& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+[[gnu::always_inline]] inline V3<T> operator-(const V3<T>& a, const V3<T>& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
 template <class T>
-V3<T> scale(const T& s, const V3<T>& a) { return {s * a.x, s * a.y, s * a.z}; }
+[[gnu::always_inline]] inline V3<T> scale(const T& s, const V3<T>& a) { return {s * a.x, s * a.y, s * a.z}; }
 template <class T>
-T dot(const V3<T>& a, const V3<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+[[gnu::always_inline]] inline T dot(const V3<T>& a, const V3<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 // A v (A = diag(k)).
 template <class T>
-V3<T> amul(const Vec3& k, const V3<T>& v) { return {k.x() * v.x, k.y() * v.y, k.z() * v.z}; }
+[[gnu::always_inline]] inline V3<T> amul(const Vec3& k, const V3<T>& v) { return {k.x() * v.x, k.y() * v.y, k.z() * v.z}; }
 template <class T>
-V3<T> lift(const Vec3& v) { return {T(v.x()), T(v.y()), T(v.z())}; }
+[[gnu::always_inline]] inline V3<T> lift(const Vec3& v) { return {T(v.x()), T(v.y()), T(v.z())}; }
 
 struct EllipsoidShot {
   Vec3 D, A;       // semi-axes, diag(1/a^2, 1/b^2, 1/c^2)
@@ -203,9 +203,10 @@ void shoot(const EllipsoidShot& s, const T& alpha, const T& beta, T r[2], std::v
   if (nodes) nodes->push_back(Vec3(value(x.x), value(x.y), value(x.z)));
   if (first) *first = value(dn);
   for (int k = 0; k < s.N; ++k) {
-    const T t = -T(2.0) * dot(u, g) / dot(u, amul(s.A, u));
+    const V3<T> Au = amul(s.A, u);
+    const T t = -T(2.0) * dot(u, g) / dot(u, Au);
     x = x + scale(t, u);
-    g = amul(s.A, x);
+    g = g + scale(t, Au);  // = A x
     u = u - scale(T(2.0) * dot(u, g) / dot(g, g), g);
     if (nodes) nodes->push_back(Vec3(value(x.x), value(x.y), value(x.z)));
     if (steps) steps->push_back(value(t));
@@ -454,170 +455,189 @@ SegmentWrap ellipsoid_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b
   // over the side where the segment is closest to leaving the body); on a
   // sphere that plane is the great circle's. The contact points from a and b
   // to the section ellipse of that plane give x_0 and the end direction.
-  EllipsoidShot s;
-  s.D = D;
-  s.A = A;
-  s.P = a;
-  s.S = b;
-  s.N = N;
+  // Where that guess fails (a segment near the body's centre, where the two
+  // sides are nearly equally short), the opposite side is tried as well and
+  // the shorter solution is kept (the length stays continuous through the
+  // switch of sides; the contact points jump, as for any shortest path).
   const Vec3 mpt = a + t_min * d;
-  const Vec3 Q = closest_surface_point(D, mpt);
   const Vec3 dir = d / d.norm();
-  Vec3 side = (Q - mpt) - (Q - mpt).dot(dir) * dir;  // in the plane, normal to the segment
-  if (!(side.norm() > 1e-12 * D.maxCoeff())) side = any_perpendicular(dir);
-  side.normalize();
-  const Vec3 T1 = section_tangent_point(A, a, dir, side);
-  const Vec3 T2 = section_tangent_point(A, b, -dir, side);
-  const Vec3 t1 = (T1 - a).normalized();
-  // u_N - w is (nearly) normal to the exit direction: measure it on the
-  // surface normal and the binormal at the guessed exit.
+  // Q: in the plane through m normal to the segment, the point of the
+  // section ellipse closest to m (the shortest way out across the segment).
+  Vec3 side0;
   {
-    const Vec3 n = A.cwiseProduct(T2).normalized();
-    const Vec3 t = (dir - dir.dot(n) * n).normalized();
-    s.r1 = n;
-    s.r2 = n.cross(t);
+    const Vec3 p1 = any_perpendicular(dir), p2 = dir.cross(p1);
+    Eigen::Matrix2d M2;
+    M2 << p1.dot(A.cwiseProduct(p1)), p1.dot(A.cwiseProduct(p2)), p1.dot(A.cwiseProduct(p2)),
+        p2.dot(A.cwiseProduct(p2));
+    const Eigen::Vector2d b2(p1.dot(A.cwiseProduct(mpt)), p2.dot(A.cwiseProduct(mpt)));
+    const Eigen::Vector2d zc = -M2.ldlt().solve(b2);
+    const double kap = std::max(1e-300, b2.dot(-zc) - (quad(mpt) - 1.0));
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(M2);
+    const Eigen::Vector2d w0 = -es.eigenvectors().transpose() * zc;  // m in the section's axes
+    const Vec3 q3 = closest_surface_point(
+        Vec3(std::sqrt(kap / es.eigenvalues()[0]), std::sqrt(kap / es.eigenvalues()[1]), 1e30), Vec3(w0[0], w0[1], 0.0));
+    const Eigen::Vector2d z = es.eigenvectors() * (Eigen::Vector2d(q3.x(), q3.y()) - w0);  // from m
+    side0 = z[0] * p1 + z[1] * p2;
+    if (!(side0.norm() > 1e-12 * D.maxCoeff())) side0 = p1;
+    side0.normalize();
   }
-  auto set_chart = [&](const Vec3& x0) {
-    const Vec3 y0 = x0.cwiseQuotient(D).normalized();
-    s.y0 = y0;
-    // Chart directions in y: the image of the travel direction and its
-    // normal, tangent to the unit sphere at y0.
-    Vec3 ta = dir.cwiseQuotient(D);
-    ta = (ta - ta.dot(y0) * y0).normalized();
-    s.ea = ta;
-    s.eb = y0.cross(ta);
-  };
-  // The discrete x_0 lies past the tangent point T1 by half a chord angle:
-  // delta = theta / (n + 1) with theta the planar guess's turning angle,
-  // i.e. by an arc length delta / (2 kappa) (kappa the normal curvature).
-  auto planar_guess = [&](int n) {
-    const double theta = std::acos(std::clamp(t1.dot((b - T2).normalized()), -1.0, 1.0));
-    const double kappa = t1.dot(A.cwiseProduct(t1)) / A.cwiseProduct(T1).norm();
-    const Vec3 x = T1 + (theta / (n + 1) / (2 * kappa)) * t1;
-    return Vec3(x / std::sqrt(quad(x)));
-  };
-  set_chart(hint ? *hint : planar_guess(N));
-
-  // Newton on (alpha, beta) (single shooting); each iteration costs one
-  // dual-number shot (a halving line search on |r| only when a full step
-  // does not reduce it).
-  double al = 0.0, be = 0.0, rn = 0.0;
-  int it = 0, total_its = 0;
-  auto single = [&](int max_its) {
-    al = be = 0.0;
-    D2 rd[2];
-    shoot<D2>(s, D2(al, 1, 0), D2(be, 0, 1), rd);
-    rn = std::hypot(rd[0].v, rd[1].v);
-    for (it = 0; it < max_its && std::isfinite(rn); ++it) {
-      if (rn < 1e-11) return true;  // the initial guess is already converged
-      const double j00 = rd[0].d0, j01 = rd[0].d1, j10 = rd[1].d0, j11 = rd[1].d1;
-      const double det = j00 * j11 - j01 * j10;
-      if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
-      const double da = -(j11 * rd[0].v - j01 * rd[1].v) / det;
-      const double db = -(-j10 * rd[0].v + j00 * rd[1].v) / det;
-      const double step = std::hypot(da, db);
-      D2 rn_d[2];
-      shoot<D2>(s, D2(al + da, 1, 0), D2(be + db, 0, 1), rn_d);
-      double rn_new = std::hypot(rn_d[0].v, rn_d[1].v);
-      double lam = 1.0;
-      if (!(rn_new < rn)) {
-        if (rn < 1e-12) return true;  // no decrease possible at rounding level
-        double r[2];
-        for (int ls = 0; ls < 40; ++ls) {
-          lam *= 0.5;
-          shoot<double>(s, al + lam * da, be + lam * db, r);
-          rn_new = std::hypot(r[0], r[1]);
-          if (rn_new < rn) break;
-        }
-        if (!(rn_new < rn)) return false;
-        shoot<D2>(s, D2(al + lam * da, 1, 0), D2(be + lam * db, 0, 1), rn_d);
-        rn_new = std::hypot(rn_d[0].v, rn_d[1].v);
-      }
-      rd[0] = rn_d[0];
-      rd[1] = rn_d[1];
-      al += lam * da;
-      be += lam * db;
-      rn = rn_new;
-      // Converged when the residual (a difference of unit vectors, i.e. an
-      // angle) is below 1e-11 rad: the length is then stationary to ~1e-11
-      // x its straight parts, far below any moment-arm tolerance.
-      if (rn < 1e-11 || (lam == 1.0 && step < 1e-9)) {
-        ++it;
-        return true;
-      }
-    }
-    return false;
-  };
-  // A discrete geodesic is not longer than the geodesic, which is not longer
-  // than the planar path over the section through a, b and Q (straight to
-  // T1, the section's arc on the Q side, straight from T2). The arc is
-  // integrated by 16-point Gauss-Legendre quadrature of the ellipse's speed;
-  // a result longer than 1.001 x this bound is another branch (e.g. one
-  // spiralling round the body) and is rejected.
-  const Section sec = make_section(A, a, dir, side);
-  const double tau1 = sec.angle(T1), tau2 = sec.angle(T2);
-  double span = mod_two_pi(tau2 - tau1);
-  if (sec.t_coordinate(tau1 + 0.5 * span) < 0) span -= 2 * kPi;
-  double planar_arc = 0.0;
-  {
-    static const double gx[8] = {0.0950125098376374, 0.2816035507792589, 0.4580167776572274, 0.6178762444026438,
-                                 0.7554044083550030, 0.8656312023878318, 0.9445750230732326, 0.9894009349916499};
-    static const double gw[8] = {0.1894506104550685, 0.1826034150449236, 0.1691565193950025, 0.1495959888165767,
-                                 0.1246289712555339, 0.0951585116824928, 0.0622535239386479, 0.0271524594117541};
-    auto speed = [&](double tau) { return std::hypot(sec.r1 * std::sin(tau), sec.r2 * std::cos(tau)); };
-    const double mid = tau1 + 0.5 * span, half = 0.5 * std::abs(span);
-    for (int i = 0; i < 8; ++i)
-      planar_arc += gw[i] * half * (speed(mid + gx[i] * 0.5 * span) + speed(mid - gx[i] * 0.5 * span));
-  }
-  const double bound = 1.001 * ((T1 - a).norm() + (b - T2).norm() + planar_arc) + 1e-12;
   const double tiny = 1e-12 * D.maxCoeff();
-  std::vector<Vec3> nodes;
-  std::vector<double> steps;
-  nodes.reserve(N + 1);
-  steps.reserve(N);
-  double arc_len = 0.0;
-  // Evaluates the converged polyline; valid = all chords positive (the
-  // wrapped side); short = within the planar bound.
-  double total = 0.0;
-  auto valid = [&]() {
-    nodes.clear();
-    steps.clear();
-    double r[2], first = 0, last = 0;
-    shoot<double>(s, al, be, r, &nodes, &steps, &first, &last);
-    arc_len = 0.0;
-    for (double t : steps) {
-      // Chords are positive on the wrapped side; at engagement they shrink
-      // to zero, where rounding may leave ~1e-17 m of either sign.
-      if (!(t > -tiny)) return false;
-      arc_len += t;
-    }
-    total = first + arc_len + last;
-    return std::isfinite(total);
+
+  struct Solution {
+    bool found = false;     // converged, valid and within the planar bound
+    bool have = false;      // converged and valid with N chords (maybe beyond the bound)
+    double total = 0.0;
+    EllipsoidShot s;
+    double al = 0, be = 0;
+    int its = 0;
   };
-  // Candidates with N chords that are valid but longer than the bound (a
-  // locally shortest path of another family); the shortest is used when no
-  // solution within the bound is found.
-  bool have_candidate = false;
-  double cand_total = 0, cand_al = 0, cand_be = 0;
-  Vec3 cand_y0, cand_ea, cand_eb;
-  auto done = [&](bool converged) {
-    if (!(converged && valid())) return false;
-    if (total <= bound) return true;
-    if (s.N == N && (!have_candidate || total < cand_total)) {
-      have_candidate = true;
-      cand_total = total;
-      cand_al = al;
-      cand_be = be;
-      cand_y0 = s.y0;
-      cand_ea = s.ea;
-      cand_eb = s.eb;
+  // Solves for the discrete geodesic with the planar guess on `side`.
+  auto attempt = [&](const Vec3& side, const Vec3* x0_hint) {
+    Solution best;
+    EllipsoidShot s;
+    s.D = D;
+    s.A = A;
+    s.P = a;
+    s.S = b;
+    s.N = N;
+    const Vec3 T1 = section_tangent_point(A, a, dir, side);
+    const Vec3 T2 = section_tangent_point(A, b, -dir, side);
+    const Vec3 t1 = (T1 - a).normalized();
+    // u_N - w is (nearly) normal to the exit direction: measure it on the
+    // surface normal and the binormal at the guessed exit.
+    {
+      const Vec3 n = A.cwiseProduct(T2).normalized();
+      const Vec3 t = (dir - dir.dot(n) * n).normalized();
+      s.r1 = n;
+      s.r2 = n.cross(t);
     }
-    return false;
-  };
-  // First attempt: at most 12 iterations (a good guess converges in 2-4).
-  bool ok = single(12);
-  total_its = it;
-  if (!done(ok)) {
+    auto set_chart = [&](const Vec3& x0) {
+      const Vec3 y0 = x0.cwiseQuotient(D).normalized();
+      s.y0 = y0;
+      // Chart directions in y: the image of the travel direction and its
+      // normal, tangent to the unit sphere at y0.
+      Vec3 ta = dir.cwiseQuotient(D);
+      ta = (ta - ta.dot(y0) * y0).normalized();
+      s.ea = ta;
+      s.eb = y0.cross(ta);
+    };
+    // The discrete x_0 lies past the tangent point T1 by half a chord angle:
+    // delta = theta / (n + 1) with theta the planar guess's turning angle,
+    // i.e. by an arc length delta / (2 kappa) (kappa the normal curvature).
+    auto planar_guess = [&](int n) {
+      const double theta = std::acos(std::clamp(t1.dot((b - T2).normalized()), -1.0, 1.0));
+      const double kappa = t1.dot(A.cwiseProduct(t1)) / A.cwiseProduct(T1).norm();
+      const Vec3 x = T1 + (theta / (n + 1) / (2 * kappa)) * t1;
+      return Vec3(x / std::sqrt(quad(x)));
+    };
+    // Newton on (alpha, beta) (single shooting); each iteration costs one
+    // dual-number shot (a halving line search on |r| only when a full step
+    // does not reduce it).
+    double al = 0.0, be = 0.0, rn = 0.0;
+    int it = 0;
+    auto single = [&](int max_its) {
+      al = be = 0.0;
+      D2 rd[2];
+      shoot<D2>(s, D2(al, 1, 0), D2(be, 0, 1), rd);
+      rn = std::sqrt(rd[0].v * rd[0].v + rd[1].v * rd[1].v);
+      for (it = 0; it < max_its && std::isfinite(rn); ++it) {
+        if (rn < 1e-11) return true;  // the initial guess is already converged
+        const double j00 = rd[0].d0, j01 = rd[0].d1, j10 = rd[1].d0, j11 = rd[1].d1;
+        const double det = j00 * j11 - j01 * j10;
+        if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
+        const double da = -(j11 * rd[0].v - j01 * rd[1].v) / det;
+        const double db = -(-j10 * rd[0].v + j00 * rd[1].v) / det;
+        const double step = std::sqrt(da * da + db * db);
+        D2 rn_d[2];
+        shoot<D2>(s, D2(al + da, 1, 0), D2(be + db, 0, 1), rn_d);
+        double rn_new = std::sqrt(rn_d[0].v * rn_d[0].v + rn_d[1].v * rn_d[1].v);
+        double lam = 1.0;
+        if (!(rn_new < rn)) {
+          if (rn < 1e-12) return true;  // no decrease possible at rounding level
+          double r[2];
+          for (int ls = 0; ls < 40; ++ls) {
+            lam *= 0.5;
+            shoot<double>(s, al + lam * da, be + lam * db, r);
+            rn_new = std::sqrt(r[0] * r[0] + r[1] * r[1]);
+            if (rn_new < rn) break;
+          }
+          if (!(rn_new < rn)) return false;
+          shoot<D2>(s, D2(al + lam * da, 1, 0), D2(be + lam * db, 0, 1), rn_d);
+          rn_new = std::sqrt(rn_d[0].v * rn_d[0].v + rn_d[1].v * rn_d[1].v);
+        }
+        rd[0] = rn_d[0];
+        rd[1] = rn_d[1];
+        al += lam * da;
+        be += lam * db;
+        rn = rn_new;
+        // Converged when the residual (a difference of unit vectors, i.e. an
+        // angle) is below 1e-11 rad: the length is then stationary to ~1e-11
+        // x its straight parts, far below any moment-arm tolerance.
+        if (rn < 1e-11 || (lam == 1.0 && step < 1e-9)) {
+          ++it;
+          return true;
+        }
+      }
+      return false;
+    };
+    // A discrete geodesic is not longer than the geodesic, which is not
+    // longer than the planar path over the section through a and b on this
+    // side (straight to T1, the section's arc, straight from T2). The arc is
+    // integrated by 16-point Gauss-Legendre quadrature of the ellipse's
+    // speed; a result longer than 1.001 x this bound is another branch (e.g.
+    // one spiralling round the body).
+    const Section sec = make_section(A, a, dir, side);
+    const double tau1 = sec.angle(T1), tau2 = sec.angle(T2);
+    double span = mod_two_pi(tau2 - tau1);
+    if (sec.t_coordinate(tau1 + 0.5 * span) < 0) span -= 2 * kPi;
+    double planar_arc = 0.0;
+    {
+      static const double gx[8] = {0.0950125098376374, 0.2816035507792589, 0.4580167776572274,
+                                   0.6178762444026438, 0.7554044083550030, 0.8656312023878318,
+                                   0.9445750230732326, 0.9894009349916499};
+      static const double gw[8] = {0.1894506104550685, 0.1826034150449236, 0.1691565193950025,
+                                   0.1495959888165767, 0.1246289712555339, 0.0951585116824928,
+                                   0.0622535239386479, 0.0271524594117541};
+      auto speed = [&](double tau) { return std::hypot(sec.r1 * std::sin(tau), sec.r2 * std::cos(tau)); };
+      const double mid = tau1 + 0.5 * span, half = 0.5 * std::abs(span);
+      for (int i = 0; i < 8; ++i)
+        planar_arc += gw[i] * half * (speed(mid + gx[i] * 0.5 * span) + speed(mid - gx[i] * 0.5 * span));
+    }
+    const double bound = 1.001 * ((T1 - a).norm() + (b - T2).norm() + planar_arc) + 1e-12;
+    std::vector<Vec3> nodes;
+    double total = 0.0;
+    // Chords positive (the wrapped side; at engagement they shrink to zero,
+    // where rounding may leave ~1e-17 m of either sign).
+    auto valid = [&]() {
+      nodes.clear();
+      std::vector<double> steps;
+      double r[2], first = 0, last = 0;
+      shoot<double>(s, al, be, r, &nodes, &steps, &first, &last);
+      total = first + last;
+      for (double t : steps) {
+        if (!(t > -tiny)) return false;
+        total += t;
+      }
+      return std::isfinite(total);
+    };
+    auto record = [&](bool converged) {
+      if (!(converged && valid())) return false;
+      const bool within = total <= bound;
+      if (s.N == N && (!best.have || (within && !best.found) || (within == best.found && total < best.total))) {
+        best.have = true;
+        best.found = within;
+        best.total = total;
+        best.s = s;
+        best.al = al;
+        best.be = be;
+      }
+      return true;
+    };
+    set_chart(x0_hint ? *x0_hint : planar_guess(N));
+    // First attempt: at most 12 iterations (a good guess converges in 2-4).
+    bool ok = record(single(12));
+    best.its += it;
+    if (best.found) return best;
     // Continuation in the number of chords: solve with n_0 <= 4 chords
     // (multiple shooting from nodes on the planar section, or else single
     // shooting from the planar guess), then double n up to N, each solve
@@ -632,45 +652,55 @@ SegmentWrap ellipsoid_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b
       y[k] = sec.point(tau1 + (k + 0.5) * span / (s.N + 1)).cwiseQuotient(D).normalized();
     int ms_its = 0;
     ok = solve_all_nodes(D, A, a, b, y, &ms_its);
-    total_its += ms_its;
+    best.its += ms_its;
     if (ok) {
       set_chart(D.cwiseProduct(y[0]));
-      ok = single(50);
-      total_its += it;
+      ok = record(single(50));
+      best.its += it;
     }
-    bool found = done(ok);
-    if (!found && !(ok && valid())) {
+    if (!ok) {
       set_chart(planar_guess(s.N));
-      ok = single(50);
-      total_its += it;
-      found = done(ok);
+      ok = record(single(50));
+      best.its += it;
     }
-    for (size_t i = 1; i < seq.size() && (found || (ok && valid())); ++i) {
+    for (size_t i = 1; i < seq.size() && ok; ++i) {
       const double shift = 0.5 * (1.0 - double(s.N + 1) / (seq[i] + 1));
       const Vec3 guess = nodes[0] - shift * (nodes[1] - nodes[0]);
       s.N = seq[i];
       set_chart(guess);
-      ok = single(50);
-      total_its += it;
-      found = done(ok);
+      ok = record(single(50));
+      best.its += it;
     }
-    if (!(found && s.N == N)) {
-      if (!have_candidate) {
-        std::ostringstream msg;
-        msg << "the discrete geodesic (" << N << " chords) was not found (Newton residual " << rn
-            << " after continuation in the number of chords, " << total_its << " iterations)";
-        ellipsoid_failure(surf, msg.str());
-      }
-      s.N = N;
-      s.y0 = cand_y0;
-      s.ea = cand_ea;
-      s.eb = cand_eb;
-      al = cand_al;
-      be = cand_be;
-      valid();
-    }
+    return best;
+  };
+
+  Solution sol = attempt(side0, hint);
+  if (!sol.found) {
+    Solution other = attempt(-side0, nullptr);
+    other.its += sol.its;
+    if (other.have && (!sol.have || (other.found && !sol.found) ||
+                       (other.found == sol.found && other.total < sol.total)))
+      sol = other;
+    else
+      sol.its = other.its;
   }
-  it = total_its;
+  if (!sol.have) {
+    std::ostringstream msg;
+    msg << "the discrete geodesic (" << N << " chords) was not found on either side (" << sol.its
+        << " Newton iterations, single and multiple shooting, continuation in the number of chords)";
+    ellipsoid_failure(surf, msg.str());
+  }
+  std::vector<Vec3> nodes;
+  std::vector<double> steps;
+  nodes.reserve(N + 1);
+  steps.reserve(N);
+  {
+    double r[2];
+    shoot<double>(sol.s, sol.al, sol.be, r, &nodes, &steps);
+  }
+  double arc_len = 0.0;
+  for (double t : steps) arc_len += t;
+  const int it = sol.its;
   // Turning angle: at every node the direction turns by 2 asin(|u . n|).
   double turn = 0.0;
   for (int k = 0; k <= N; ++k) {
@@ -721,21 +751,23 @@ SegmentWrap torus_wrap(const WrapSurface& surf, const Vec3& a, const Vec3& b, st
   length_at(phi_c, &w0, nullptr);
   if (!w0.active) return SegmentWrap{};
   // Maximise l(phi) (Danskin: the most constraining section) by Newton on
-  // l'(phi) = 0 with central differences (h = 1e-6 rad: l is a closed form
-  // smooth in phi, rounding ~1e-17 m gives l'' to ~1e-5 relative), steps
+  // l'(phi) = 0 with central differences of the closed-form l: l' with
+  // h = 1e-6 rad (rounding ~1e-16 l / h), l'' with h2 = 1e-3 rad (l'' h2^2
+  // ~1e-10 m stays far above rounding; it only steers the iteration), steps
   // limited to 0.05 rad, within a quarter turn of phi_c.
-  const double h = 1e-6, window = kPi / 4;
+  const double h = 1e-6, h2 = 1e-3, window = kPi / 4;
   double phi = phi_c;
   int it = 0;
   bool converged = false;
   for (; it < 100; ++it) {
     const double lp = length_at(phi + h, nullptr, nullptr), l0 = length_at(phi, nullptr, nullptr),
                  lm = length_at(phi - h, nullptr, nullptr);
-    const double d1 = (lp - lm) / (2 * h), d2 = (lp - 2 * l0 + lm) / (h * h);
-    // Converged when l' is at its rounding level (~1e-11 m/rad): phi* is
-    // then known to |l'| / |l''|, and the envelope error of the moment arms
-    // is of the order of l' itself.
-    if (d2 < 0 && std::abs(d1) < 5e-11) {
+    const double lpp = length_at(phi + h2, nullptr, nullptr), lmm = length_at(phi - h2, nullptr, nullptr);
+    const double d1 = (lp - lm) / (2 * h), d2 = (lpp - 2 * l0 + lmm) / (h2 * h2);
+    // Converged when l' is at its rounding level (8 ulp(l) / h, ~5e-10 m/rad
+    // for l = 0.3 m): phi* is then known to |l'| / |l''|, and the envelope
+    // error of the moment arms is of the order of l' itself.
+    if (d2 < 0 && std::abs(d1) < 8 * std::numeric_limits<double>::epsilon() * l0 / h) {
       converged = true;
       ++it;
       break;

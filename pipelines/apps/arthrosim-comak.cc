@@ -31,6 +31,8 @@
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
 #include "pipelines/apps/name_value.h"
+#include "pipelines/comak_stage.h"
+#include "pipelines/stages.h"
 
 using namespace arthrosim;
 namespace msk = arthrosim::musculoskeletal;
@@ -75,7 +77,7 @@ int main(int argc, char** argv) {
   std::string model_path, trial_path, out, sto_prefix, scene_path, prepared_path;
   int first = 0, last = -1, stride = 1;
   msk::ComakOptions o;
-  double lowpass_hz = 6.0;
+  double lowpass_hz = msk::GaitTrialOptions().lowpass.cutoff_hz;  // the one default (signal.h)
   bool verbose = false, quiet = false, no_pressure = false;
   app.add_option("--model", model_path,
                  "model URDF (e.g. data/models/knee_parametric/knee.urdf) or a model folder")
@@ -176,28 +178,26 @@ int main(int argc, char** argv) {
     std::vector<std::string> effects = {"ligaments", "muscles", "tibiofemoral_contact",
                                         "patellofemoral_contact"};
     if (!scene_path.empty()) {
-      const common::Scene scene = common::load_scene(scene_path);
+      const common::Scene scene = pipelines::load_scene(scene_path);
       // The trial window of the scene (explicit flags win).
-      if (scene.top.has("trial.start_s") && !app.count("--start-time") && !app.count("--first-frame"))
-        start_time = scene.top.si("trial.start_s");
-      if (scene.top.has("trial.end_s") && !app.count("--end-time") && !app.count("--last-frame"))
-        end_time = scene.top.si("trial.end_s");
-      if (scene.comak) {
-        const common::OptionBlock& c = *scene.comak;
-        effects = c.list("effects");
-        if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.si("ipopt_tolerance");
-        if (!app.count("--acceptable-iterations"))
-          o.acceptable_iterations = static_cast<int>(c.integer("ipopt_acceptable_iterations"));
-        if (!app.count("--max-iterations"))
-          o.max_iterations = static_cast<int>(c.integer("ipopt_max_iterations"));
-        if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
-        if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
-        if (!ankle_flag->count()) o.ankle_equilibrium = c.flag("ankle_equilibrium");
-        if (!app.count("--body-inertia")) o.body_inertia = c.flag("body_inertia");
-        if (!hip_flag->count()) o.hip_equilibrium = c.flag("hip_equilibrium");
-        if (!no_damping) o.coordinate_damping = c.flag("coordinate_damping");
-        if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
-        if (!single_start) o.second_start = c.flag("second_start");
+      const pipelines::SceneInputs in = pipelines::scene_inputs(scene);
+      if (in.trial_start_s && !app.count("--start-time") && !app.count("--first-frame"))
+        start_time = *in.trial_start_s;
+      if (in.trial_end_s && !app.count("--end-time") && !app.count("--last-frame")) end_time = *in.trial_end_s;
+      if (scene.has_block("comak")) {
+        const pipelines::ComakStageOptions c = common::read_options<pipelines::ComakStageOptions>(scene.block("comak"));
+        effects = c.effects;
+        if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.solver.ipopt_tolerance;
+        if (!app.count("--acceptable-iterations")) o.acceptable_iterations = c.solver.acceptable_iterations;
+        if (!app.count("--max-iterations")) o.max_iterations = c.solver.max_iterations;
+        if (!app.count("--activation-min")) o.activation_min = c.solver.activation_min;
+        if (!app.count("--reserve-actuators")) o.reserve_actuators = c.solver.reserve_actuators;
+        if (!ankle_flag->count()) o.ankle_equilibrium = c.solver.ankle_equilibrium;
+        if (!app.count("--body-inertia")) o.body_inertia = c.solver.body_inertia;
+        if (!hip_flag->count()) o.hip_equilibrium = c.solver.hip_equilibrium;
+        if (!no_damping) o.coordinate_damping = c.solver.coordinate_damping;
+        if (!app.count("--lowpass-hz")) lowpass_hz = c.trial.lowpass.cutoff_hz;
+        if (!single_start) o.second_start = c.solver.second_start;
       }
     }
     if (single_start) o.second_start = false;

@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <random>
+#include <string>
 
 #include "common/error.h"
 #include "musculoskeletal/path.h"
@@ -372,4 +374,47 @@ TEST(CoordinateFunction, SplineReproducesCubicsAndParabolas) {
   EXPECT_DOUBLE_EQ(msk::CoordinateFunction::constant(0.2).value(7.0), 0.2);
   EXPECT_DOUBLE_EQ(msk::CoordinateFunction::linear(2.0, 1.0).derivative(3.0), 2.0);
   EXPECT_THROW(msk::CoordinateFunction::cubic_spline({0, 0}, {1, 2}), arthrosim::common::InputError);
+}
+
+TEST(Wrap, EllipsoidRandomSegmentsAreSolved) {
+  // Random ellipsoids (semi-axes 5-65 mm) and random segments passing through
+  // them, many deep: the solver must find the discrete geodesic (8 and 16
+  // chords) in all but a few cases near the centre, where both sides of the
+  // body are nearly equally short; a failure is a NumericalError naming the
+  // surface, never a silent wrong result. Measured: 2 of 9,221 wrapped cases
+  // raise (0.02 %), both with the segment within 47 % of the way from the
+  // centre to the surface; the bound allows 0.2 %.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1, 1), V(0, 1);
+  int active = 0, failures = 0, deepest_failure_pct = 100;
+  double worst_short = 0.0;
+  for (int i = 0; i < 10000; ++i) {
+    msk::WrapSurface e = ellipsoid(Vec3(0.005 + 0.06 * V(rng), 0.005 + 0.06 * V(rng), 0.005 + 0.06 * V(rng)));
+    Vec3 dir(U(rng), U(rng), U(rng));
+    dir.normalize();
+    const Vec3 a = e.semi_axes.cwiseProduct(Vec3(U(rng), U(rng), U(rng))) * 0.6 - dir * (0.05 + 0.1 * V(rng));
+    const Vec3 b = a + dir * (0.15 + 0.2 * V(rng)) + 0.02 * Vec3(U(rng), U(rng), U(rng));
+    try {
+      const auto w8 = msk::wrap_segment(e, a, b, 8);
+      if (!w8.active) continue;
+      ++active;
+      const auto w16 = msk::wrap_segment(e, a, b, 16);
+      ASSERT_TRUE(w16.active);
+      // Both inscribed: the finer one is not shorter by more than rounding
+      // unless they chose different sides (then the coarse one may be longer).
+      worst_short = std::max(worst_short, seg_length(w8, a, b) - seg_length(w16, a, b));
+    } catch (const arthrosim::common::NumericalError& err) {
+      ++failures;
+      EXPECT_NE(std::string(err.what()).find("wrap ellipsoid"), std::string::npos);
+      const Vec3 A = e.semi_axes.cwiseProduct(e.semi_axes).cwiseInverse(), d = b - a;
+      const double t = std::clamp(-a.dot(A.cwiseProduct(d)) / d.dot(A.cwiseProduct(d)), 0.0, 1.0);
+      const Vec3 m = a + t * d;
+      deepest_failure_pct = std::min(deepest_failure_pct, int(100 * std::sqrt(m.dot(A.cwiseProduct(m)))));
+    }
+  }
+  std::printf("random ellipsoid wraps: %d wrapped, %d failures (%.2f %%), deepest point of a failing segment "
+              "at %d %% of the way from the centre to the surface\n",
+              active, failures, 100.0 * failures / std::max(1, active), deepest_failure_pct);
+  EXPECT_GT(active, 9000);
+  EXPECT_LT(failures, 0.002 * active);
 }
