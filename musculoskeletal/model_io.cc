@@ -530,8 +530,9 @@ void read_surface(Context& c, const XMLElement* e) {
   } else {
     s.thickness = read_thickness_csv(c.rd, e, c.rd.existing_file(e, "thickness_csv"), s.mesh);
   }
-  // Mesh coordinates given in the reference (model) frame move to the body frame.
-  const Pose X = to_body(c, e, s.body);
+  // Mesh coordinates given in the reference (model) frame move to the body
+  // frame; xyz/rpy place the mesh file's frame in that frame (default identity).
+  const Pose X = to_body(c, e, s.body) * c.rd.pose(e);
   for (int i = 0; i < s.mesh.num_vertices(); ++i)
     s.mesh.V.row(i) = (X * Vec3(s.mesh.V.row(i).transpose())).transpose();
   s.name = n;
@@ -582,6 +583,7 @@ void read_ligament(Context& c, const XMLElement* e) {
        b = b->NextSiblingElement("bundle"), ++k) {
     const std::string where = "ligament '" + lig.name + "' bundle " + std::to_string(k);
     LigamentBundle lb;
+    if (c.rd.has(b, "name")) lb.name = c.rd.attr(b, "name");
     BlankevoortParameters& p = lb.parameters;
     // Bundle attributes override the group's.
     auto value = [&](const char* name, double def) {
@@ -633,6 +635,9 @@ void read_muscle(Context& c, const XMLElement* e) {
     if (!(m.optimal_fiber_length > 0) || !(m.tendon_slack_length > 0))
       c.rd.fail(e, "muscle '" + m.name + "' expected optimal_fiber_length > 0 m and tendon_slack_length > 0 m");
   }
+  m.pennation_angle = c.rd.number_or(e, "pennation_angle", 0.0);
+  if (!(m.pennation_angle >= 0 && m.pennation_angle < M_PI / 2))
+    c.rd.fail(e, "muscle '" + m.name + "' expected 0 <= pennation_angle < pi/2 rad");
   m.path = read_path(c, e, "muscle '" + m.name + "'");
   c.model.muscles.push_back(std::move(m));
 }
@@ -667,6 +672,8 @@ Model parse_model(const std::string& xml, const std::string& file_name,
   forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), ref);
   Context c{rd, model, ref, {}, {}, {}};
   std::set<int> prescribed;
+  bool have_subject = false;
+  model.default_q = Eigen::VectorXd::Zero(model.num_coordinates());
   for (const XMLElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
     const std::string name = e->Name();
     if (name.rfind(kNs, 0) != 0) continue;
@@ -691,12 +698,50 @@ Model parse_model(const std::string& xml, const std::string& file_name,
       read_ligament(c, e);
     } else if (is_ext(e, "muscle")) {
       read_muscle(c, e);
+    } else if (is_ext(e, "default")) {
+      const std::string j = rd.attr(e, "joint");
+      const int ci = model.tree.coordinate_index(j);
+      if (ci < 0) rd.fail(e, "default: expected a revolute or prismatic joint, found '" + j + "'");
+      model.default_q[ci] = rd.number(e, "value");
+    } else if (is_ext(e, "role")) {
+      const std::string role = rd.attr(e, "name");
+      const bool joint = rd.has(e, "joint"), link = rd.has(e, "link");
+      if (joint == link) rd.fail(e, "role '" + role + "': expected exactly one of joint or link");
+      if (joint) {
+        const std::string j = rd.attr(e, "joint");
+        const int ci = model.tree.coordinate_index(j);
+        if (ci < 0) rd.fail(e, "role '" + role + "': expected a revolute or prismatic joint, found '" + j + "'");
+        if (!model.coordinate_roles.emplace(role, ci).second) rd.fail(e, "duplicate role '" + role + "'");
+      } else {
+        const int b = body_of(c, e, "link");
+        if (!model.body_roles.emplace(role, b).second) rd.fail(e, "duplicate role '" + role + "'");
+      }
+    } else if (is_ext(e, "coordinate_spring")) {
+      CoordinateSpring sp;
+      sp.name = rd.has(e, "name") ? rd.attr(e, "name") : rd.attr(e, "joint");
+      const std::string j = rd.attr(e, "joint");
+      sp.coordinate = model.tree.coordinate_index(j);
+      if (sp.coordinate < 0) rd.fail(e, "coordinate_spring: expected a revolute or prismatic joint, found '" + j + "'");
+      sp.stiffness = rd.number_or(e, "stiffness", 0.0);
+      sp.rest_length = rd.number_or(e, "rest_length", 0.0);
+      sp.viscosity = rd.number_or(e, "viscosity", 0.0);
+      if (!(sp.stiffness >= 0) || !(sp.viscosity >= 0))
+        rd.fail(e, "coordinate_spring '" + sp.name + "': expected stiffness >= 0 and viscosity >= 0");
+      model.coordinate_springs.push_back(sp);
+    } else if (is_ext(e, "subject")) {
+      if (have_subject) rd.fail(e, "expected one <arthrosim:subject>, found a second");
+      have_subject = true;
+      model.subject_mass_kg = rd.number(e, "mass_kg");
+      if (!(model.subject_mass_kg > 0)) rd.fail(e, "subject: expected mass_kg > 0");
     } else {
       rd.fail(e, "unknown element <" + name +
-                     "> (expected arthrosim:prescribed, wrap_cylinder, wrap_ellipsoid, wrap_sphere, "
-                     "wrap_torus, surface, contact, ligament or muscle)");
+                     "> (expected arthrosim:prescribed, default, role, wrap_cylinder, wrap_ellipsoid, "
+                     "wrap_sphere, wrap_torus, surface, contact, ligament, muscle, coordinate_spring or "
+                     "subject)");
     }
   }
+  if (!have_subject)
+    for (const Body& b : model.tree.bodies) model.subject_mass_kg += b.mass;
   for (int i = 0; i < model.num_coordinates(); ++i)
     (prescribed.count(i) ? model.prescribed_coordinates : model.free_coordinates).push_back(i);
   return model;

@@ -370,6 +370,11 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.inputs.emplace_back("trial", in.trial);
     s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
     s.options = comak.canonical();
+    // The trial window (top-level trial.start_s / trial.end_s) decides which
+    // frames the stage solves.
+    for (const auto& kv : scene.top.canonical())
+      if (kv.first.rfind("scene.trial.", 0) == 0) s.options.push_back(kv);
+    std::sort(s.options.begin(), s.options.end());
     s.effects = comak.list("effects");
     add_path_inputs(comak, s);
     s.outputs = {out_dir / kKinematics};
