@@ -209,13 +209,15 @@ struct UnconfinedSeries {
 
   explicit UnconfinedSeries(double nu_s, int roots = 400) : nu(nu_s), c((1 - 2 * nu_s) / (1 - nu_s)) {
     auto f = [this](double x) { return c * std::cyl_bessel_j(1.0, x) - x * std::cyl_bessel_j(0.0, x); };
-    const double step = 0.01;
+    // Roots are at least 2.5 apart (asymptotically pi, checked by the test), so a
+    // scan at 0.1 brackets each one alone.
+    const double step = 0.1;
     double x0 = step, f0 = f(x0);
     while (static_cast<int>(alpha.size()) < roots) {
       const double x1 = x0 + step, f1 = f(x1);
       if ((f0 < 0) != (f1 < 0)) {
         double lo = x0, hi = x1, flo = f0;
-        for (int it = 0; it < 200 && hi - lo > 1e-15 * hi; ++it) {
+        for (int it = 0; it < 60 && hi - lo > 1e-15 * hi; ++it) {
           const double mid = 0.5 * (lo + hi), fm = f(mid);
           if ((fm < 0) == (flo < 0)) { lo = mid; flo = fm; } else { hi = mid; }
         }
