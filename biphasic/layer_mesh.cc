@@ -37,7 +37,8 @@ std::array<int, 9> quad_entities(const LayerMesh& m, int q) {
 }  // namespace
 
 LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& normals,
-                        const Eigen::VectorXd& thickness, int layers) {
+                        const Eigen::VectorXd& thickness, int layers,
+                        const std::vector<double>& level_fractions) {
   const std::string w = where(surface);
   const int nv = surface.num_nodes();
   const int nq = surface.num_quads();
@@ -55,6 +56,18 @@ LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& 
   LayerMesh m;
   m.name = surface.name;
   m.layers = layers;
+  if (level_fractions.empty()) {
+    for (int L = 0; L <= layers; ++L) m.levels.push_back(static_cast<double>(L) / layers);
+  } else {
+    bool ok = static_cast<int>(level_fractions.size()) == layers + 1 && level_fractions.front() == 0.0 &&
+              level_fractions.back() == 1.0;
+    for (size_t L = 1; ok && L < level_fractions.size(); ++L) ok = level_fractions[L] > level_fractions[L - 1];
+    if (!ok) {
+      throw common::InputError(w + ": expected " + std::to_string(layers + 1) +
+                               " strictly increasing level fractions from 0 to 1");
+    }
+    m.levels = level_fractions;
+  }
   m.surface = surface;
   m.normals = normals;
   m.thickness = thickness;
@@ -127,13 +140,13 @@ LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& 
   m.q1_nodes.resize(nv * (N + 1), 3);
   for (int v = 0; v < nv; ++v)
     for (int L = 0; L <= N; ++L)
-      m.q1_nodes.row(m.q1_node(v, L)) = bone.row(v) + (static_cast<double>(L) / N) * offset.row(v);
+      m.q1_nodes.row(m.q1_node(v, L)) = bone.row(v) + m.levels[L] * offset.row(v);
 
   const int n_entities = nv + ne + nq;
   m.q2_nodes.resize(static_cast<Eigen::Index>(n_entities) * (2 * N + 1), 3);
   auto place = [&](int entity, const std::vector<int>& verts) {
     for (int l = 0; l <= 2 * N; ++l) {
-      const double s = static_cast<double>(l) / (2 * N);
+      const double s = l % 2 == 0 ? m.levels[l / 2] : 0.5 * (m.levels[l / 2] + m.levels[l / 2 + 1]);
       Eigen::RowVector3d p = Eigen::RowVector3d::Zero();
       for (int v : verts) p += bone.row(v) + s * offset.row(v);
       m.q2_nodes.row(m.q2_node(entity, l)) = p / static_cast<double>(verts.size());

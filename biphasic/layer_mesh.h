@@ -6,7 +6,8 @@
 // Geometry. Surface node v at x_v with unit normal n_v (pointing away from the
 // bone, into the joint space) and thickness h_v > 0 lies on the bone at
 // x_v - h_v n_v. Level s in [0, 1] of the layer (0 bone, 1 articular surface)
-// is at x_v - (1 - s) h_v n_v. Each element is the trilinear hexahedron
+// is at x_v - (1 - s) h_v n_v; corner level L is at s_L (equal steps L / N by
+// default). Each element is the trilinear hexahedron
 // spanned by its 8 corners (subparametric for the quadratic field: the
 // displacement nodes sit where the trilinear map puts them).
 //
@@ -37,6 +38,7 @@ struct LayerMesh {
   common::QuadMesh surface;         ///< articular surface (as given)
   common::Points3 normals;          ///< unit node normals of the surface (away from bone)
   Eigen::VectorXd thickness;        ///< per surface node [m]
+  std::vector<double> levels;       ///< corner level fractions s_L, L = 0..N (0 bone, 1 surface)
   Eigen::Matrix<int, Eigen::Dynamic, 2> edges;       ///< unique surface edges (a < b)
   Eigen::Matrix<int, Eigen::Dynamic, 4> quad_edges;  ///< per quad: edges of sides 01, 12, 23, 30
 
@@ -84,8 +86,12 @@ struct LayerMesh {
 /// non-positive thickness, a zero or non-finite normal, a quad index out of
 /// range, or an element whose trilinear Jacobian is not positive at a corner
 /// (thickness too large for the surface curvature, inverted quad).
+/// `level_fractions` (optional, N + 1 values from 0 at the bone to 1 at the
+/// articular surface, strictly increasing) places the corner levels; empty
+/// means equal heights. Displacement mid-levels sit half way between.
 LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& normals,
-                        const Eigen::VectorXd& thickness, int layers);
+                        const Eigen::VectorXd& thickness, int layers,
+                        const std::vector<double>& level_fractions = {});
 
 /// Corner positions (8 x 3, hex_basis order) of element `element`.
 Eigen::Matrix<double, 8, 3> element_corners(const LayerMesh& mesh, int element);

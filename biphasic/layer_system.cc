@@ -70,19 +70,27 @@ const char* to_string(ElementPair pair) {
 }
 
 LayerSystem assemble_layer(LayerMesh mesh, const Material& material, ElementPair pair) {
-  validate(material, "layer '" + mesh.name + "'");
+  const int layers = mesh.layers;
+  return assemble_layer(std::move(mesh), std::vector<Material>(layers, material), pair);
+}
+
+LayerSystem assemble_layer(LayerMesh mesh, const std::vector<Material>& layer_materials,
+                           ElementPair pair) {
+  if (static_cast<int>(layer_materials.size()) != mesh.layers) {
+    throw common::InputError("layer '" + mesh.name + "': expected one material per element layer (" +
+                             std::to_string(mesh.layers) + "), found " +
+                             std::to_string(layer_materials.size()));
+  }
+  for (const Material& material : layer_materials) validate(material, "layer '" + mesh.name + "'");
   LayerSystem sys;
   sys.mesh = std::move(mesh);
-  sys.material = material;
+  sys.materials = layer_materials;
   sys.pair = pair;
   const LayerMesh& m = sys.mesh;
   const int order = sys.u_order();
   const int nn = hex_nodes(order);
   const int nu = sys.num_u_dofs();
   const int np = sys.num_p_dofs();
-  const double lambda = material.lame_lambda();
-  const double mu = material.shear_modulus();
-  const double k = material.permeability_m4_per_Ns;
 
   const QuadratureRule rule = hex_rule(order == 2 ? 3 : 2);
   // Reference bases at the quadrature points (the same for every element).
@@ -100,6 +108,10 @@ LayerSystem assemble_layer(LayerMesh mesh, const Material& material, ElementPair
   std::array<int, 8> pdof{};
   for (int el = 0; el < m.num_elements(); ++el) {
     const Eigen::Matrix<double, 8, 3> X = element_corners(m, el);
+    const Material& material = sys.element_material(el);
+    const double lambda = material.lame_lambda();
+    const double mu = material.shear_modulus();
+    const double k = material.permeability_m4_per_Ns;
     Ke.setZero();
     Ae.setZero();
     Be.setZero();
@@ -196,8 +208,9 @@ PointFields evaluate_point(const LayerSystem& sys, int element, const Eigen::Vec
   }
   PointFields f;
   f.strain = 0.5 * (grad_u + grad_u.transpose());
-  const double lambda = sys.material.lame_lambda();
-  const double mu = sys.material.shear_modulus();
+  const Material& material = sys.element_material(element);
+  const double lambda = material.lame_lambda();
+  const double mu = material.shear_modulus();
   f.effective_stress = lambda * f.strain.trace() * Eigen::Matrix3d::Identity() + 2.0 * mu * f.strain;
   Eigen::Vector3d grad_p = Eigen::Vector3d::Zero();
   f.pressure = 0.0;
@@ -207,7 +220,7 @@ PointFields evaluate_point(const LayerSystem& sys, int element, const Eigen::Vec
     grad_p += pc * Gm.row(c).transpose();
   }
   f.total_stress = f.effective_stress - f.pressure * Eigen::Matrix3d::Identity();
-  f.flux = -sys.material.permeability_m4_per_Ns * grad_p;
+  f.flux = -material.permeability_m4_per_Ns * grad_p;
   return f;
 }
 

@@ -29,6 +29,7 @@
 // set of the pair), then p-dof = corner node index (LayerMesh::q1_node).
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <vector>
 
 #include "biphasic/layer_mesh.h"
 #include "biphasic/material.h"
@@ -40,7 +41,9 @@ const char* to_string(ElementPair pair);
 
 struct LayerSystem {
   LayerMesh mesh;
-  Material material;
+  /// Material of each element layer (index L = 0 at the bone); all equal for
+  /// a single-material layer.
+  std::vector<Material> materials;
   ElementPair pair = ElementPair::kTaylorHood;
 
   Eigen::SparseMatrix<double> K;  ///< nu x nu solid stiffness [N/m]
@@ -51,6 +54,10 @@ struct LayerSystem {
   /// F_t = surface_load * t, t = [t_0x t_0y t_0z t_1x ...] [Pa] -> [N].
   Eigen::SparseMatrix<double> surface_load;
 
+  /// Material of element layer L.
+  const Material& material(int L = 0) const { return materials[L]; }
+  /// Material of an element.
+  const Material& element_material(int element) const { return materials[element % mesh.layers]; }
   /// Polynomial order of the displacement basis (2 Taylor-Hood, 1 equal order).
   int u_order() const { return pair == ElementPair::kTaylorHood ? 2 : 1; }
   /// Displacement node positions (q2_nodes or q1_nodes of the mesh).
@@ -69,6 +76,11 @@ struct LayerSystem {
 /// Assembles K, A, B and the surface load operator (Gauss 3^3 for Q2, 2^3 for
 /// Q1 in the volume; 3 x 3 on faces). Validates the material (InputError).
 LayerSystem assemble_layer(LayerMesh mesh, const Material& material,
+                           ElementPair pair = ElementPair::kTaylorHood);
+/// As above with one material per element layer (size mesh.layers): a layered
+/// column whose interfaces are tied (shared nodes: continuous displacement and
+/// pressure), e.g. two cartilage layers bonded at their contact surface.
+LayerSystem assemble_layer(LayerMesh mesh, const std::vector<Material>& layer_materials,
                            ElementPair pair = ElementPair::kTaylorHood);
 
 /// Stress and flux at one point of an element.

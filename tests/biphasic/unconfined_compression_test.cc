@@ -94,7 +94,7 @@ DiskRun run_disk(int n, double dtau, double tau0, double tau_end, const Unconfin
   // Equilibrium force on the discrete section (the O-grid's rim is a chord
   // polygon, 0.64 % smaller than the disk at n = 4): F_inf = E_s eps0 A_h.
   const double area = 4.0 * articular_node_areas(sys.mesh).sum();
-  const double F_inf = -sys.material.youngs_modulus() * kEps0 * area;
+  const double F_inf = -sys.material().youngs_modulus() * kEps0 * area;
   DiskRun r;
   StepInput in;
   in.u_fixed = Eigen::VectorXd::Zero(fixed_u.size());
