@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <numeric>
 
+#include "biphasic/layer_fields.h"
 #include "biphasic/trapezoidal.h"
 #include "biphasic_fixtures.h"
 #include "common/error.h"
@@ -102,6 +104,18 @@ TEST(LayerSystem, DisplacementPatchTestOnADistortedLayer) {
       const PointFields f = evaluate_point(sys, el, Eigen::Vector3d(0.3, -0.7, 0.9), integ.u(), integ.p());
       EXPECT_LT((f.effective_stress - sigma).norm(), 1e-8 * sigma.norm()) << el;
       EXPECT_LT((f.total_stress - sigma).norm(), 1e-8 * sigma.norm()) << el;
+    }
+    // Nodal fields: the same constant stress at every corner node, its
+    // principal values and the displacement of the corner nodes.
+    const NodalFields nf = nodal_fields(sys, integ.u(), integ.p());
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+    const Eigen::Vector3d ev = eig.eigenvalues();
+    for (int n = 0; n < sys.mesh.num_q1_nodes(); ++n) {
+      EXPECT_LT((from_voigt(nf.effective_stress.row(n)) - sigma).norm(), 1e-8 * sigma.norm()) << n;
+      EXPECT_NEAR(nf.max_principal[n], ev[2], 1e-8 * sigma.norm());
+      EXPECT_NEAR(nf.max_shear[n], 0.5 * (ev[2] - ev[0]), 1e-8 * sigma.norm());
+      EXPECT_LT((nf.displacement.row(n).transpose() - G * sys.mesh.q1_nodes.row(n).transpose()).norm(),
+                1e-9 * 3e-3 * G.norm());
     }
   }
 }
