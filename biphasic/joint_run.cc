@@ -34,9 +34,10 @@ JointRun::JointRun(std::vector<JointLayer> layers, std::vector<JointPair> pairs,
     }
     if (p.a == p.b) throw common::InputError("biphasic: contact pair of layer '" + p.a + "' with itself");
   }
-  for (const JointLayer& l : layers_) {
+  for (JointLayer& l : layers_) {
     common::QuadMesh surface = l.surface;
     surface.name = l.name;
+    untangled_.push_back(untangle_normals(surface, &l.normals, l.thickness));
     LayerMesh mesh = extrude_layer(surface, l.normals, l.thickness, options_.element_layers);
     problems_.push_back(std::make_unique<LayerProblem>(assemble_layer(std::move(mesh), l.material, options_.pair),
                                                        options_.time));
@@ -97,6 +98,87 @@ const Eigen::Isometry3d& pose(const JointFrame& frame, const std::string& bone) 
 }
 
 }  // namespace
+
+std::vector<std::vector<char>> contact_vertices(const std::vector<JointLayer>& layers,
+                                                const std::vector<JointPair>& pairs,
+                                                const std::vector<JointFrame>& frames) {
+  auto index = [&](const std::string& name) {
+    for (size_t i = 0; i < layers.size(); ++i)
+      if (layers[i].name == name) return static_cast<int>(i);
+    throw common::InputError("biphasic: contact pair names no layer '" + name + "'");
+  };
+  std::vector<std::vector<char>> out;
+  for (const JointLayer& l : layers) out.emplace_back(l.surface.num_nodes(), 0);
+  for (const JointFrame& frame : frames) {
+    std::vector<PlacedSurface> placed;
+    std::vector<std::unique_ptr<common::TriangleTree>> trees;
+    for (const JointLayer& l : layers) {
+      common::QuadMesh s = l.surface;
+      s.name = l.name;
+      placed.push_back(place_surface(s, l.normals, l.thickness, l.material.aggregate_modulus_Pa, pose(frame, l.bone)));
+      trees.push_back(std::make_unique<common::TriangleTree>(placed.back().triangles));
+    }
+    for (const JointPair& p : pairs) {
+      const int a = index(p.a), b = index(p.b);
+      // The force only scales the conditions; 1 N finds the same contact set.
+      const ContactConditions ca = penetration_conditions(placed[a], placed[b], *trees[b], 1.0);
+      const ContactConditions cb = penetration_conditions(placed[b], placed[a], *trees[a], 1.0);
+      for (size_t v = 0; v < ca.in_contact.size(); ++v) out[a][v] |= ca.in_contact[v];
+      for (size_t v = 0; v < cb.in_contact.size(); ++v) out[b][v] |= cb.in_contact[v];
+    }
+  }
+  return out;
+}
+
+JointLayer crop_layer(const JointLayer& layer, const std::vector<char>& seed, double margin_m,
+                      std::vector<int>* kept) {
+  const int nv = layer.surface.num_nodes();
+  std::vector<Eigen::Vector3d> seeds;
+  for (int v = 0; v < nv; ++v)
+    if (seed[v]) seeds.push_back(layer.surface.V.row(v).transpose());
+  std::vector<char> near(nv, 0);
+  const double m2 = margin_m * margin_m;
+  for (int v = 0; v < nv; ++v) {
+    const Eigen::Vector3d x = layer.surface.V.row(v).transpose();
+    for (const Eigen::Vector3d& s : seeds) {
+      if ((x - s).squaredNorm() <= m2) {
+        near[v] = 1;
+        break;
+      }
+    }
+  }
+  std::vector<int> quads;
+  std::vector<int> new_index(nv, -1);
+  std::vector<int> old_index;
+  for (int q = 0; q < layer.surface.num_quads(); ++q) {
+    bool keep = false;
+    for (int k = 0; k < 4; ++k) keep = keep || near[layer.surface.Q(q, k)];
+    if (!keep) continue;
+    quads.push_back(q);
+    for (int k = 0; k < 4; ++k) {
+      const int v = layer.surface.Q(q, k);
+      if (new_index[v] < 0) {
+        new_index[v] = static_cast<int>(old_index.size());
+        old_index.push_back(v);
+      }
+    }
+  }
+  JointLayer out = layer;
+  const int n = static_cast<int>(old_index.size());
+  out.surface.V.resize(n, 3);
+  out.normals.resize(n, 3);
+  out.thickness.resize(n);
+  for (int i = 0; i < n; ++i) {
+    out.surface.V.row(i) = layer.surface.V.row(old_index[i]);
+    out.normals.row(i) = layer.normals.row(old_index[i]);
+    out.thickness[i] = layer.thickness[old_index[i]];
+  }
+  out.surface.Q.resize(static_cast<int>(quads.size()), 4);
+  for (size_t i = 0; i < quads.size(); ++i)
+    for (int k = 0; k < 4; ++k) out.surface.Q(static_cast<int>(i), k) = new_index[layer.surface.Q(quads[i], k)];
+  if (kept) *kept = old_index;
+  return out;
+}
 
 std::vector<PairFrame> JointRun::contact(const JointFrame& frame) const {
   std::vector<PlacedSurface> placed;

@@ -96,6 +96,23 @@ struct LayerStep {
   Region max_shear_region = Region::kCentral;
 };
 
+/// Vertices of each layer that are in contact in at least one frame, from the
+/// full surfaces (preprocessing only, no finite elements). Checks as
+/// JointRun::contact.
+std::vector<std::vector<char>> contact_vertices(const std::vector<JointLayer>& layers,
+                                                const std::vector<JointPair>& pairs,
+                                                const std::vector<JointFrame>& frames);
+
+/// The layer restricted to the quads with a vertex within `margin_m` of a
+/// `seed` vertex (Euclidean distance in the bone frame), vertices renumbered;
+/// `kept` (if given) receives the original index of each kept vertex. With no
+/// seed vertex the result has no quads. The cut faces are free-draining and
+/// traction-free like the layer's outline: far from every contact their
+/// loads are zero, so the margin only needs to cover the decay of the
+/// solution (docs/biphasic.md, "Cropping").
+JointLayer crop_layer(const JointLayer& layer, const std::vector<char>& seed, double margin_m,
+                      std::vector<int>* kept = nullptr);
+
 class JointRun {
  public:
   /// Builds every layer (extrusion, assembly, one factorisation each) and
@@ -106,6 +123,9 @@ class JointRun {
   const std::vector<JointPair>& pairs() const { return pairs_; }
   const LayerProblem& problem(int layer) const { return *problems_[layer]; }
   int layer_index(const std::string& name) const;  ///< -1 if none
+  /// Surface vertices of a layer whose extrusion direction was smoothed so
+  /// that no element folds (untangle_normals).
+  const std::vector<int>& untangled(int layer) const { return untangled_[layer]; }
   /// Region of each articular vertex of a layer.
   const std::vector<Region>& regions(int layer) const { return regions_[layer]; }
   const JointOptions& options() const { return options_; }
@@ -132,6 +152,7 @@ class JointRun {
   std::vector<std::unique_ptr<LayerProblem>> problems_;
   std::vector<std::vector<Region>> regions_;
   std::vector<Eigen::VectorXd> node_areas_;
+  std::vector<std::vector<int>> untangled_;
 };
 
 }  // namespace arthrosim::biphasic

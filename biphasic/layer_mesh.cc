@@ -200,6 +200,82 @@ LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& 
   return m;
 }
 
+namespace {
+
+// True when the one-layer element of quad q has positive Jacobians at its 8
+// corners (same test as extrude_layer).
+bool quad_element_valid(const common::QuadMesh& s, const common::Points3& n, const Eigen::VectorXd& h, int q) {
+  static constexpr int kCorner[2][2] = {{0, 3}, {1, 2}};
+  Eigen::Matrix<double, 8, 3> X;
+  for (int k = 0; k < 2; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const int v = s.Q(q, kCorner[i][j]);
+        const Eigen::RowVector3d nv = n.row(v).normalized();
+        X.row((k * 2 + j) * 2 + i) = s.V.row(v) - (k == 0 ? h[v] : 0.0) * nv;
+      }
+  Eigen::VectorXd N1;
+  Eigen::MatrixXd dN1;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d xi(c & 1 ? 1.0 : -1.0, c & 2 ? 1.0 : -1.0, c & 4 ? 1.0 : -1.0);
+    hex_basis(1, xi, &N1, &dN1);
+    const Eigen::Matrix3d J = X.transpose() * dN1;
+    const double scale = J.col(0).norm() * J.col(1).norm() * J.col(2).norm();
+    if (!(J.determinant() > 1e-9 * scale)) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<int> untangle_normals(const common::QuadMesh& s, common::Points3* normals, const Eigen::VectorXd& h,
+                                  int max_rounds) {
+  const int nv = s.num_nodes(), nq = s.num_quads();
+  // Quad normals (bilinear centre normal) and the quads around each vertex.
+  common::Points3 qn(nq, 3);
+  std::vector<std::vector<int>> around(nv);
+  for (int q = 0; q < nq; ++q) {
+    const Eigen::Vector3d d1 = (s.V.row(s.Q(q, 2)) - s.V.row(s.Q(q, 0))).transpose();
+    const Eigen::Vector3d d2 = (s.V.row(s.Q(q, 3)) - s.V.row(s.Q(q, 1))).transpose();
+    qn.row(q) = d1.cross(d2).normalized().transpose();
+    for (int k = 0; k < 4; ++k) around[s.Q(q, k)].push_back(q);
+  }
+  std::vector<char> changed(nv, 0);
+  for (int round = 0; round <= max_rounds; ++round) {
+    std::vector<int> bad;
+    for (int q = 0; q < nq; ++q)
+      if (!quad_element_valid(s, *normals, h, q)) bad.push_back(q);
+    if (bad.empty()) break;
+    if (round == max_rounds) {
+      std::ostringstream m;
+      m << "layer '" << s.name << "': " << bad.size() << " quads (first " << bad.front()
+        << ") still fold at the bone side after " << max_rounds
+        << " rounds of normal smoothing: the thickness is too large for the surface curvature there";
+      throw common::InputError(m.str());
+    }
+    // Average over the quads around, then (later rounds) over the neighbours'
+    // current normals as well, so the smoothing spreads.
+    common::Points3 next = *normals;
+    for (int q : bad) {
+      for (int k = 0; k < 4; ++k) {
+        const int v = s.Q(q, k);
+        Eigen::RowVector3d avg = Eigen::RowVector3d::Zero();
+        for (int r : around[v]) {
+          avg += qn.row(r);
+          for (int j = 0; j < 4; ++j) avg += normals->row(s.Q(r, j)).normalized();
+        }
+        next.row(v) = avg.normalized();
+        changed[v] = 1;
+      }
+    }
+    *normals = next;
+  }
+  std::vector<int> out;
+  for (int v = 0; v < nv; ++v)
+    if (changed[v]) out.push_back(v);
+  return out;
+}
+
 Eigen::Matrix<double, 8, 3> element_corners(const LayerMesh& mesh, int element) {
   Eigen::Matrix<double, 8, 3> X;
   for (int a = 0; a < 8; ++a) X.row(a) = mesh.q1_nodes.row(mesh.hex_q1(element, a));
@@ -243,21 +319,23 @@ std::vector<int> LayerMesh::periphery_nodes(int order) const {
   return out;
 }
 
-Eigen::VectorXd articular_node_areas(const LayerMesh& mesh) {
-  Eigen::VectorXd area = Eigen::VectorXd::Zero(mesh.num_vertices());
+Eigen::VectorXd articular_node_areas(const LayerMesh& mesh) { return surface_node_areas(mesh.surface); }
+
+Eigen::VectorXd surface_node_areas(const common::QuadMesh& surface) {
+  Eigen::VectorXd area = Eigen::VectorXd::Zero(surface.num_nodes());
   const QuadratureRule rule = quad_rule(2);
   Eigen::VectorXd N;
   Eigen::MatrixXd dN;
   static constexpr int kLocal[4] = {0, 1, 3, 2};  // quad corner -> bilinear basis index
-  for (int q = 0; q < mesh.num_quads(); ++q) {
+  for (int q = 0; q < surface.num_quads(); ++q) {
     Eigen::Matrix<double, 4, 3> X;
-    for (int k = 0; k < 4; ++k) X.row(kLocal[k]) = mesh.surface.V.row(mesh.surface.Q(q, k));
+    for (int k = 0; k < 4; ++k) X.row(kLocal[k]) = surface.V.row(surface.Q(q, k));
     for (size_t g = 0; g < rule.points.size(); ++g) {
       quad_basis(1, rule.points[g][0], rule.points[g][1], &N, &dN);
       const Eigen::Vector3d t1 = X.transpose() * dN.col(0);
       const Eigen::Vector3d t2 = X.transpose() * dN.col(1);
       const double dA = t1.cross(t2).norm() * rule.weights[g];
-      for (int k = 0; k < 4; ++k) area[mesh.surface.Q(q, k)] += N[kLocal[k]] * dA;
+      for (int k = 0; k < 4; ++k) area[surface.Q(q, k)] += N[kLocal[k]] * dA;
     }
   }
   return area;

@@ -93,6 +93,17 @@ LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& 
                         const Eigen::VectorXd& thickness, int layers,
                         const std::vector<double>& level_fractions = {});
 
+/// Extrusion directions that do not turn an element inside out. Where a
+/// quad's one-layer element would have a non-positive corner Jacobian (the
+/// bone-side face folds: adjacent normals diverge strongly over a short edge
+/// compared with the thickness, typically at a sharp outline), the normals
+/// of that quad's vertices are replaced by the normalised average of the
+/// normals of the quads around them; repeated up to `max_rounds` times.
+/// Returns the vertices whose normal changed (sorted); throws
+/// common::InputError naming the quads still inverted after that.
+std::vector<int> untangle_normals(const common::QuadMesh& surface, common::Points3* normals,
+                                  const Eigen::VectorXd& thickness, int max_rounds = 20);
+
 /// Corner positions (8 x 3, hex_basis order) of element `element`.
 Eigen::Matrix<double, 8, 3> element_corners(const LayerMesh& mesh, int element);
 
@@ -100,6 +111,8 @@ Eigen::Matrix<double, 8, 3> element_corners(const LayerMesh& mesh, int element);
 /// the articular surface of the bilinear hat function of vertex v [m^2]
 /// (2 x 2 Gauss rule per quad: exact for planar quads). Sum = surface area.
 Eigen::VectorXd articular_node_areas(const LayerMesh& mesh);
+/// The same for any quad surface.
+Eigen::VectorXd surface_node_areas(const common::QuadMesh& surface);
 
 /// Volume of the layer [m^3] (Gauss 2 x 2 x 2 on each trilinear element, exact).
 double layer_volume(const LayerMesh& mesh);

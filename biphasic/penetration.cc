@@ -10,21 +10,29 @@ namespace arthrosim::biphasic {
 
 PlacedSurface place_surface(const LayerMesh& mesh, double aggregate_modulus_Pa,
                             const Eigen::Isometry3d& X_WB) {
+  common::QuadMesh surface = mesh.surface;
+  surface.name = mesh.name;
+  return place_surface(surface, mesh.normals, mesh.thickness, aggregate_modulus_Pa, X_WB);
+}
+
+PlacedSurface place_surface(const common::QuadMesh& surface, const common::Points3& normals,
+                            const Eigen::VectorXd& thickness, double aggregate_modulus_Pa,
+                            const Eigen::Isometry3d& X_WB) {
   PlacedSurface s;
-  s.name = mesh.name;
-  const int nv = mesh.num_vertices();
+  s.name = surface.name;
+  const int nv = surface.num_nodes();
   s.nodes.resize(nv, 3);
   s.normals.resize(nv, 3);
   const Eigen::Matrix3d R = X_WB.linear();
   for (int v = 0; v < nv; ++v) {
-    s.nodes.row(v) = (X_WB * Eigen::Vector3d(mesh.surface.V.row(v).transpose())).transpose();
-    s.normals.row(v) = (R * Eigen::Vector3d(mesh.normals.row(v).transpose())).transpose();
+    s.nodes.row(v) = (X_WB * Eigen::Vector3d(surface.V.row(v).transpose())).transpose();
+    s.normals.row(v) = (R * Eigen::Vector3d(normals.row(v).transpose()).normalized()).transpose();
   }
-  s.thickness = mesh.thickness;
-  s.node_area = articular_node_areas(mesh);
-  s.triangles = common::triangulate(mesh.surface);
+  s.thickness = thickness;
+  s.node_area = surface_node_areas(surface);
+  s.triangles = common::triangulate(surface);
   s.triangles.V = s.nodes;
-  s.triangles.name = mesh.name;
+  s.triangles.name = surface.name;
   s.aggregate_modulus_Pa = aggregate_modulus_Pa;
   return s;
 }

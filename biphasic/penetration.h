@@ -54,6 +54,10 @@ struct PlacedSurface {
 /// the bone frame B).
 PlacedSurface place_surface(const LayerMesh& mesh, double aggregate_modulus_Pa,
                             const Eigen::Isometry3d& X_WB);
+/// The same from the surface data alone (unit normals, thickness per node).
+PlacedSurface place_surface(const common::QuadMesh& surface, const common::Points3& normals,
+                            const Eigen::VectorXd& thickness, double aggregate_modulus_Pa,
+                            const Eigen::Isometry3d& X_WB);
 
 /// Boundary conditions of one layer ("self") from its contact with one other
 /// layer. Per-node arrays have one entry per articular vertex of self (zero

@@ -1,0 +1,70 @@
+#pragma once
+// The biphasic stage (issue 31, seed 000): cartilage layers of the prepared
+// model as linear biphasic (u-p) volumes on rigid bones, loaded by the
+// penetration method from the stage-1 kinematics file (bone poses, the
+// tibiofemoral contact force per compartment). Method: docs/biphasic.md;
+// library: biphasic/; output: docs/biphasic.md, "Output".
+//
+// Stage shape: options (this struct), a pure from_options check, build (read
+// the files, crop, assemble, factorise) and run (preprocess every frame, step,
+// write). When the stage-shape work (issue 29) lands, the options get their
+// declare() and the stage its descriptor; the reading of the prepared model
+// and the kinematics file moves to their reader modules.
+#include <string>
+#include <vector>
+
+namespace arthrosim::pipelines {
+
+struct BiphasicStageOptions {
+  std::string prepared;    ///< prepared-model HDF5 (arthrosim-prepare)
+  std::string kinematics;  ///< kinematics HDF5 (arthrosim-comak)
+  std::string out;         ///< output HDF5 (XDMF sidecar next to it)
+  /// Cartilage layers simulated (prepared surface names). The femur with the
+  /// two tibial plates by default; "patella" adds the patellofemoral pair.
+  std::vector<std::string> layers = {"femur", "tibia_medial", "tibia_lateral"};
+  /// Element layers through the thickness [-]; 1..16.
+  int element_layers = 2;
+  /// Time step [s]; > 0. Default: the bundled trial's frame interval.
+  double time_step_s = 0.01;
+  /// Generalised trapezoidal parameter [-]; in [0.5, 1] (docs/biphasic.md, "Time integration").
+  double omega = 0.5;
+  /// Material of every layer (docs/biphasic.md, "Parameters").
+  double aggregate_modulus_Pa = 0.9e6;
+  double poisson_ratio = 0.02;
+  double permeability_m4_per_Ns = 3e-15;
+  /// Each layer is cut to the quads within this distance of a vertex that is
+  /// in contact in some frame [m]; 0 keeps the whole surface. >= 0.
+  double crop_margin_m = 5e-3;
+  /// Last frame time simulated [s]; < 0 = the whole trial.
+  double end_time_s = -1.0;
+  bool progress = true;
+  std::vector<std::string> argv;  ///< for the run metadata
+};
+
+/// Checks every option alone and together (InputError naming the option).
+void check_options(const BiphasicStageOptions& options);
+
+struct BiphasicLayerSummary {
+  std::string name;
+  int quads_total = 0, quads_kept = 0;
+  int unknowns = 0, free_unknowns = 0;
+  long long matrix_nonzeros = 0;
+  int factorizations = 0, solves = 0;
+  double assembly_s = 0.0, factorization_s = 0.0, solve_s = 0.0, step_s = 0.0;
+  double max_relative_residual = 0.0;
+  double peak_fluid_pressure_Pa = 0.0;
+  double peak_tensile_Pa = 0.0, peak_shear_Pa = 0.0;
+};
+
+struct BiphasicStageResult {
+  int frames = 0;            ///< stage-1 frames used
+  int frames_failed = 0;     ///< stage-1 frames whose solver failed (left out, reported)
+  int steps = 0;
+  int skipped_pair_frames = 0;  ///< (pair, frame) with a force but no overlap
+  std::vector<BiphasicLayerSummary> layers;
+  double preprocessing_s = 0.0, build_s = 0.0, stepping_s = 0.0, wall_s = 0.0;
+};
+
+BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& options);
+
+}  // namespace arthrosim::pipelines
