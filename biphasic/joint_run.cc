@@ -108,7 +108,13 @@ std::vector<std::vector<char>> contact_vertices(const std::vector<JointLayer>& l
     throw common::InputError("biphasic: contact pair names no layer '" + name + "'");
   };
   std::vector<std::vector<char>> out;
-  for (const JointLayer& l : layers) out.emplace_back(l.surface.num_nodes(), 0);
+  for (const JointLayer& l : layers) {
+    common::QuadMesh s = l.surface;
+    s.name = l.name;
+    validate_surface_data(s, l.normals, l.thickness);
+    validate(l.material, "layer '" + l.name + "'");
+    out.emplace_back(l.surface.num_nodes(), 0);
+  }
   for (const JointFrame& frame : frames) {
     std::vector<PlacedSurface> placed;
     std::vector<std::unique_ptr<common::TriangleTree>> trees;

@@ -36,6 +36,47 @@ std::array<int, 9> quad_entities(const LayerMesh& m, int q) {
 
 }  // namespace
 
+void validate_surface_data(const common::QuadMesh& surface, const common::Points3& normals,
+                           const Eigen::VectorXd& thickness) {
+  const std::string w = where(surface);
+  const int nv = surface.num_nodes();
+  if (surface.num_quads() == 0) throw common::InputError(w + ": expected at least one surface quad, found none");
+  if (normals.rows() != nv || thickness.size() != nv) {
+    std::ostringstream s;
+    s << w << ": expected one normal and one thickness per surface node (" << nv << "), found "
+      << normals.rows() << " normals and " << thickness.size() << " thicknesses";
+    throw common::InputError(s.str());
+  }
+  for (int v = 0; v < nv; ++v) {
+    const double h = thickness[v];
+    if (!std::isfinite(h) || h <= 0.0) {
+      std::ostringstream s;
+      s << w << ": surface node " << v << ": expected a thickness > 0 m, found " << h << " m";
+      throw common::InputError(s.str());
+    }
+    const double len = normals.row(v).norm();
+    if (!std::isfinite(len) || len < 1e-12) {
+      std::ostringstream s;
+      s << w << ": surface node " << v << ": expected a non-zero finite normal, found (" << normals(v, 0) << ", "
+        << normals(v, 1) << ", " << normals(v, 2) << ")";
+      throw common::InputError(s.str());
+    }
+    if (!surface.V.row(v).allFinite()) {
+      throw common::InputError(w + ": surface node " + std::to_string(v) + ": expected finite coordinates");
+    }
+  }
+  for (int q = 0; q < surface.num_quads(); ++q) {
+    for (int k = 0; k < 4; ++k) {
+      const int a = surface.Q(q, k);
+      if (a < 0 || a >= nv) {
+        std::ostringstream s;
+        s << w << ": quad " << q << ": expected node indices in [0, " << nv << "), found " << a;
+        throw common::InputError(s.str());
+      }
+    }
+  }
+}
+
 LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& normals,
                         const Eigen::VectorXd& thickness, int layers,
                         const std::vector<double>& level_fractions) {
@@ -46,13 +87,7 @@ LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& 
     throw common::InputError(w + ": expected at least 1 element layer through the thickness, found " +
                              std::to_string(layers));
   }
-  if (nq == 0) throw common::InputError(w + ": expected at least one surface quad, found none");
-  if (normals.rows() != nv || thickness.size() != nv) {
-    std::ostringstream s;
-    s << w << ": expected one normal and one thickness per surface node (" << nv << "), found "
-      << normals.rows() << " normals and " << thickness.size() << " thicknesses";
-    throw common::InputError(s.str());
-  }
+  validate_surface_data(surface, normals, thickness);
   LayerMesh m;
   m.name = surface.name;
   m.layers = layers;
@@ -71,26 +106,7 @@ LayerMesh extrude_layer(const common::QuadMesh& surface, const common::Points3& 
   m.surface = surface;
   m.normals = normals;
   m.thickness = thickness;
-  for (int v = 0; v < nv; ++v) {
-    const double h = thickness[v];
-    if (!std::isfinite(h) || h <= 0.0) {
-      std::ostringstream s;
-      s << w << ": surface node " << v << ": expected a thickness > 0 m, found " << h << " m";
-      throw common::InputError(s.str());
-    }
-    const double len = normals.row(v).norm();
-    if (!std::isfinite(len) || len < 1e-12) {
-      std::ostringstream s;
-      s << w << ": surface node " << v << ": expected a non-zero finite normal, found ("
-        << normals(v, 0) << ", " << normals(v, 1) << ", " << normals(v, 2) << ")";
-      throw common::InputError(s.str());
-    }
-    if (!surface.V.row(v).allFinite()) {
-      throw common::InputError(w + ": surface node " + std::to_string(v) +
-                               ": expected finite coordinates");
-    }
-    m.normals.row(v) /= len;
-  }
+  for (int v = 0; v < nv; ++v) m.normals.row(v) /= normals.row(v).norm();
 
   // Unique edges and the quad -> edge map.
   std::map<std::pair<int, int>, int> edge_index;

@@ -80,6 +80,12 @@ struct LayerMesh {
   }
 };
 
+/// Checks the surface data extrude_layer needs (same errors as it): at least
+/// one quad, indices in range, finite coordinates, a non-zero finite normal
+/// and a finite thickness > 0 at every node.
+void validate_surface_data(const common::QuadMesh& surface, const common::Points3& normals,
+                           const Eigen::VectorXd& thickness);
+
 /// Builds the layer mesh. `normals` (one row per surface node) are normalised
 /// here; `thickness` [m] per surface node. Throws common::InputError naming
 /// `surface.name` and the node / quad for: layers < 1, a non-finite or

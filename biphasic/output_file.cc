@@ -185,7 +185,7 @@ void OutputWriter::write_frames(const std::vector<double>& frame_times,
   f.flush();
 }
 
-void OutputWriter::finish(const JointRun& run, const std::string& xdmf_path) {
+void OutputWriter::finish(const JointRun& run) {
   common::H5File& f = *file_;
   for (size_t i = 0; i < run.layers().size(); ++i) {
     const IntegratorCounters& c = run.problem(static_cast<int>(i)).integrator().counters();
@@ -199,12 +199,17 @@ void OutputWriter::finish(const JointRun& run, const std::string& xdmf_path) {
     f.set_attribute(g, "step_s", c.step_s);
     f.set_attribute(g, "max_relative_residual", c.max_relative_residual);
   }
-  f.flush();
-  if (xdmf_path.empty()) return;
+  impl_->time.reset();
+  impl_->layers.clear();
+  file_.reset();
+}
+
+void write_output_xdmf(const std::string& h5_path, const std::string& xdmf_path) {
+  const common::H5File f(h5_path, common::H5File::Mode::kRead);
   common::XdmfSeries series;
   const Eigen::VectorXd t = f.read_vector("/time");
   series.times.assign(t.data(), t.data() + t.size());
-  for (const std::string& name : impl_->names) {
+  for (const std::string& name : f.read_strings("/layers/names")) {
     const std::string g = layer_group(name);
     common::XdmfSurface volume;
     volume.name = name;

@@ -45,15 +45,19 @@ class OutputWriter {
   /// in the order of run.pairs()).
   void write_frames(const std::vector<double>& frame_times,
                     const std::vector<std::vector<CompartmentFrame>>& frames);
-  /// Counters of every layer's integrator, and the XDMF sidecar (`xdmf_path`,
-  /// empty = none) over the steps written.
-  void finish(const JointRun& run, const std::string& xdmf_path);
+  /// Writes the counters of every layer's integrator and closes the file.
+  void finish(const JointRun& run);
 
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
   std::unique_ptr<common::H5File> file_;
 };
+
+/// Writes the XDMF sidecar of a finished output file (volume meshes of every
+/// layer, placed in the world per step, with displacement, fluid pressure,
+/// flux, max principal and max shear stress).
+void write_output_xdmf(const std::string& h5_path, const std::string& xdmf_path);
 
 /// What tests and the report read back: the per-step series of one layer.
 struct LayerSeries {

@@ -287,9 +287,12 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   t0 = std::chrono::steady_clock::now();
   const double dt = o.time_step_s;
   const int expected = static_cast<int>(std::floor((frame_times.back() - frame_times.front()) / dt + 1e-9));
+  // Written as <out>.partial and renamed when complete: an earlier complete
+  // result at `out` survives a failed run.
   std::filesystem::path out_path(o.out);
   if (out_path.has_parent_path()) std::filesystem::create_directories(out_path.parent_path());
-  biphasic::OutputWriter writer(o.out, run, expected);
+  const std::string partial = o.out + ".partial";
+  biphasic::OutputWriter writer(partial, run, expected);
   writer.write_frames(frame_times, records);
   std::vector<const char*> argv;
   for (const std::string& a : o.argv) argv.push_back(a.c_str());
@@ -314,7 +317,9 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   });
   progress.finish();
   result.stepping_s = seconds_since(t0);
-  writer.finish(run, xdmf_path_for(o.out));
+  writer.finish(run);
+  std::filesystem::rename(partial, o.out);
+  biphasic::write_output_xdmf(o.out, xdmf_path_for(o.out));
   for (size_t i = 0; i < layers.size(); ++i) {
     const biphasic::LayerProblem& p = run.problem(static_cast<int>(i));
     const biphasic::IntegratorCounters& c = p.integrator().counters();
