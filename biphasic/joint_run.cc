@@ -1,6 +1,7 @@
 #include "biphasic/joint_run.h"
 
 #include <cmath>
+#include <exception>
 #include <set>
 #include <sstream>
 
@@ -34,44 +35,65 @@ JointRun::JointRun(std::vector<JointLayer> layers, std::vector<JointPair> pairs,
     }
     if (p.a == p.b) throw common::InputError("biphasic: contact pair of layer '" + p.a + "' with itself");
   }
-  for (JointLayer& l : layers_) {
-    common::QuadMesh surface = l.surface;
-    surface.name = l.name;
-    untangled_.push_back(untangle_normals(surface, &l.normals, l.thickness));
-    LayerMesh mesh = extrude_layer(surface, l.normals, l.thickness, options_.element_layers);
-    problems_.push_back(std::make_unique<LayerProblem>(assemble_layer(std::move(mesh), l.material, options_.pair),
-                                                       options_.time));
-    const LayerMesh& m = problems_.back()->system().mesh;
-    const Eigen::VectorXd area = articular_node_areas(m);
-    node_areas_.push_back(area);
-    // Regions from the area centroid and the half extents along the axes.
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (int v = 0; v < m.num_vertices(); ++v) c += area[v] * m.surface.V.row(v).transpose();
-    c /= area.sum();
-    double ant_min = 0, ant_max = 0, lat_min = 0, lat_max = 0;
-    for (int v = 0; v < m.num_vertices(); ++v) {
-      const Eigen::Vector3d d = m.surface.V.row(v).transpose() - c;
-      ant_min = std::min(ant_min, d.dot(options_.anterior_B));
-      ant_max = std::max(ant_max, d.dot(options_.anterior_B));
-      lat_min = std::min(lat_min, d.dot(options_.lateral_B));
-      lat_max = std::max(lat_max, d.dot(options_.lateral_B));
+  // Layers are independent: built (extrusion, assembly, factorisation) in
+  // parallel, each by one thread, so the result does not depend on the
+  // thread count.
+  const int nl = static_cast<int>(layers_.size());
+  problems_.resize(nl);
+  regions_.resize(nl);
+  node_areas_.resize(nl);
+  untangled_.resize(nl);
+  std::vector<std::exception_ptr> errors(nl);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int i = 0; i < nl; ++i) {
+    try {
+      build_layer(i);
+    } catch (...) {
+      errors[i] = std::current_exception();
     }
-    std::vector<Region> r(m.num_vertices());
-    for (int v = 0; v < m.num_vertices(); ++v) {
-      const Eigen::Vector3d d = m.surface.V.row(v).transpose() - c;
-      const double a = d.dot(options_.anterior_B), s = d.dot(options_.lateral_B);
-      const double an = a / (a >= 0 ? std::max(ant_max, 1e-12) : std::max(-ant_min, 1e-12));
-      const double sn = s / (s >= 0 ? std::max(lat_max, 1e-12) : std::max(-lat_min, 1e-12));
-      if (std::abs(an) <= options_.central_fraction && std::abs(sn) <= options_.central_fraction) {
-        r[v] = Region::kCentral;
-      } else if (std::abs(an) >= std::abs(sn)) {
-        r[v] = an > 0 ? Region::kAnterior : Region::kPosterior;
-      } else {
-        r[v] = sn > 0 ? Region::kLateral : Region::kMedial;
-      }
-    }
-    regions_.push_back(std::move(r));
   }
+  for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
+}
+
+void JointRun::build_layer(int i) {
+  JointLayer& l = layers_[i];
+  common::QuadMesh surface = l.surface;
+  surface.name = l.name;
+  untangled_[i] = untangle_normals(surface, &l.normals, l.thickness);
+  LayerMesh mesh = extrude_layer(surface, l.normals, l.thickness, options_.element_layers);
+  problems_[i] = std::make_unique<LayerProblem>(assemble_layer(std::move(mesh), l.material, options_.pair),
+                                                options_.time);
+  const LayerMesh& m = problems_[i]->system().mesh;
+  const Eigen::VectorXd area = articular_node_areas(m);
+  node_areas_[i] = area;
+  // Regions from the area centroid and the half extents along the axes.
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (int v = 0; v < m.num_vertices(); ++v) c += area[v] * m.surface.V.row(v).transpose();
+  c /= area.sum();
+  double ant_min = 0, ant_max = 0, lat_min = 0, lat_max = 0;
+  for (int v = 0; v < m.num_vertices(); ++v) {
+    const Eigen::Vector3d d = m.surface.V.row(v).transpose() - c;
+    ant_min = std::min(ant_min, d.dot(options_.anterior_B));
+    ant_max = std::max(ant_max, d.dot(options_.anterior_B));
+    lat_min = std::min(lat_min, d.dot(options_.lateral_B));
+    lat_max = std::max(lat_max, d.dot(options_.lateral_B));
+  }
+  std::vector<Region> r(m.num_vertices());
+  for (int v = 0; v < m.num_vertices(); ++v) {
+    const Eigen::Vector3d d = m.surface.V.row(v).transpose() - c;
+    const double a = d.dot(options_.anterior_B), s = d.dot(options_.lateral_B);
+    const double an = a / (a >= 0 ? std::max(ant_max, 1e-12) : std::max(-ant_min, 1e-12));
+    const double sn = s / (s >= 0 ? std::max(lat_max, 1e-12) : std::max(-lat_min, 1e-12));
+    if (std::abs(an) <= options_.central_fraction && std::abs(sn) <= options_.central_fraction) {
+      r[v] = Region::kCentral;
+    } else if (std::abs(an) >= std::abs(sn)) {
+      r[v] = an > 0 ? Region::kAnterior : Region::kPosterior;
+    } else {
+      r[v] = sn > 0 ? Region::kLateral : Region::kMedial;
+    }
+  }
+  regions_[i] = std::move(r);
 }
 
 int JointRun::layer_index(const std::string& name) const {
@@ -278,13 +300,22 @@ int JointRun::run(const std::vector<double>& frame_times, const std::vector<std:
   const double t0 = frame_times.front();
   const int steps = static_cast<int>(std::floor((frame_times.back() - t0) / dt + 1e-9));
   std::vector<LayerStep> results(nl);
+  std::vector<std::exception_ptr> errors(nl);
   for (int i = 1; i <= steps; ++i) {
     const double t = t0 + i * dt;
-    for (size_t l = 0; l < nl; ++l) {
-      const SurfaceLoads loads = loads_at(frame_times, per_layer[l], t);
-      problems_[l]->step(loads);
-      results[l] = evaluate(static_cast<int>(l), loads);
+    // Layers are independent: one thread per layer (deterministic).
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int l = 0; l < static_cast<int>(nl); ++l) {
+      try {
+        const SurfaceLoads loads = loads_at(frame_times, per_layer[l], t);
+        problems_[l]->step(loads);
+        results[l] = evaluate(l, loads);
+      } catch (...) {
+        errors[l] = std::current_exception();
+      }
     }
+    for (const std::exception_ptr& e : errors)
+      if (e) std::rethrow_exception(e);
     if (on_step) on_step(i, t, results);
   }
   return steps;

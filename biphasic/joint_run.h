@@ -145,6 +145,7 @@ class JointRun {
 
  private:
   LayerStep evaluate(int layer, const SurfaceLoads& loads) const;
+  void build_layer(int layer);
 
   std::vector<JointLayer> layers_;
   std::vector<JointPair> pairs_;
