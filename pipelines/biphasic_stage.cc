@@ -303,7 +303,53 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   if (!o.progress) po.mode = common::ProgressOptions::Mode::kOff;
   common::Progress progress("biphasic", expected, po);
   result.layers.resize(layers.size());
-  result.steps = run.run(frame_times, frame_loads, [&](int, double t, const std::vector<biphasic::LayerStep>& r) {
+  // Summed compartment force at time t (interpolated as the loads are).
+  auto force_at = [&](double t) {
+    size_t k = 1;
+    while (k + 1 < frames.size() && frames[k].time_s < t) ++k;
+    const double s = std::clamp((t - frames[k - 1].time_s) / (frames[k].time_s - frames[k - 1].time_s), 0.0, 1.0);
+    double f = 0.0;
+    for (const auto& [c, F] : frames[k].force_N) f += (1 - s) * frames[k - 1].force_N.at(c) + s * F;
+    return f;
+  };
+  const double t_mid = 0.5 * (frame_times.front() + frame_times.back());
+  result.key_steps.resize(2);
+  std::vector<double> fls_sum(layers.size(), 0.0);
+  std::vector<int> fls_count(layers.size(), 0);
+  auto key_layers = [&](const std::vector<biphasic::LayerStep>& r) {
+    std::vector<BiphasicKeyLayer> out;
+    for (size_t i = 0; i < r.size(); ++i) {
+      BiphasicKeyLayer k;
+      k.name = layers[i].name;
+      k.contact_area_m2 = r[i].contact_area_m2;
+      k.fluid_load_support = r[i].fluid_load_support;
+      k.max_tensile_Pa = r[i].max_tensile_Pa;
+      k.max_shear_Pa = r[i].max_shear_Pa;
+      k.max_tensile_region = r[i].max_tensile_vertex >= 0 ? biphasic::to_string(r[i].max_tensile_region) : "none";
+      k.max_shear_region = biphasic::to_string(r[i].max_shear_region);
+      k.max_surface_fluid_pressure_Pa = r[i].loads.pressure.size() ? r[i].loads.pressure.maxCoeff() : 0.0;
+      out.push_back(k);
+    }
+    return out;
+  };
+  result.steps = run.run(frame_times, frame_loads, [&](int step, double t, const std::vector<biphasic::LayerStep>& r) {
+    const double force = force_at(t);
+    BiphasicKeyStep& key = result.key_steps[t <= t_mid ? 0 : 1];
+    if (key.step == 0 || force > key.force_N) {
+      key.step = step;
+      key.time_s = t;
+      key.force_N = force;
+      key.layers = key_layers(r);
+    }
+    for (size_t i = 0; i < r.size(); ++i) {
+      if (r[i].contact_area_m2 > 0.0) {
+        fls_sum[i] += r[i].fluid_load_support;
+        ++fls_count[i];
+      }
+      if (r[i].loads.pressure.size())
+        result.layers[i].peak_surface_fluid_pressure_Pa =
+            std::max(result.layers[i].peak_surface_fluid_pressure_Pa, r[i].loads.pressure.maxCoeff());
+    }
     std::vector<Eigen::Isometry3d> X;
     for (const JointLayer& l : layers) X.push_back(pose_at(frames, l.bone, t));
     writer.append_step(t, X, r);
@@ -317,6 +363,8 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   });
   progress.finish();
   result.stepping_s = seconds_since(t0);
+  for (size_t i = 0; i < layers.size(); ++i)
+    result.mean_fluid_load_support.push_back(fls_count[i] ? fls_sum[i] / fls_count[i] : 0.0);
   writer.finish(run);
   std::filesystem::rename(partial, o.out);
   biphasic::write_output_xdmf(o.out, xdmf_path_for(o.out));

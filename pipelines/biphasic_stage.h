@@ -52,8 +52,26 @@ struct BiphasicLayerSummary {
   int factorizations = 0, solves = 0;
   double assembly_s = 0.0, factorization_s = 0.0, solve_s = 0.0, step_s = 0.0;
   double max_relative_residual = 0.0;
-  double peak_fluid_pressure_Pa = 0.0;
+  double peak_fluid_pressure_Pa = 0.0;          ///< anywhere in the layer
+  double peak_surface_fluid_pressure_Pa = 0.0;  ///< prescribed on the contact area
   double peak_tensile_Pa = 0.0, peak_shear_Pa = 0.0;
+};
+
+/// One layer at one of the key steps.
+struct BiphasicKeyLayer {
+  std::string name;
+  double contact_area_m2 = 0.0, fluid_load_support = 0.0;
+  double max_tensile_Pa = 0.0, max_shear_Pa = 0.0;
+  std::string max_tensile_region, max_shear_region;
+  double max_surface_fluid_pressure_Pa = 0.0;  ///< the prescribed contact pressure (eq 17)
+};
+
+/// The step with the largest summed compartment force in the first and in the
+/// second half of the run (the two peaks of stance in a gait cycle).
+struct BiphasicKeyStep {
+  int step = 0;
+  double time_s = 0.0, force_N = 0.0;
+  std::vector<BiphasicKeyLayer> layers;
 };
 
 struct BiphasicStageResult {
@@ -62,6 +80,9 @@ struct BiphasicStageResult {
   int steps = 0;
   int skipped_pair_frames = 0;  ///< (pair, frame) with a force but no overlap
   std::vector<BiphasicLayerSummary> layers;
+  std::vector<BiphasicKeyStep> key_steps;
+  /// Mean fluid load support of each layer over the steps with contact.
+  std::vector<double> mean_fluid_load_support;
   double preprocessing_s = 0.0, build_s = 0.0, stepping_s = 0.0, wall_s = 0.0;
 };
 

@@ -77,6 +77,21 @@ int main(int argc, char** argv) {
                   l.name.c_str(), l.quads_kept, l.quads_total, l.unknowns, l.factorizations, l.factorization_s,
                   l.solves, l.solves ? 1e3 * l.solve_s / l.solves : 0.0, l.peak_fluid_pressure_Pa * 1e-6,
                   l.peak_tensile_Pa * 1e-6, l.peak_shear_Pa * 1e-6);
+    for (size_t i = 0; i < r.layers.size(); ++i)
+      std::printf("  %-13s peak contact (prescribed) fluid pressure %.3g MPa, mean fluid load support over the steps "
+                  "in contact %.3f\n",
+                  r.layers[i].name.c_str(), r.layers[i].peak_surface_fluid_pressure_Pa * 1e-6,
+                  r.mean_fluid_load_support[i]);
+    for (const auto& k : r.key_steps) {
+      if (k.step == 0) continue;
+      std::printf("key step %d (t = %.3f s, summed contact force %.0f N):\n", k.step, k.time_s, k.force_N);
+      for (const auto& l : k.layers)
+        std::printf("  %-13s contact area %6.1f mm^2, fluid load support %.3f, contact fluid pressure up to %.3g MPa, "
+                    "max tensile %.3g MPa (%s), max interface shear %.3g MPa (%s)\n",
+                    l.name.c_str(), l.contact_area_m2 * 1e6, l.fluid_load_support,
+                    l.max_surface_fluid_pressure_Pa * 1e-6, l.max_tensile_Pa * 1e-6, l.max_tensile_region.c_str(),
+                    l.max_shear_Pa * 1e-6, l.max_shear_region.c_str());
+    }
     std::printf("timings: preprocessing %.2f s, build (assembly + factorisation) %.2f s, stepping %.2f s, wall %.2f s\n",
                 r.preprocessing_s, r.build_s, r.stepping_s, r.wall_s);
     std::printf("wrote %s\n", o.out.c_str());
