@@ -1,5 +1,7 @@
 #include "biphasic/output_file.h"
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "common/error.h"
@@ -247,6 +249,50 @@ std::vector<LayerSeries> read_layer_series(const std::string& path) {
     s.factorization_s = f.attribute_double(g, "factorization_s");
     s.solve_s = f.attribute_double(g, "solve_s");
     out.push_back(std::move(s));
+  }
+  return out;
+}
+
+}  // namespace arthrosim::biphasic
+
+namespace arthrosim::biphasic {
+
+std::vector<OutputDifference> compare_outputs(const std::string& path, const std::string& reference_path) {
+  const common::H5File a(path, common::H5File::Mode::kRead), r(reference_path, common::H5File::Mode::kRead);
+  const Eigen::VectorXd ta = a.read_vector("/time"), tr = r.read_vector("/time");
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> common_steps;
+  for (Eigen::Index i = 0, j = 0; i < ta.size() && j < tr.size();) {
+    if (std::abs(ta[i] - tr[j]) < 1e-9) common_steps.emplace_back(i++, j++);
+    else if (ta[i] < tr[j]) ++i;
+    else ++j;
+  }
+  if (common_steps.empty()) {
+    throw common::InputError(path, 0, "no step time in common with " + reference_path);
+  }
+  const std::vector<std::string> names_a = a.read_strings("/layers/names");
+  std::vector<OutputDifference> out;
+  for (const std::string& name : r.read_strings("/layers/names")) {
+    if (std::find(names_a.begin(), names_a.end(), name) == names_a.end()) continue;
+    const std::string g = layer_group(name);
+    auto series = [&](const common::H5File& f, const std::string& metric) -> Eigen::VectorXd {
+      if (metric == "peak_fluid_pressure") return f.read_matrix(g + "/pressure").rowwise().maxCoeff();
+      return f.read_vector(g + "/series/" + metric);
+    };
+    for (const std::string metric :
+         {"max_tensile_stress", "max_shear_stress", "fluid_load_support", "contact_area", "peak_fluid_pressure"}) {
+      const Eigen::VectorXd xa = series(a, metric), xr = series(r, metric);
+      OutputDifference d;
+      d.layer = name;
+      d.metric = metric;
+      d.common_times = static_cast<int>(common_steps.size());
+      double diff = 0.0;
+      for (const auto& [i, j] : common_steps) {
+        diff = std::max(diff, std::abs(xa[i] - xr[j]));
+        d.reference_peak = std::max(d.reference_peak, std::abs(xr[j]));
+      }
+      d.relative = d.reference_peak > 0.0 ? diff / d.reference_peak : diff;
+      out.push_back(d);
+    }
   }
   return out;
 }

@@ -73,6 +73,21 @@ struct LayerSeries {
 /// something is missing).
 std::vector<LayerSeries> read_layer_series(const std::string& path);
 
+/// Difference of one key output between a run and a reference run.
+struct OutputDifference {
+  std::string layer, metric;
+  double relative = 0.0;   ///< max over common times |a - ref| / max |ref|
+  double reference_peak = 0.0;
+  int common_times = 0;
+};
+
+/// Key outputs of `path` against `reference_path` at the times both have
+/// (within 1e-9 s): per layer the series max_tensile_stress, max_shear_stress,
+/// fluid_load_support, contact_area and the largest fluid pressure anywhere in
+/// the layer (peak_fluid_pressure). Layers missing from either file are
+/// skipped. Throws InputError when the files have no time in common.
+std::vector<OutputDifference> compare_outputs(const std::string& path, const std::string& reference_path);
+
 /// Dataset paths (for tools that inspect the file directly, e.g. h5diff).
 std::string layer_group(const std::string& layer);
 

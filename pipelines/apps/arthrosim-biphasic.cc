@@ -8,6 +8,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "biphasic/output_file.h"
+#include "common/error.h"
 #include "common/log.h"
 #include "pipelines/biphasic_stage.h"
 
@@ -29,8 +31,8 @@ int main(int argc, char** argv) {
   pipelines::BiphasicStageOptions o;
   bool verbose = false, quiet = false;
   double time_step_ms = o.time_step_s * 1e3, h_mpa = o.aggregate_modulus_Pa * 1e-6, margin_mm = o.crop_margin_m * 1e3;
-  app.add_option("--prepared", o.prepared, "prepared-model HDF5 (arthrosim-prepare)")->required();
-  app.add_option("--kinematics", o.kinematics, "kinematics HDF5 (arthrosim-comak)")->required();
+  app.add_option("--prepared", o.prepared, "prepared-model HDF5 (arthrosim-prepare)");
+  app.add_option("--kinematics", o.kinematics, "kinematics HDF5 (arthrosim-comak)");
   app.add_option("--out", o.out, "output HDF5 (XDMF sidecar next to it, same stem)")->required();
   app.add_option("--layers", o.layers, "cartilage layers (femur, tibia_medial, tibia_lateral, patella)")
       ->delimiter(',')
@@ -49,6 +51,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--end-time-s", o.end_time_s, "last frame time simulated [s]; < 0 = the whole trial")
       ->capture_default_str();
+  std::string compare_to;
+  app.add_option("--compare-to", compare_to,
+                 "after the run (or instead of it, with --compare-only), print the relative difference of the key "
+                 "outputs of --out against this earlier output file (common step times)");
+  bool compare_only = false;
+  app.add_flag("--compare-only", compare_only, "do not run; compare --out with --compare-to");
   app.add_flag("--verbose", verbose, "more messages");
   app.add_flag("--quiet", quiet, "warnings and errors only (no progress)");
   app.footer(
@@ -58,7 +66,9 @@ int main(int argc, char** argv) {
       "      --out out/biphasic.h5                              # the whole gait cycle, three layers\n"
       "  arthrosim-biphasic --prepared out/demo/prepared.h5 --kinematics out/demo/kinematics.h5 \\\n"
       "      --end-time-s 0.1 --element-layers 1 --out out/biphasic_short.h5   # the first 0.1 s, coarse\n"
-      "  paraview out/biphasic.xdmf                             # fluid pressure, stresses, flux per step\n");
+      "  paraview out/biphasic.xdmf                             # fluid pressure, stresses, flux per step\n"
+      "  arthrosim-biphasic --prepared P --kinematics K --out b1.h5 --element-layers 1 --compare-to b2.h5\n"
+      "      # how far one element layer is from an earlier run with two (scripts/biphasic_study.sh)\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-biphasic");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -67,7 +77,21 @@ int main(int argc, char** argv) {
   o.crop_margin_m = margin_mm * 1e-3;
   o.progress = !quiet;
   for (int i = 0; i < argc; ++i) o.argv.emplace_back(argv[i]);
+  auto compare = [&]() {
+    double worst = 0.0;
+    for (const auto& d : biphasic::compare_outputs(o.out, compare_to)) {
+      std::printf("compare %-13s %-20s %.4g (reference peak %.4g, %d common steps)\n", d.layer.c_str(),
+                  d.metric.c_str(), d.relative, d.reference_peak, d.common_times);
+      worst = std::max(worst, d.relative);
+    }
+    std::printf("compare worst relative difference %.4g\n", worst);
+  };
   try {
+    if (compare_only) {
+      if (compare_to.empty()) throw common::InputError("--compare-only needs --compare-to");
+      compare();
+      return 0;
+    }
     const pipelines::BiphasicStageResult r = pipelines::run_biphasic_stage(o);
     std::printf("%d frames (%d left out: stage 1 failed), %d steps of %.4g ms, %d (pair, frame) skipped without overlap\n",
                 r.frames, r.frames_failed, r.steps, o.time_step_s * 1e3, r.skipped_pair_frames);
@@ -95,6 +119,7 @@ int main(int argc, char** argv) {
     std::printf("timings: preprocessing %.2f s, build (assembly + factorisation) %.2f s, stepping %.2f s, wall %.2f s\n",
                 r.preprocessing_s, r.build_s, r.stepping_s, r.wall_s);
     std::printf("wrote %s\n", o.out.c_str());
+    if (!compare_to.empty()) compare();
   } catch (const std::exception& e) {
     std::cerr << "arthrosim-biphasic: error: " << e.what() << "\n";
     return 1;

@@ -7,6 +7,16 @@
 //
 //   build/bench/biphasic_bench --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 //
+// GaitCycle runs the whole stage (arthrosim-biphasic with its defaults) on a
+// prepared model and a kinematics file named by the environment:
+//
+//   arthrosim run data/scenes/demo.yaml --out out/demo
+//   ARTHROSIM_BIPHASIC_PREPARED=out/demo/prepared.h5 ARTHROSIM_BIPHASIC_KINEMATICS=out/demo/kinematics.h5 \
+//       build/bench/biphasic_bench --benchmark_filter=GaitCycle
+//
+// and prints per layer the unknowns, factorisation time and time per step,
+// and the whole cycle's wall time.
+//
 // Variants (argument: quads per side of the surface):
 //   Assemble/n     - element matrices and surface load operator
 //   Factorize/n    - reduction to the free unknowns, scaling, UMFPACK LU
@@ -18,7 +28,13 @@
 #include <cmath>
 #include <memory>
 
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
 #include "biphasic/layer_problem.h"
+#include "common/log.h"
+#include "pipelines/biphasic_stage.h"
 
 namespace {
 
@@ -116,6 +132,39 @@ void Step(benchmark::State& state) {
   report(state, p);
 }
 
+void GaitCycle(benchmark::State& state) {
+  const char* prepared = std::getenv("ARTHROSIM_BIPHASIC_PREPARED");
+  const char* kinematics = std::getenv("ARTHROSIM_BIPHASIC_KINEMATICS");
+  if (!prepared || !kinematics) {
+    state.SkipWithError(
+        "set ARTHROSIM_BIPHASIC_PREPARED and ARTHROSIM_BIPHASIC_KINEMATICS (see the comment at the top of "
+        "tests/benchmarks/biphasic_bench.cc)");
+    return;
+  }
+  common::set_log_level(common::LogLevel::kError);
+  pipelines::BiphasicStageOptions o;
+  o.prepared = prepared;
+  o.kinematics = kinematics;
+  o.out = (std::filesystem::temp_directory_path() / "arthrosim_biphasic_bench.h5").string();
+  o.progress = false;
+  pipelines::BiphasicStageResult r;
+  for (auto _ : state) r = pipelines::run_biphasic_stage(o);
+  state.counters["steps"] = r.steps;
+  state.counters["wall_s"] = r.wall_s;
+  state.counters["build_s"] = r.build_s;
+  state.counters["stepping_s"] = r.stepping_s;
+  int total = 0;
+  for (const auto& l : r.layers) {
+    state.counters[l.name + "_unknowns"] = l.unknowns;
+    state.counters[l.name + "_factorization_s"] = l.factorization_s;
+    state.counters[l.name + "_step_ms"] = l.solves ? 1e3 * l.step_s / l.solves : 0.0;
+    state.counters[l.name + "_solves_per_step"] = r.steps ? static_cast<double>(l.solves) / r.steps : 0.0;
+    total += l.unknowns;
+  }
+  state.counters["unknowns"] = total;
+}
+
+BENCHMARK(GaitCycle)->Unit(benchmark::kSecond)->Iterations(1);
 BENCHMARK(Assemble)->Arg(21)->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK(Factorize)->Arg(21)->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK(Step)->Arg(21)->Unit(benchmark::kMillisecond)->Iterations(1);
