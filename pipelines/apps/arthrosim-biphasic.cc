@@ -61,14 +61,16 @@ int main(int argc, char** argv) {
   app.add_flag("--quiet", quiet, "warnings and errors only (no progress)");
   app.footer(
       "Sample runs:\n"
-      "  arthrosim run data/scenes/demo.yaml --out out/demo     # prepared model + kinematics of the bundled knee\n"
-      "  arthrosim-biphasic --prepared out/demo/prepared.h5 --kinematics out/demo/kinematics.h5 \\\n"
-      "      --out out/biphasic.h5                              # the whole gait cycle, three layers\n"
-      "  arthrosim-biphasic --prepared out/demo/prepared.h5 --kinematics out/demo/kinematics.h5 \\\n"
-      "      --end-time-s 0.1 --element-layers 1 --out out/biphasic_short.h5   # the first 0.1 s, coarse\n"
-      "  paraview out/biphasic.xdmf                             # fluid pressure, stresses, flux per step\n"
-      "  arthrosim-biphasic --prepared P --kinematics K --out b1.h5 --element-layers 1 --compare-to b2.h5\n"
-      "      # how far one element layer is from an earlier run with two (scripts/biphasic_study.sh)\n");
+      "  arthrosim-prepare --model data/models/knee_parametric/coarse --out prepared.h5\n"
+      "  arthrosim-comak --model data/models/knee_parametric/coarse --prepared prepared.h5 \\\n"
+      "      --trial data/trials/synthetic_gait --first-frame 10 --last-frame 14 --out kinematics.h5\n"
+      "  arthrosim-biphasic --prepared prepared.h5 --kinematics kinematics.h5 --element-layers 1 \\\n"
+      "      --out biphasic.h5                       # five frames of stance, three layers (about 10 s)\n"
+      "  arthrosim-biphasic --out biphasic.h5 --compare-to other.h5 --compare-only\n"
+      "      # key outputs of one run against another (scripts/biphasic_study.sh)\n"
+      "  paraview biphasic.xdmf                      # fluid pressure, stresses, flux per step\n"
+      "The whole gait cycle: prepared.h5 and kinematics.h5 of any `arthrosim run` (e.g. data/scenes/demo.yaml --out\n"
+      "out/demo`, then arthrosim-biphasic with the defaults (about 1.5 min on 2 cores, docs/biphasic.md).\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-biphasic");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
