@@ -61,7 +61,8 @@ void JointRun::build_layer(int i) {
   common::QuadMesh surface = l.surface;
   surface.name = l.name;
   untangled_[i] = untangle_normals(surface, &l.normals, l.thickness);
-  LayerMesh mesh = extrude_layer(surface, l.normals, l.thickness, options_.element_layers);
+  LayerMesh mesh = extrude_layer(surface, l.normals, l.thickness, options_.element_layers,
+                                 graded_levels(options_.element_layers, options_.grading));
   problems_[i] = std::make_unique<LayerProblem>(assemble_layer(std::move(mesh), l.material, options_.pair),
                                                 options_.time);
   const LayerMesh& m = problems_[i]->system().mesh;

@@ -60,6 +60,9 @@ struct JointFrame {
 
 struct JointOptions {
   int element_layers = 4;
+  /// Height ratio of successive element layers from the articular surface to
+  /// the bone (1: equal; > 1: thinner at the surface). graded_levels().
+  double grading = 1.0;
   ElementPair pair = ElementPair::kTaylorHood;
   TrapezoidalOptions time;  ///< dt and omega
   /// Regions: a node is central when its offset from the layer's area centroid

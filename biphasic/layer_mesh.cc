@@ -335,6 +335,21 @@ std::vector<int> LayerMesh::periphery_nodes(int order) const {
   return out;
 }
 
+std::vector<double> graded_levels(int layers, double ratio) {
+  // Heights from the surface down: 1, r, r^2, ...; levels counted from the bone.
+  std::vector<double> height(layers);
+  double total = 0.0;
+  for (int k = 0; k < layers; ++k) total += (height[k] = std::pow(ratio, k));
+  std::vector<double> levels(layers + 1, 0.0);
+  double s = 0.0;
+  for (int L = 1; L < layers; ++L) {
+    s += height[layers - L] / total;  // element L - 1 counted from the bone is surface element layers - L
+    levels[L] = s;
+  }
+  levels[layers] = 1.0;
+  return levels;
+}
+
 Eigen::VectorXd articular_node_areas(const LayerMesh& mesh) { return surface_node_areas(mesh.surface); }
 
 Eigen::VectorXd surface_node_areas(const common::QuadMesh& surface) {

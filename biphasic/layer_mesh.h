@@ -113,6 +113,11 @@ std::vector<int> untangle_normals(const common::QuadMesh& surface, common::Point
 /// Corner positions (8 x 3, hex_basis order) of element `element`.
 Eigen::Matrix<double, 8, 3> element_corners(const LayerMesh& mesh, int element);
 
+/// Corner level fractions of `layers` element layers whose heights grow
+/// geometrically by `ratio` from the articular surface to the bone (ratio 1:
+/// equal heights; ratio > 1: the element at the surface is the thinnest).
+std::vector<double> graded_levels(int layers, double ratio);
+
 /// Area-weighted integrals of the bilinear surface basis: a[v] = integral over
 /// the articular surface of the bilinear hat function of vertex v [m^2]
 /// (2 x 2 Gauss rule per quad: exact for planar quads). Sum = surface area.

@@ -32,7 +32,7 @@ std::string options_text(const BiphasicStageOptions& o) {
   std::ostringstream s;
   s << "layers: [";
   for (size_t i = 0; i < o.layers.size(); ++i) s << (i ? ", " : "") << o.layers[i];
-  s << "]\nelement_layers: " << o.element_layers << "\ntime_step_s: " << o.time_step_s
+  s << "]\nelement_layers: " << o.element_layers << "\ngrading: " << o.grading << "\ntime_step_s: " << o.time_step_s
     << "\nomega: " << o.omega << "\naggregate_modulus_Pa: " << o.aggregate_modulus_Pa
     << "\npoisson_ratio: " << o.poisson_ratio << "\npermeability_m4_per_Ns: " << o.permeability_m4_per_Ns
     << "\ncrop_margin_m: " << o.crop_margin_m << "\nend_time_s: " << o.end_time_s << "\n";
@@ -169,6 +169,7 @@ void check_options(const BiphasicStageOptions& o) {
   if (seen.size() < 2) fail("layers: expected the femur and at least one partner (tibia_medial, tibia_lateral, patella)");
   if (o.element_layers < 1 || o.element_layers > 16)
     fail("element_layers: expected 1..16, found " + std::to_string(o.element_layers));
+  if (!(o.grading >= 1.0 && o.grading <= 4.0)) fail("grading: expected a value in [1, 4], found " + std::to_string(o.grading));
   if (!(o.time_step_s > 0.0) || !std::isfinite(o.time_step_s))
     fail("time_step_s: expected a value > 0 s, found " + std::to_string(o.time_step_s));
   if (!(o.omega >= 0.5 && o.omega <= 1.0)) fail("omega: expected a value in [0.5, 1], found " + std::to_string(o.omega));
@@ -232,6 +233,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   t0 = std::chrono::steady_clock::now();
   biphasic::JointOptions jo;
   jo.element_layers = o.element_layers;
+  jo.grading = o.grading;
   jo.time = {o.time_step_s, o.omega};
   biphasic::JointRun run(layers, pairs, jo);
   result.build_s = seconds_since(t0);
@@ -387,6 +389,84 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   }
   result.wall_s = seconds_since(t_start);
   return result;
+}
+
+namespace {
+
+// A square surface over the X-Z plane, facing +Y (up, flat) or -Y (down, the
+// paraboloid y = (x^2 + z^2) / (2 R); R = 0 is flat).
+void write_square_surface(common::H5File& f, const std::string& name, const std::string& bone, int n, double size,
+                          bool up, double R, double thickness) {
+  const int nv = (n + 1) * (n + 1);
+  Eigen::MatrixXd V(nv, 3), N(nv, 3);
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      const double x = size * i / n - size / 2, z = size * j / n - size / 2;
+      const double y = R > 0 ? (x * x + z * z) / (2 * R) : 0.0;
+      V.row(j * (n + 1) + i) << x, y, z;
+      Eigen::Vector3d nv3 = up ? Eigen::Vector3d(0, 1, 0)
+                               : Eigen::Vector3d(R > 0 ? x / R : 0.0, -1.0, R > 0 ? z / R : 0.0).normalized();
+      N.row(j * (n + 1) + i) = nv3.transpose();
+    }
+  // (i, j) -> (X, Z): counter-clockwise seen from -Y for (a, a+1, a+n+2, a+n+1).
+  Eigen::MatrixXi Q(n * n, 4);
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i;
+      if (up) Q.row(j * n + i) << a, a + n + 1, a + n + 2, a + 1;
+      else Q.row(j * n + i) << a, a + 1, a + n + 2, a + n + 1;
+    }
+  const std::string g = "/surfaces/" + name + "/quads/";
+  f.write(g + "nodes", V);
+  f.write(g + "quads", Q);
+  f.write(g + "normals", N);
+  f.write(g + "thickness", Eigen::VectorXd::Constant(nv, thickness));
+  f.set_attribute("/surfaces/" + name, "bone", bone);
+}
+
+}  // namespace
+
+std::pair<std::string, std::string> write_two_layer_case(const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  const std::string prepared = (std::filesystem::path(dir) / "two_layers_prepared.h5").string();
+  const std::string kinematics = (std::filesystem::path(dir) / "two_layers_kinematics.h5").string();
+  {
+    common::H5File f(prepared, common::H5File::Mode::kTruncate);
+    f.set_attribute("/", "schema", "arthrosim prepared model 1");
+    f.set_attribute("/", "length_unit", "m");
+    f.set_attribute("/", "model_folder", "canonical two-layer case (arthrosim-biphasic --canonical)");
+    f.write("/surfaces/names", std::vector<std::string>{"femur", "tibia_medial"});
+    write_square_surface(f, "femur", "femur", 12, 12e-3, false, 30e-3, 1.5e-3);
+    write_square_surface(f, "tibia_medial", "tibia", 16, 16e-3, true, 0.0, 2e-3);
+  }
+  {
+    common::H5File f(kinematics, common::H5File::Mode::kTruncate);
+    f.set_attribute("/", "format", "arthrosim kinematics file");
+    f.set_attribute("/", "world_frame", "femur frame of the canonical case: Y superior");
+    const int n = 101;
+    Eigen::VectorXd t(n);
+    std::vector<double> femur, tibia;
+    Eigen::MatrixXd medial(n, 3), lateral = Eigen::MatrixXd::Zero(n, 3);
+    for (int i = 0; i < n; ++i) {
+      t[i] = 0.01 * i;
+      const double ramp = std::min(t[i] / 0.5, 1.0);
+      Eigen::Matrix4d Xf = Eigen::Matrix4d::Identity(), Xt = Eigen::Matrix4d::Identity();
+      Xf(1, 3) = -0.15e-3 * ramp;
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) {
+          femur.push_back(Xf(r, c));
+          tibia.push_back(Xt(r, c));
+        }
+      medial.row(i) << 0.0, -200.0 * ramp, 0.0;
+    }
+    f.write("/time", t);
+    f.write_tensor3("/bodies/femur/X_W", {n, 4, 4}, femur);
+    f.write_tensor3("/bodies/tibia/X_W", {n, 4, 4}, tibia);
+    f.write("/contact/tibiofemoral/medial_force", medial);
+    f.write("/contact/tibiofemoral/lateral_force", lateral);
+    f.write("/solver/status", Eigen::VectorXi(Eigen::VectorXi::Zero(n)));
+  }
+  return {prepared, kinematics};
 }
 
 }  // namespace arthrosim::pipelines

@@ -11,6 +11,7 @@
 // declare() and the stage its descriptor; the reading of the prepared model
 // and the kinematics file moves to their reader modules.
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace arthrosim::pipelines {
@@ -24,6 +25,9 @@ struct BiphasicStageOptions {
   std::vector<std::string> layers = {"femur", "tibia_medial", "tibia_lateral"};
   /// Element layers through the thickness [-]; 1..16.
   int element_layers = 2;
+  /// Height ratio of successive element layers from the articular surface to
+  /// the bone [-]; 1..4 (1: equal heights).
+  double grading = 1.0;
   /// Time step [s]; > 0. Default: the bundled trial's frame interval.
   double time_step_s = 0.01;
   /// Generalised trapezoidal parameter [-]; in [0.5, 1] (docs/biphasic.md, "Time integration").
@@ -87,5 +91,17 @@ struct BiphasicStageResult {
 };
 
 BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& options);
+
+/// The canonical case for users to check the method: two layers pressed
+/// together. Writes `<dir>/two_layers_prepared.h5` (a prepared model with a
+/// "femur" layer of 12 x 12 mm, 1.5 mm thick, its articular surface the
+/// paraboloid y = (x^2 + z^2) / (2 R), R = 30 mm, facing down, over a flat
+/// "tibia_medial" plate of 16 x 16 mm, 2 mm thick, facing up; knee frame
+/// convention Y superior) and `<dir>/two_layers_kinematics.h5` (the femur
+/// pressed into the plate: overlap at the apex ramped from 0 to 0.15 mm over
+/// 0.5 s and held to 1 s, contact radius sqrt(2 R d) = 3 mm, medial contact
+/// force ramped to 200 N with it; 10 ms frames) with the datasets the stage
+/// reads. Returns the two paths.
+std::pair<std::string, std::string> write_two_layer_case(const std::string& dir);
 
 }  // namespace arthrosim::pipelines

@@ -39,6 +39,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--element-layers", o.element_layers, "element layers through the thickness (1..16)")
       ->capture_default_str();
+  app.add_option("--grading", o.grading,
+                 "height ratio of successive element layers from the surface to the bone (1 = equal, 1..4)")
+      ->capture_default_str();
   app.add_option("--time-step-ms", time_step_ms, "time step [ms]")->capture_default_str();
   app.add_option("--omega", o.omega, "generalised trapezoidal parameter in [0.5, 1]")->capture_default_str();
   app.add_option("--aggregate-modulus-mpa", h_mpa, "aggregate modulus H_A of every layer [MPa]")
@@ -55,6 +58,10 @@ int main(int argc, char** argv) {
   app.add_option("--compare-to", compare_to,
                  "after the run (or instead of it, with --compare-only), print the relative difference of the key "
                  "outputs of --out against this earlier output file (common step times)");
+  std::string canonical;
+  app.add_option("--canonical", canonical,
+                 "write the canonical two-layer case (two flat layers pressed together) into this folder and run "
+                 "it (--prepared, --kinematics and --layers are then those of the case)");
   bool compare_only = false;
   app.add_flag("--compare-only", compare_only, "do not run; compare --out with --compare-to");
   app.add_flag("--verbose", verbose, "more messages");
@@ -69,6 +76,8 @@ int main(int argc, char** argv) {
       "  arthrosim-biphasic --out biphasic.h5 --compare-to other.h5 --compare-only\n"
       "      # key outputs of one run against another (scripts/biphasic_study.sh)\n"
       "  paraview biphasic.xdmf                      # fluid pressure, stresses, flux per step\n"
+      "  arthrosim-biphasic --canonical two_layers --out two_layers/biphasic.h5\n"
+      "      # two flat layers pressed together (docs/biphasic.md, \"Canonical case\")\n"
       "The whole gait cycle: prepared.h5 and kinematics.h5 of any `arthrosim run` (e.g. data/scenes/demo.yaml --out\n"
       "out/demo`, then arthrosim-biphasic with the defaults (about 1.5 min on 2 cores, docs/biphasic.md).\n");
   CLI11_PARSE(app, argc, argv);
@@ -93,6 +102,13 @@ int main(int argc, char** argv) {
       if (compare_to.empty()) throw common::InputError("--compare-only needs --compare-to");
       compare();
       return 0;
+    }
+    if (!canonical.empty()) {
+      const auto files = pipelines::write_two_layer_case(canonical);
+      o.prepared = files.first;
+      o.kinematics = files.second;
+      o.layers = {"femur", "tibia_medial"};
+      std::printf("canonical case: %s, %s\n", files.first.c_str(), files.second.c_str());
     }
     const pipelines::BiphasicStageResult r = pipelines::run_biphasic_stage(o);
     std::printf("%d frames (%d left out: stage 1 failed), %d steps of %.4g ms, %d (pair, frame) skipped without overlap\n",

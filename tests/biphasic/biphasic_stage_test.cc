@@ -231,5 +231,30 @@ TEST(BiphasicStage, RefusesBadThicknessAndPermeability) {
   EXPECT_THROW(pipelines::run_biphasic_stage(o), common::InputError);  // no femur: no pair
 }
 
+TEST(BiphasicStage, CanonicalCaseSatisfiesTheContactConditionsOnBothLayers) {
+  // The canonical case (a paraboloid pressed into a flat plate, contact
+  // radius sqrt(2 R d) = 3 mm at the end of the ramp): the two layers see the
+  // same contact (eq 18: the same prescribed fluid pressure at the apex; the
+  // same contact area) up to the discretisation of the contact edge by node
+  // areas. Measured at t = 0.5 s: areas 27.1 / 27.0 mm^2 (the circle:
+  // 28.3), apex pressures 14.3 / 14.4 MPa. Bounds 2 % between the layers,
+  // 10 % against the circle's area (the edge of a 1 mm grid).
+  common::set_log_level(common::LogLevel::kError);
+  const auto files = pipelines::write_two_layer_case((scratch() / "canonical").string());
+  pipelines::BiphasicStageOptions o = options(files.first, files.second, "canonical/out.h5");
+  o.end_time_s = 0.5;
+  const auto r = pipelines::run_biphasic_stage(o);
+  EXPECT_EQ(r.steps, 50);
+  const auto& key = r.key_steps[1];  // the largest force in the second half: t = 0.5 s
+  ASSERT_EQ(key.layers.size(), 2u);
+  const double a0 = key.layers[0].contact_area_m2, a1 = key.layers[1].contact_area_m2;
+  EXPECT_NEAR(a0, a1, 0.02 * a1);
+  EXPECT_NEAR(a1, biphasic::testing::kPi * 9e-6, 0.1 * biphasic::testing::kPi * 9e-6) << "contact radius 3 mm";
+  const double p0 = key.layers[0].max_surface_fluid_pressure_Pa, p1 = key.layers[1].max_surface_fluid_pressure_Pa;
+  EXPECT_NEAR(p0, p1, 0.02 * p1);
+  EXPECT_NEAR(key.layers[0].fluid_load_support, key.layers[1].fluid_load_support, 1e-3);
+  for (const auto& l : r.layers) EXPECT_EQ(l.factorizations, 1);
+}
+
 }  // namespace
 }  // namespace arthrosim

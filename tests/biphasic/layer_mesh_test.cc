@@ -116,6 +116,29 @@ TEST(LayerMesh, CylindricalLayerVolumeIsTheChordPolygonsExactly) {
   }
 }
 
+TEST(LayerMesh, GradedLevels) {
+  // Heights 1 : r : r^2 from the surface: with r = 2 and 3 layers the levels
+  // from the bone are 0, 4/7, 6/7, 1.
+  const std::vector<double> l = graded_levels(3, 2.0);
+  ASSERT_EQ(l.size(), 4u);
+  EXPECT_EQ(l[0], 0.0);
+  EXPECT_NEAR(l[1], 4.0 / 7.0, 1e-15);
+  EXPECT_NEAR(l[2], 6.0 / 7.0, 1e-15);
+  EXPECT_EQ(l[3], 1.0);
+  const std::vector<double> u = graded_levels(4, 1.0);
+  for (int i = 0; i <= 4; ++i) EXPECT_NEAR(u[i], i / 4.0, 1e-15);
+  // A graded box keeps its volume, and its mid-levels sit half way.
+  const common::QuadMesh s = grid_surface(1, 1, 1e-3, 1e-3, 2e-3);
+  const LayerMesh m = extrude_layer(s, constant_normals(4, Eigen::Vector3d::UnitZ()), Eigen::VectorXd::Constant(4, 2e-3),
+                                    3, l);
+  EXPECT_NEAR(layer_volume(m), 2e-9, 1e-21);
+  EXPECT_NEAR(m.q1_nodes(m.q1_node(0, 1), 2), 2e-3 * 4.0 / 7.0, 1e-18);
+  EXPECT_NEAR(m.q2_nodes(m.q2_node(0, 3), 2), 2e-3 * 5.0 / 7.0, 1e-18);
+  EXPECT_THROW(extrude_layer(s, constant_normals(4, Eigen::Vector3d::UnitZ()), Eigen::VectorXd::Constant(4, 2e-3), 3,
+                             {0.0, 0.5, 0.4, 1.0}),
+               common::InputError);
+}
+
 TEST(LayerMesh, RefusesBadThicknessNormalsAndLayers) {
   const common::QuadMesh s = grid_surface(2, 2, 1e-3, 1e-3);
   const auto n = constant_normals(9, Eigen::Vector3d::UnitZ());
