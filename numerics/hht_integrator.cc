@@ -20,6 +20,31 @@ double weighted_max(const Eigen::VectorXd& x, const Eigen::VectorXd& w) {
 
 }  // namespace
 
+void IntegratorOptions::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.number("time_step_s", dt_s, Unit::kSecond, {1e-8, 1}, "HHT time step");
+  v.number("hht_alpha", alpha, Unit::kNone, {-1.0 / 3.0, 0}, "HHT numerical damping parameter (0 = trapezoidal rule)");
+  v.integer("max_newton_iterations", max_newton_iterations, {1, 1000},
+            "Newton iterations per step attempt before the step is halved");
+  v.number("newton_tolerance", residual_rtol, Unit::kNone, {1e-14, 1e-2},
+           "relative tolerance of a step's Newton iteration on the residual and on the increment "
+           "(docs/shell_element.md)");
+  v.number("newton_residual_floor_n", residual_atol_N, Unit::kNone, {0, 1e6},
+           "absolute residual [N] below which a step's residual test passes whatever its first residual "
+           "(contact: force jumps at facet kinks leave residuals of order 0.01 N)");
+  v.number("newton_increment_floor_mm", increment_atol_m, Unit::kMillimetre, {0, 1},
+           "absolute Newton increment below which a step's increment test passes");
+  v.choice("linear_solver", solver,
+           {{"auto", LinearSolverChoice::kAuto},
+            {"cholmod", LinearSolverChoice::kCholmod},
+            {"umfpack", LinearSolverChoice::kUmfpack}},
+           "sparse solver of the Newton steps: auto (CHOLMOD when every tangent is symmetric, else UMFPACK), cholmod "
+           "(on the symmetric part (K + K^T)/2), umfpack");
+  v.flag("newton_reuse_factorization", reuse_factorization,
+         "modified Newton: keep the last factorisation across iterations and steps of the same size while the residual "
+         "falls by 4x per iteration (else refactorise); not with mesh_contact");
+}
+
 // The equation of one step as a Newton system in q_{n+1} (file comment of
 // hht_integrator.h): G = M a + (1 + alpha) F(q, v, t1) - alpha F_n with a, v
 // from the Newmark relations, or G = F(q, 0, t1) quasi-statically. Keeps the

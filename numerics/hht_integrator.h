@@ -44,6 +44,7 @@
 #include <string>
 #include <vector>
 
+#include "common/options.h"
 #include "numerics/newton.h"
 #include "numerics/time_integrable.h"
 
@@ -57,7 +58,7 @@ struct IntegratorOptions {
   double residual_rtol = 1e-8;     ///< relative residual tolerance
   double residual_atol_N = 1e-10;  ///< absolute residual tolerance [N]
   double increment_rtol = 1e-8;    ///< relative increment tolerance
-  double increment_atol_m = 1e-14; ///< absolute increment tolerance [m]
+  double increment_atol_m = 1e-11 * common::units::mm;  ///< absolute increment tolerance [m]
   double roundoff_increment_rel = 1e-11;  ///< see "round-off stagnation"
   double roundoff_residual_drop = 1e-3;   ///< required ||G|| / ||G^(0)||
   bool extrapolate_predictor = true;      ///< quasi-static secant predictor
@@ -90,6 +91,15 @@ struct IntegratorOptions {
   /// (also kept in statistics().rejections), so a caller can report it while
   /// a single advance_to() is still creeping on with short steps.
   std::function<void(const std::string& rejection)> on_rejection;
+
+  /// Scene keys of a stage that integrates with these options
+  /// (common/options.h): time_step_s, hht_alpha, max_newton_iterations,
+  /// newton_tolerance (residual_rtol; increment_rtol takes the same value,
+  /// see same_tolerances()), newton_residual_floor_n, newton_increment_floor_mm,
+  /// linear_solver, newton_reuse_factorization.
+  void declare(common::OptionVisitor& v);
+  /// increment_rtol = residual_rtol (one scene key sets both).
+  void same_tolerances() { increment_rtol = residual_rtol; }
 };
 
 enum class IntegratorStatus { kNotStarted, kRunning, kFailed };

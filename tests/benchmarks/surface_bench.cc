@@ -62,6 +62,7 @@
 #include "common/scene_edit.h"
 #include "pipelines/prepare.h"
 #include "pipelines/runner.h"
+#include "pipelines/stages.h"
 #include "pipelines/surface_stage.h"
 
 namespace arthrosim::pipelines {
@@ -99,7 +100,7 @@ std::string osmotic_scene(const std::string& linear_solver) {
   const std::string bundled = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/osmotic.yaml";
   if (linear_solver == "auto") return bundled;
   const std::string scene = (bench_dir() / ("osmotic_" + linear_solver + ".yaml")).string();
-  std::ofstream(scene) << common::edit_scene_text(bundled, {{"surface.scenarios.osmotic.linear_solver", linear_solver}});
+  std::ofstream(scene) << common::edit_scene_text(bundled, pipelines::scene_schema(), {{"surface.scenarios.osmotic.linear_solver", linear_solver}});
   return scene;
 }
 
@@ -300,7 +301,7 @@ GaitInputs make_gait_inputs(const std::string& tag, const std::string& prepared 
   GaitInputs g;
   const fs::path out = bench_dir() / tag;
   fs::create_directories(out);
-  for (const StageStep& s : plan_stages(common::load_scene(gait_scene()), out)) {
+  for (const StageStep& s : plan_stages(pipelines::load_scene(gait_scene()), out)) {
     if (s.name == "prepare" && !prepared.empty()) {
       g.prepared = prepared;
       continue;
@@ -404,7 +405,7 @@ void BM_OnlyRequestedEffects(benchmark::State& state) {
     std::ofstream(p) << text;
     return p;
   };
-  const common::Scene osmotic = common::load_scene(fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/osmotic.yaml");
+  const common::Scene osmotic = pipelines::load_scene(fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/osmotic.yaml");
   bool comak_planned = false;
   for (const StageStep& s : plan_stages(osmotic, bench_dir() / "osmotic_plan")) comak_planned |= s.name == "comak";
   for (auto _ : state) {

@@ -149,6 +149,8 @@ SeriesResult press_plates(const ContactOptions& o, const Eigen::Isometry3d& X,
 ContactOptions with_stiffness(double kc) {
   ContactOptions o;
   o.stiffness_N_m3 = kc;
+  o.rim_vertices = true;  // the plates' rim nodes may be penetrating vertices
+  o.rim_max_depth_m = 0;  // rim contacts (kRimContacts only) cut off at max_depth_m
   return o;
 }
 
