@@ -289,6 +289,7 @@ std::vector<OutputDifference> compare_outputs(const std::string& path, const std
       for (const auto& [i, j] : common_steps) {
         diff = std::max(diff, std::abs(xa[i] - xr[j]));
         d.reference_peak = std::max(d.reference_peak, std::abs(xr[j]));
+        d.peak = std::max(d.peak, std::abs(xa[i]));
       }
       d.relative = d.reference_peak > 0.0 ? diff / d.reference_peak : diff;
       out.push_back(d);

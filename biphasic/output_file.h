@@ -78,6 +78,7 @@ struct OutputDifference {
   std::string layer, metric;
   double relative = 0.0;   ///< max over common times |a - ref| / max |ref|
   double reference_peak = 0.0;
+  double peak = 0.0;         ///< max |a| over the common times
   int common_times = 0;
 };
 

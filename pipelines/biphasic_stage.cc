@@ -10,12 +10,14 @@
 
 #include "biphasic/joint_run.h"
 #include "biphasic/output_file.h"
+#include "common/effects.h"
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/metadata.h"
 #include "common/progress.h"
 #include "pipelines/prepare.h"
+#include "pipelines/stages.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -35,7 +37,8 @@ std::string options_text(const BiphasicStageOptions& o) {
   s << "]\nelement_layers: " << o.element_layers << "\ngrading: " << o.grading << "\ntime_step_s: " << o.time_step_s
     << "\nomega: " << o.omega << "\naggregate_modulus_Pa: " << o.aggregate_modulus_Pa
     << "\npoisson_ratio: " << o.poisson_ratio << "\npermeability_m4_per_Ns: " << o.permeability_m4_per_Ns
-    << "\ncrop_margin_m: " << o.crop_margin_m << "\nend_time_s: " << o.end_time_s << "\n";
+    << "\ncrop_margin_m: " << o.crop_margin_m << "\nend_time_s: "
+    << (o.end_time_s ? std::to_string(*o.end_time_s) : std::string("(whole trial)")) << "\n";
   return s.str();
 }
 
@@ -153,8 +156,71 @@ Eigen::Isometry3d pose_at(const std::vector<JointFrame>& frames, const std::stri
 
 }  // namespace
 
+void BiphasicOptions::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.effect_list("effects", effects, "biphasic",
+                "biphasic effects to simulate: biphasic_layers and penetration_contact (both)")
+      .required();
+  v.text_list("layers", layers, "femur|tibia_medial|tibia_lateral|patella",
+              "cartilage layers (prepared surfaces): the femur and its partners; patella adds the patellofemoral pair");
+  v.integer("element_layers", element_layers, {1, 16}, "element layers through the thickness");
+  v.number("grading", grading, Unit::kNone, {1, 4},
+           "height ratio of successive element layers from the articular surface to the bone (1: equal)");
+  v.number("time_step_ms", time_step_s, Unit::kMillisecond, {1e-3, 1e6}, "constant time step");
+  v.number("omega", omega, Unit::kNone, {0.5, 1}, "generalised trapezoidal parameter (1/2: trapezoidal, 1: backward Euler)");
+  v.number("aggregate_modulus_mpa", aggregate_modulus_Pa, Unit::kMegapascal, {1e-6, 1e6},
+           "aggregate modulus H_A of every layer (Keenan et al. 2009: 0.48-1.58 MPa)");
+  v.number("poisson_ratio", poisson_ratio, Unit::kNone, {0, 0.499}, "drained Poisson's ratio of the solid matrix");
+  v.number("permeability", permeability_m4_per_Ns, Unit::kNone, {1e-25, 1e-5},
+           "permeability k in m^4/(N s) (SI; Keenan et al. 2009: 1.7e-15 to 5.4e-15)");
+  v.number("crop_margin_mm", crop_margin_m, Unit::kMillimetre, {0, 1e3},
+           "keep each layer's quads within this distance of a vertex in contact in some frame (0: whole surface)");
+  v.number("end_time_s", end_time_s, Unit::kSecond, {0, 1e4}, "last frame time simulated (default: the whole trial)");
+}
+
+StageDescriptor biphasic_stage_descriptor() {
+  StageDescriptor d;
+  d.name = "biphasic";
+  d.executable = "arthrosim-biphasic";
+  d.summary = "cartilage layers as linear biphasic volumes loaded by the penetration method from stage 1's kinematics";
+  d.block = block_schema<BiphasicOptions>("biphasic", "effects and options of the biphasic stage (docs/biphasic.md)");
+  d.outputs = {"biphasic"};
+  for (const common::EffectInfo& e : common::known_effects())
+    if (e.stage == common::EffectStage::kBiphasic)
+      d.effects.push_back({std::string(e.name), "biphasic", std::string(e.description)});
+  d.check = [](const common::Scene& scene) {
+    if (!wants_output(scene, "biphasic")) return;
+    const common::OptionValue& outputs = scene.top.value("outputs");
+    auto fail = [&](const std::string& what) {
+      throw common::InputError(scene.file.string(), outputs.value_line, outputs.value_column,
+                               "output 'biphasic' " + what);
+    };
+    if (!scene.has_block("biphasic")) fail("needs a 'biphasic' block with its effects");
+    if (!scene.has_block("comak"))
+      fail("needs stage 1's kinematics: add a 'comak' block with its effects (tibiofemoral_contact gives the forces)");
+    if (!scene.top.has("trial")) fail("needs stage 1's kinematics, which needs a walking trial: add 'trial: PATH'");
+    const common::OptionBlock& b = scene.block("biphasic");
+    const std::vector<std::string>& effects = b.list("effects");
+    for (const char* needed : {"biphasic_layers", "penetration_contact"}) {
+      if (std::find(effects.begin(), effects.end(), needed) == effects.end()) {
+        const common::OptionValue& v = b.value("effects");
+        throw common::InputError(scene.file.string(), v.value_line, v.value_column,
+                                 std::string("biphasic effects: expected biphasic_layers and penetration_contact "
+                                             "together (the layers carry nothing without the contact conditions, "
+                                             "and the conditions need the layers), found no ") +
+                                     needed);
+      }
+    }
+  };
+  return d;
+}
+
 void check_options(const BiphasicStageOptions& o) {
   auto fail = [](const std::string& what) { throw common::InputError("biphasic options: " + what); };
+  for (const char* needed : {"biphasic_layers", "penetration_contact"}) {
+    if (std::find(o.effects.begin(), o.effects.end(), needed) == o.effects.end())
+      fail(std::string("effects: expected biphasic_layers and penetration_contact, found no ") + needed);
+  }
   if (o.prepared.empty()) fail("expected a prepared model (--prepared), found none");
   if (o.kinematics.empty()) fail("expected a kinematics file (--kinematics), found none");
   if (o.out.empty()) fail("expected an output file (--out), found none");
@@ -198,7 +264,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   std::set<std::string> bones, compartments;
   for (const JointLayer& l : full) bones.insert(l.bone);
   for (const JointPair& p : pairs) compartments.insert(p.compartment);
-  const KinematicsInput kin = read_kinematics(o.kinematics, bones, compartments, o.end_time_s);
+  const KinematicsInput kin = read_kinematics(o.kinematics, bones, compartments, o.end_time_s.value_or(-1.0));
   result.frames_failed = kin.failed;
   const std::vector<JointFrame>& frames = kin.frames;
   if (frames.size() < 2) {
@@ -237,6 +303,9 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   jo.time = {o.time_step_s, o.omega};
   biphasic::JointRun run(layers, pairs, jo);
   result.build_s = seconds_since(t0);
+  common::EffectLedger ledger("biphasic");
+  for (size_t i = 0; i < layers.size(); ++i)
+    ledger.record("biphasic_layers", run.problem(static_cast<int>(i)).system().mesh.num_elements(), layers[i].name);
   for (size_t i = 0; i < layers.size(); ++i) {
     const biphasic::LayerProblem& p = run.problem(static_cast<int>(i));
     common::log_info("layer " + layers[i].name + ": " + std::to_string(layers[i].surface.num_quads()) + " of " +
@@ -283,6 +352,9 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
     }
     records.push_back(std::move(rec));
   }
+  for (const JointPair& p : pairs)
+    ledger.record("penetration_contact", static_cast<std::int64_t>(frames.size()), p.compartment);
+  ledger.require_only(o.effects);
   result.preprocessing_s += seconds_since(t0);
 
   // Step and write.
@@ -367,6 +439,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   result.stepping_s = seconds_since(t0);
   for (size_t i = 0; i < layers.size(); ++i)
     result.mean_fluid_load_support.push_back(fls_count[i] ? fls_sum[i] / fls_count[i] : 0.0);
+  common::write_effect_ledger(writer.file(), ledger);
   writer.finish(run);
   std::filesystem::rename(partial, o.out);
   biphasic::write_output_xdmf(o.out, xdmf_path_for(o.out));

@@ -10,16 +10,23 @@
 // write). When the stage-shape work (issue 29) lands, the options get their
 // declare() and the stage its descriptor; the reading of the prepared model
 // and the kinematics file moves to their reader modules.
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "common/options.h"
+
 namespace arthrosim::pipelines {
 
-struct BiphasicStageOptions {
-  std::string prepared;    ///< prepared-model HDF5 (arthrosim-prepare)
-  std::string kinematics;  ///< kinematics HDF5 (arthrosim-comak)
-  std::string out;         ///< output HDF5 (XDMF sidecar next to it)
+struct StageDescriptor;
+
+/// The biphasic block of a scene (docs/scenes.md) and the program's options.
+struct BiphasicOptions {
+  /// Effects to simulate: biphasic_layers and penetration_contact (the
+  /// layers without contact conditions would carry nothing, the conditions
+  /// need the layers: a scene lists both).
+  std::vector<std::string> effects;
   /// Cartilage layers simulated (prepared surface names). The femur with the
   /// two tibial plates by default; "patella" adds the patellofemoral pair.
   std::vector<std::string> layers = {"femur", "tibia_medial", "tibia_lateral"};
@@ -29,24 +36,37 @@ struct BiphasicStageOptions {
   /// the bone [-]; 1..4 (1: equal heights).
   double grading = 1.0;
   /// Time step [s]; > 0. Default: the bundled trial's frame interval.
-  double time_step_s = 0.01;
+  double time_step_s = 10 * common::units::ms;
   /// Generalised trapezoidal parameter [-]; in [0.5, 1] (docs/biphasic.md, "Time integration").
   double omega = 0.5;
   /// Material of every layer (docs/biphasic.md, "Parameters").
-  double aggregate_modulus_Pa = 0.9e6;
+  double aggregate_modulus_Pa = 0.9 * common::units::mpa;
   double poisson_ratio = 0.02;
   double permeability_m4_per_Ns = 3e-15;
   /// Each layer is cut to the quads within this distance of a vertex that is
   /// in contact in some frame [m]; 0 keeps the whole surface. >= 0.
-  double crop_margin_m = 5e-3;
-  /// Last frame time simulated [s]; < 0 = the whole trial.
-  double end_time_s = -1.0;
+  double crop_margin_m = 5 * common::units::mm;
+  /// Last frame time simulated [s]; none = the whole trial.
+  std::optional<double> end_time_s;
+  void declare(common::OptionVisitor& v);
+};
+
+/// Everything the program needs: the files and the options (without a scene
+/// both effects).
+struct BiphasicStageOptions : BiphasicOptions {
+  BiphasicStageOptions() { effects = {"biphasic_layers", "penetration_contact"}; }
+  std::string prepared;    ///< prepared-model HDF5 (arthrosim-prepare)
+  std::string kinematics;  ///< kinematics HDF5 (arthrosim-comak)
+  std::string out;         ///< output HDF5 (XDMF sidecar next to it)
   bool progress = true;
   std::vector<std::string> argv;  ///< for the run metadata
 };
 
 /// Checks every option alone and together (InputError naming the option).
 void check_options(const BiphasicStageOptions& options);
+
+/// The biphasic stage's entry in the stage table (pipelines/stages.h).
+StageDescriptor biphasic_stage_descriptor();
 
 struct BiphasicLayerSummary {
   std::string name;

@@ -12,6 +12,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "pipelines/biphasic_stage.h"
+#include "pipelines/stages.h"
 
 using namespace arthrosim;
 
@@ -29,31 +30,39 @@ int main(int argc, char** argv) {
       "area, fluid load support, maximum tensile stress on the contact surface and maximum shear stress at the\n"
       "cartilage-bone interface with their regions. Method, parameters and limits: docs/biphasic.md."};
   pipelines::BiphasicStageOptions o;
+  const pipelines::BiphasicOptions defaults;
   bool verbose = false, quiet = false;
-  double time_step_ms = o.time_step_s * 1e3, h_mpa = o.aggregate_modulus_Pa * 1e-6, margin_mm = o.crop_margin_m * 1e3;
+  std::string scene;
+  std::vector<std::string> layers = defaults.layers;
+  int element_layers = defaults.element_layers;
+  double grading = defaults.grading, time_step_ms = defaults.time_step_s * 1e3, omega = defaults.omega;
+  double h_mpa = defaults.aggregate_modulus_Pa * 1e-6, nu = defaults.poisson_ratio, k = defaults.permeability_m4_per_Ns;
+  double margin_mm = defaults.crop_margin_m * 1e3, end_time_s = -1.0;
   app.add_option("--prepared", o.prepared, "prepared-model HDF5 (arthrosim-prepare)");
   app.add_option("--kinematics", o.kinematics, "kinematics HDF5 (arthrosim-comak)");
   app.add_option("--out", o.out, "output HDF5 (XDMF sidecar next to it, same stem)")->required();
-  app.add_option("--layers", o.layers, "cartilage layers (femur, tibia_medial, tibia_lateral, patella)")
-      ->delimiter(',')
-      ->capture_default_str();
-  app.add_option("--element-layers", o.element_layers, "element layers through the thickness (1..16)")
-      ->capture_default_str();
-  app.add_option("--grading", o.grading,
-                 "height ratio of successive element layers from the surface to the bone (1 = equal, 1..4)")
-      ->capture_default_str();
-  app.add_option("--time-step-ms", time_step_ms, "time step [ms]")->capture_default_str();
-  app.add_option("--omega", o.omega, "generalised trapezoidal parameter in [0.5, 1]")->capture_default_str();
-  app.add_option("--aggregate-modulus-mpa", h_mpa, "aggregate modulus H_A of every layer [MPa]")
-      ->capture_default_str();
-  app.add_option("--poisson-ratio", o.poisson_ratio, "drained Poisson's ratio of the solid matrix")
-      ->capture_default_str();
-  app.add_option("--permeability", o.permeability_m4_per_Ns, "permeability k [m^4/(N s)]")->capture_default_str();
-  app.add_option("--crop-margin-mm", margin_mm,
-                 "keep the quads within this distance of a vertex in contact in some frame [mm]; 0 = whole surface")
-      ->capture_default_str();
-  app.add_option("--end-time-s", o.end_time_s, "last frame time simulated [s]; < 0 = the whole trial")
-      ->capture_default_str();
+  app.add_option("--scene", scene,
+                 "scene YAML: its biphasic block gives effects and options (flags given here win)");
+  auto* o_layers = app.add_option("--layers", layers, "cartilage layers (femur, tibia_medial, tibia_lateral, patella)")
+                       ->delimiter(',')
+                       ->capture_default_str();
+  auto* o_el = app.add_option("--element-layers", element_layers, "element layers through the thickness (1..16)")
+                   ->capture_default_str();
+  auto* o_grading =
+      app.add_option("--grading", grading,
+                     "height ratio of successive element layers from the surface to the bone (1 = equal, 1..4)")
+          ->capture_default_str();
+  auto* o_dt = app.add_option("--time-step-ms", time_step_ms, "time step [ms]")->capture_default_str();
+  auto* o_omega = app.add_option("--omega", omega, "generalised trapezoidal parameter in [0.5, 1]")->capture_default_str();
+  auto* o_h = app.add_option("--aggregate-modulus-mpa", h_mpa, "aggregate modulus H_A of every layer [MPa]")
+                  ->capture_default_str();
+  auto* o_nu = app.add_option("--poisson-ratio", nu, "drained Poisson's ratio of the solid matrix")->capture_default_str();
+  auto* o_k = app.add_option("--permeability", k, "permeability k [m^4/(N s)]")->capture_default_str();
+  auto* o_margin =
+      app.add_option("--crop-margin-mm", margin_mm,
+                     "keep the quads within this distance of a vertex in contact in some frame [mm]; 0 = whole surface")
+          ->capture_default_str();
+  auto* o_end = app.add_option("--end-time-s", end_time_s, "last frame time simulated [s] (default: the whole trial)");
   std::string compare_to;
   app.add_option("--compare-to", compare_to,
                  "after the run (or instead of it, with --compare-only), print the relative difference of the key "
@@ -83,9 +92,6 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-biphasic");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
-  o.time_step_s = time_step_ms * 1e-3;
-  o.aggregate_modulus_Pa = h_mpa * 1e6;
-  o.crop_margin_m = margin_mm * 1e-3;
   o.progress = !quiet;
   for (int i = 0; i < argc; ++i) o.argv.emplace_back(argv[i]);
   auto compare = [&]() {
@@ -98,6 +104,21 @@ int main(int argc, char** argv) {
     std::printf("compare worst relative difference %.4g\n", worst);
   };
   try {
+    // Options: the defaults, then the scene's biphasic block, then the flags given.
+    if (!scene.empty()) {
+      const common::Scene sc = pipelines::load_scene(scene);
+      static_cast<pipelines::BiphasicOptions&>(o) = common::read_options<pipelines::BiphasicOptions>(sc.block("biphasic"));
+    }
+    if (o_layers->count()) o.layers = layers;
+    if (o_el->count()) o.element_layers = element_layers;
+    if (o_grading->count()) o.grading = grading;
+    if (o_dt->count()) o.time_step_s = time_step_ms * 1e-3;
+    if (o_omega->count()) o.omega = omega;
+    if (o_h->count()) o.aggregate_modulus_Pa = h_mpa * 1e6;
+    if (o_nu->count()) o.poisson_ratio = nu;
+    if (o_k->count()) o.permeability_m4_per_Ns = k;
+    if (o_margin->count()) o.crop_margin_m = margin_mm * 1e-3;
+    if (o_end->count()) o.end_time_s = end_time_s;
     if (compare_only) {
       if (compare_to.empty()) throw common::InputError("--compare-only needs --compare-to");
       compare();

@@ -18,6 +18,8 @@
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/log.h"
+#include "pipelines/runner.h"
+#include "pipelines/stages.h"
 
 namespace arthrosim {
 namespace {
@@ -254,6 +256,52 @@ TEST(BiphasicStage, CanonicalCaseSatisfiesTheContactConditionsOnBothLayers) {
   EXPECT_NEAR(p0, p1, 0.02 * p1);
   EXPECT_NEAR(key.layers[0].fluid_load_support, key.layers[1].fluid_load_support, 1e-3);
   for (const auto& l : r.layers) EXPECT_EQ(l.factorizations, 1);
+}
+
+// The scene block and the runner's plan (no stage is run).
+TEST(BiphasicStage, SceneBlockAndPlan) {
+  const fs::path dir = scratch() / "scene";
+  fs::create_directories(dir / "models" / "knee");
+  fs::create_directories(dir / "trials" / "walk");
+  const std::string head = "model: models/knee\ntrial: trials/walk\noutputs: [biphasic]\n"
+                           "comak: {effects: [muscles, tibiofemoral_contact, patellofemoral_contact]}\n";
+  const common::Scene scene = pipelines::parse_scene(
+      head + "biphasic:\n  effects: [biphasic_layers, penetration_contact]\n  element_layers: 3\n"
+             "  time_step_ms: 20\n  aggregate_modulus_mpa: 1.2\n",
+      dir / "s.yaml");
+  const auto o = common::read_options<pipelines::BiphasicOptions>(scene.block("biphasic"));
+  EXPECT_EQ(o.element_layers, 3);
+  EXPECT_DOUBLE_EQ(o.time_step_s, 0.02);
+  EXPECT_DOUBLE_EQ(o.aggregate_modulus_Pa, 1.2e6);
+  EXPECT_DOUBLE_EQ(o.permeability_m4_per_Ns, 3e-15);  // the default
+  EXPECT_FALSE(o.end_time_s.has_value());
+  const auto plan = pipelines::plan_stages(scene, dir / "out");
+  ASSERT_EQ(plan.size(), 3u);
+  EXPECT_EQ(plan[0].name, "prepare");
+  EXPECT_EQ(plan[1].name, "comak");
+  EXPECT_EQ(plan[2].name, "biphasic");
+  EXPECT_EQ(plan[2].executable, "arthrosim-biphasic");
+  EXPECT_EQ(plan[2].effects, (std::vector<std::string>{"biphasic_layers", "penetration_contact"}));
+  EXPECT_EQ(plan[2].outputs.front(), dir / "out" / "biphasic.h5");
+  EXPECT_NE(std::find(plan[2].arguments.begin(), plan[2].arguments.end(), "--kinematics"), plan[2].arguments.end());
+  // Refusals with the scene's line: one effect missing, no comak block, no trial.
+  auto refused = [&](const std::string& text, const std::string& needle) {
+    try {
+      pipelines::parse_scene(text, dir / "bad.yaml");
+      ADD_FAILURE() << "accepted: " << needle;
+    } catch (const common::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad.yaml:"), std::string::npos) << e.what();
+    }
+  };
+  refused(head + "biphasic: {effects: [biphasic_layers]}\n", "found no penetration_contact");
+  refused("model: models/knee\ntrial: trials/walk\noutputs: [biphasic]\nbiphasic: {effects: [biphasic_layers, "
+          "penetration_contact]}\n",
+          "needs stage 1's kinematics: add a 'comak' block");
+  refused(head + "biphasic: {effects: [biphasic_layers, penetration_contact], element_layers: 0}\n",
+          "element_layers");
+  refused(head + "biphasic: {effects: [biphasic_layers, penetration_contact], layers: [femur, meniscus]}\n",
+          "meniscus");
 }
 
 }  // namespace
