@@ -322,7 +322,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
       surface_moves = surface_moves || s.wants("imposed_kinematics");
     }
   }
-  const bool want_comak = wants_output(scene, "kinematics") || surface_moves;
+  const bool want_biphasic = wants_output(scene, "biphasic");
+  const bool want_comak = wants_output(scene, "kinematics") || surface_moves || want_biphasic;
   const bool want_prepare = wants_output(scene, "prepared_model") || want_comak || want_surface;
   const fs::path scene_file = scene.file;
   const SceneInputs in = scene_inputs(scene);
@@ -365,7 +366,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.name = "comak";
     s.executable = "arthrosim-comak";
     const common::OptionBlock& comak = scene.block("comak");
-    s.needed_for = first_reason("kinematics", "bone motion for imposed_kinematics");
+    s.needed_for = first_reason("kinematics", surface_moves ? "bone motion for imposed_kinematics"
+                                                            : "bone poses and contact forces for the biphasic stage");
     s.inputs.emplace_back("model", in.model);
     s.inputs.emplace_back("trial", in.trial);
     s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
@@ -403,6 +405,22 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
                                              "--out", (out_dir / surface_file(sc.name)).string()});
       plan.push_back(std::move(s));
     }
+  }
+  if (want_biphasic) {
+    StageStep s;
+    s.name = "biphasic";
+    s.executable = "arthrosim-biphasic";
+    s.needed_for = "output biphasic";
+    const common::OptionBlock& biphasic = scene.block("biphasic");
+    s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
+    s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
+    s.options = biphasic.canonical();
+    s.effects = biphasic.list("effects");
+    add_path_inputs(biphasic, s);
+    s.outputs = {out_dir / "biphasic.h5", out_dir / "biphasic.xdmf"};
+    s.arguments = {"--prepared", (out_dir / kPrepared).string(), "--kinematics", (out_dir / kKinematics).string(),
+                   "--scene",    scene_file.string(),            "--out",        (out_dir / "biphasic.h5").string()};
+    plan.push_back(std::move(s));
   }
   if (want_report) {
     StageStep s;

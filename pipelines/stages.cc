@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "common/error.h"
+#include "pipelines/biphasic_stage.h"
 #include "pipelines/comak_stage.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/prepare.h"
@@ -16,6 +17,7 @@ const std::vector<StageDescriptor>& stages() {
       prepare_stage_descriptor(),
       comak_stage_descriptor(),
       surface_stage_descriptor(),
+      biphasic_stage_descriptor(),
       post_stage_descriptor(),
   };
   return kStages;

@@ -343,7 +343,7 @@ TEST_F(SceneTest, OutputsNeedTheirBlocks) {
                6, 1, {"scenario 'gait' uses imposed_kinematics", "add 'trial: PATH'"});
   expect_error("model: ../models/knee\noutputs: [prepared_model, bogus]\n", 2, 27,
                {"'outputs': unknown item 'bogus'", "expected any of prepared_model, kinematics, surface, "
-                                                   "report"});
+                                                   "biphasic, report"});
 }
 
 TEST_F(SceneTest, PathsAndDuplicates) {
