@@ -1,0 +1,152 @@
+// Effect mca_elastic: the pair law of movable cellular automata (seed eq.
+// A1-A8) against closed forms.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <tuple>
+
+#include "shockwave/simulation.h"
+#include "tests/shockwave/test_support.h"
+
+namespace arthrosim::shockwave {
+namespace {
+
+using testing::box;
+using testing::material;
+using testing::ramp_velocity;
+
+struct Moduli {
+  double E = 0.0, nu = 0.0, E_platen = 0.0;
+};
+
+// Uniaxial compression of a prism (n x n x 3n automata): the bottom layer on
+// frictionless rollers (v_z = 0; one automaton also fixed in x, y and one in
+// y against rigid motion), the top layer moved down with free lateral motion
+// (a frictionless platen); quasi-static by dynamic relaxation (mass
+// damping). The platen layers are not traction-free, so the measurement uses
+// the middle third (Saint-Venant): E = sigma_zz / eps_zz with sigma_zz the
+// mean averaged stress (A4) of the gauge's automata that have all their
+// neighbours and eps_zz from the mean axial displacement of the gauge's end
+// layers; nu = -eps_lateral / eps_zz from the mean lateral displacement of
+// the layers next to the side faces in the gauge. (The platen force over the layer area,
+// printed too, is lower for FCC: the automata of an FCC (001) face have 3 of
+// the 4 pairs that carry axial force, so the face layer transmits 3/4 of the
+// interior stress, an O(d/width) size effect absent for SC.)
+Moduli compress(LatticeKind kind, int nsites, DForm form, double K, double G) {
+  const double d = 1e-3;
+  const Lattice lat = make_lattice(kind, d);
+  const int n = kind == LatticeKind::kFcc ? static_cast<int>(std::lround(nsites * std::sqrt(2.0))) : nsites;
+  const int nz = 3 * n;
+  Model m = box(lat, {n, n, nz}, material(K, G));
+  const double h = lat.spacing;
+  const double L = (nz - 1) * h;
+  const double eps = 1e-4;
+  const TissueConstants& c = m.constants[0];
+  const double t_wave = L / c.drained_p_speed;
+  const double T = 6.0 * t_wave;  // ramp
+  for (int a = 0; a < m.size(); ++a) {
+    const auto& cell = m.cell[a];
+    if (cell[2] == 0) m.constraints.push_back({a, 4, common::Vec3::Zero()});
+    if (cell[2] == nz - 1) m.constraints.push_back({a, 4, common::Vec3(0, 0, -eps * L)});
+  }
+  // Rigid-body motion in x, y and about z: fix one bottom automaton in x, y
+  // and a second one on the same x row in y.
+  m.constraints[0].axes = 7;
+  for (auto& con : m.constraints)
+    if (m.cell[con.automaton][2] == 0 && m.cell[con.automaton][1] == m.cell[m.constraints[0].automaton][1] &&
+        con.automaton != m.constraints[0].automaton) {
+      con.axes = 6;
+      break;
+    }
+  m.constraint_scale = [T](double t) { return ramp_velocity(t, T); };
+  SimulationOptions o;
+  o.pore_fluid = false;
+  o.filtration = false;
+  o.d_form = form;
+  // About critical damping of the lowest axial mode, omega = pi c / (2 L).
+  o.damping = 3.14159 * c.drained_p_speed / (2.0 * L);
+  Simulation sim(m, o);
+  const std::int64_t steps = static_cast<std::int64_t>(std::ceil(2.5 * T / sim.time_step()));
+  sim.run(steps);
+  double Fz = 0.0;
+  int top = 0;
+  for (size_t k = 0; k < m.constraints.size(); ++k)
+    if (m.cell[m.constraints[k].automaton][2] == nz - 1) {
+      Fz += sim.constraint_forces()[k].z();
+      ++top;
+    }
+  const double area = top * lat.area_per_surface_site();
+  const double platen_stress = Fz / area;  // compressive (the pairs push the platen up)
+  const int k0 = n, k1 = 2 * n;
+  double szz = 0.0;
+  int inner = 0;
+  for (int a = 0; a < m.size(); ++a)
+    if (m.cell[a][2] >= k0 && m.cell[a][2] <= k1 && m.neighbour_count[a] == lat.directions) {
+      szz += -sim.stress(a)[2];
+      ++inner;
+    }
+  const double stress = szz / inner;
+  auto mean = [&](auto pred, int axis) {
+    double sum = 0.0;
+    int cnt = 0;
+    for (int a = 0; a < m.size(); ++a)
+      if (pred(m.cell[a])) {
+        sum += sim.displacement(a)[axis];
+        ++cnt;
+      }
+    return sum / cnt;
+  };
+  const double uz0 = mean([&](const auto& cl) { return cl[2] == k0; }, 2);
+  const double uz1 = mean([&](const auto& cl) { return cl[2] == k1; }, 2);
+  const double eps_zz = (uz0 - uz1) / ((k1 - k0) * h);  // compressive, > 0
+  double lat_strain = 0.0;
+  for (int axis : {0, 1}) {
+    const double lo = mean([&](const auto& cl) { return cl[axis] == 1 && cl[2] >= k0 && cl[2] <= k1; }, axis);
+    const double hi = mean([&](const auto& cl) { return cl[axis] == n - 2 && cl[2] >= k0 && cl[2] <= k1; }, axis);
+    lat_strain += 0.5 * (hi - lo) / ((n - 3) * h);
+  }
+  Moduli out;
+  out.E = stress / eps_zz;
+  out.nu = lat_strain / eps_zz;
+  out.E_platen = platen_stress / eps_zz;
+  return out;
+}
+
+class EffectiveModuli : public ::testing::TestWithParam<std::tuple<LatticeKind, double, double>> {};
+
+// Decides the D question (pair_law.h): with D = 1 - 2G/(3K) the lattice
+// reproduces the input E and nu; with the seed's printed D = 1 - 2G/K it
+// does not (measured for nu = 0.25: E 40 % low, nu -0.23). Materials:
+// nu = 0.25 and the drained skeleton of Table 1's fibrous tissue (K 4.16 MPa,
+// G 0.43 MPa, nu = 0.45). Tolerance 1 %: the gauge is not perfectly
+// homogeneous (Saint-Venant decay of the platen layers over one width) and
+// dynamic relaxation stops at a finite time; measured within 0.5 % (E) and
+// 0.5 % (nu).
+TEST_P(EffectiveModuli, HookeFormMatchesInputSeedFormDoesNot) {
+  const auto [kind, K, G] = GetParam();
+  const double E = 9 * K * G / (3 * K + G), nu = (3 * K - 2 * G) / (2 * (3 * K + G));
+  const Moduli hooke = compress(kind, 8, DForm::kHooke, K, G);
+  const Moduli seed = compress(kind, 8, DForm::kSeedPrinted, K, G);
+  std::printf("%s: input E %.4g nu %.4f | D=1-2G/(3K): E %.4g nu %.4f (platen force: E %.4g) | D=1-2G/K: E %.4g nu %.4f\n",
+              to_string(kind).c_str(), E, nu, hooke.E, hooke.nu, hooke.E_platen, seed.E, seed.nu);
+  EXPECT_NEAR(hooke.E / E, 1.0, 0.01);
+  EXPECT_NEAR(hooke.nu / nu, 1.0, 0.01);
+  // The printed form makes the bulk modulus K - 4G/3 (summing A7 as above);
+  // for a nearly incompressible skeleton (fibrous, K >> G) E and nu hardly
+  // notice (measured 2-3 %), so the form is decided on the nu = 0.25 material.
+  if (nu < 0.3) EXPECT_GT(std::abs(seed.E / E - 1.0) + std::abs(seed.nu / nu - 1.0), 0.3);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Lattices, EffectiveModuli,
+    ::testing::Values(std::make_tuple(LatticeKind::kSimpleCubic, 10e6, 6e6), std::make_tuple(LatticeKind::kFcc, 10e6, 6e6),
+                      std::make_tuple(LatticeKind::kSimpleCubic, 4.16e6, 0.43e6),
+                      std::make_tuple(LatticeKind::kFcc, 4.16e6, 0.43e6)),
+    [](const auto& info) {
+      return to_string(std::get<0>(info.param)) + (std::get<2>(info.param) < 1e6 ? "_fibrous" : "_nu025");
+    });
+
+}  // namespace
+}  // namespace arthrosim::shockwave
+
