@@ -112,6 +112,9 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
   if (!(options.damping * dt_ <= 0.5))
     throw common::InputError(src, 0, "expected damping * dt <= 0.5, found " + std::to_string(options.damping * dt_));
 
+  wa_.resize(n_);
+  for (int i = 0; i < n_; ++i) wa_[i] = w_[model.tissue[i]];
+  for (auto& a : acc_) a.assign(n_, 0.0);
   // Free-surface factor of the volumetric strain (see simulation.h).
   f_.resize(n_);
   for (int i = 0; i < n_; ++i) f_[i] = free_surface_factor(model, i, poro_[model.tissue[i]] != 0);
@@ -196,7 +199,7 @@ void Simulation::predictor() {
   const double* vz = vel_[cur_][2].data();
   const std::int32_t* nb = model_.neighbours.data();
   const std::uint8_t* tis = model_.tissue.data();
-  const double* w = w_.data();
+  const double* w = wa_.data();
   const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
   const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
   const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
@@ -205,7 +208,7 @@ void Simulation::predictor() {
     const int ti = tis[i];
     const double xi = px[i], yi = py[i], zi = pz[i];
     const double vxi = vx[i], vyi = vy[i], vzi = vz[i];
-    const double wi = w[ti];
+    const double wi = w[i];
     double sum = 0.0;
     for (int s = 0; s < K; ++s) {
       const int j = nb[static_cast<size_t>(s) * n + i];
@@ -218,7 +221,7 @@ void Simulation::predictor() {
       }
       const double inv_r = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
       const double dr = (dx * (vx[j] - vxi) + dy * (vy[j] - vyi) + dz * (vz[j] - vzi)) * inv_r * dt;
-      const double wj = w[tis[j]];
+      const double wj = w[j];
       sum += dr * (wi / (wi + wj));
     }
     const double dtheta = f_[i] * sv * sum;
@@ -240,9 +243,135 @@ void Simulation::predictor() {
 }
 
 // ---------------------------------------------------------------------------
-// B. Pair forces (A3, A7-A9), moments (A1), averaged stress (A4-A6), kick, drift.
+// B1. Pair forces (A3, A7-A9) of the bonds each automaton owns (its forward
+// directions): new pair state, and the owner's share of force, moment and
+// averaged stress.
+template <bool kPeriodic>
+void Simulation::pair_forces() {
+  const int n = n_, H = K_ / 2;
+  const double dt = dt_;
+  const int c = cur_, o = 1 - cur_;
+  const double* px = pos_[c][0].data();
+  const double* py = pos_[c][1].data();
+  const double* pz = pos_[c][2].data();
+  const double* vx = vel_[c][0].data();
+  const double* vy = vel_[c][1].data();
+  const double* vz = vel_[c][2].data();
+  const double* wx = omg_[c][0].data();
+  const double* wy = omg_[c][1].data();
+  const double* wz = omg_[c][2].data();
+  const double* sn0 = sn_[c].data();
+  const double* tx0 = tx_[c].data();
+  const double* ty0 = ty_[c].data();
+  const double* tz0 = tz_[c].data();
+  double* sn1 = sn_[o].data();
+  double* tx1 = tx_[o].data();
+  double* ty1 = ty_[o].data();
+  double* tz1 = tz_[o].data();
+  const std::int32_t* nb = model_.neighbours.data();
+  const double* w = wa_.data();
+  const double* b = b_.data();
+  const double S = model_.lattice.contact_area;
+  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
+  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
+  double* Fx = acc_[0].data();
+  double* Fy = acc_[1].data();
+  double* Fz = acc_[2].data();
+  double* Mx = acc_[3].data();
+  double* My = acc_[4].data();
+  double* Mz = acc_[5].data();
+  double* S11 = acc_[6].data();
+  double* S22 = acc_[7].data();
+  double* S33 = acc_[8].data();
+  double* S12 = acc_[9].data();
+  double* S23 = acc_[10].data();
+  double* S13 = acc_[11].data();
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (int i = 0; i < n; ++i) {
+    double fx = 0, fy = 0, fz = 0, mx = 0, my = 0, mz = 0;
+    double s11 = 0, s22 = 0, s33 = 0, s12 = 0, s23 = 0, s13 = 0;
+    const double xi = px[i], yi = py[i], zi = pz[i];
+    const double vxi = vx[i], vyi = vy[i], vzi = vz[i];
+    const double wxi = wx[i], wyi = wy[i], wzi = wz[i];
+    const double wi = w[i], wbi = w[i] * b[i];
+    for (int s = 0; s < H; ++s) {
+      const size_t bi = static_cast<size_t>(s) * n + i;
+      const int j = nb[bi];
+      if (j < 0) continue;
+      double dx = px[j] - xi, dy = py[j] - yi, dz = pz[j] - zi;
+      if constexpr (kPeriodic) {
+        dx = wrap(dx, Lx, iLx);
+        dy = wrap(dy, Ly, iLy);
+        dz = wrap(dz, Lz, iLz);
+      }
+      const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
+      const double inv_r = 1.0 / r;
+      const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
+      const double dvx = vx[j] - vxi, dvy = vy[j] - vyi, dvz = vz[j] - vzi;
+      const double dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
+      const double wj = w[j];
+      const double inv_w = 1.0 / (wi + wj);
+      // A8: normal specific force.
+      const double sig = sn0[bi] + (dr + (wbi + wj * b[j])) * inv_w;
+      // Relative shear displacement at the contact point, (v_j - v_i) -
+      // q (omega_i + omega_j) x n, tangential part, times dt.
+      const double q = 0.5 * r;
+      const double osx = wxi + wx[j], osy = wyi + wy[j], osz = wzi + wz[j];
+      double lx = (dvx - q * (osy * nz - osz * ny)) * dt;
+      double ly = (dvy - q * (osz * nx - osx * nz)) * dt;
+      double lz = (dvz - q * (osx * ny - osy * nx)) * dt;
+      const double ln = lx * nx + ly * ny + lz * nz;
+      lx -= ln * nx;
+      ly -= ln * ny;
+      lz -= ln * nz;
+      // Stored tangential force, turned into the current contact plane, plus
+      // the A8 increment.
+      double tX = tx0[bi], tY = ty0[bi], tZ = tz0[bi];
+      const double tn = tX * nx + tY * ny + tZ * nz;
+      tX += lx * inv_w - tn * nx;
+      tY += ly * inv_w - tn * ny;
+      tZ += lz * inv_w - tn * nz;
+      sn1[bi] = sig;
+      tx1[bi] = tX;
+      ty1[bi] = tY;
+      tz1[bi] = tZ;
+      // A3: force on the owner; A1: moment q n x F^tau (the same on both);
+      // A4: q n (x) F (the same for both automata).
+      const double Fx_ = S * (sig * nx + tX), Fy_ = S * (sig * ny + tY), Fz_ = S * (sig * nz + tZ);
+      fx += Fx_;
+      fy += Fy_;
+      fz += Fz_;
+      const double qS = q * S;
+      mx += qS * (ny * tZ - nz * tY);
+      my += qS * (nz * tX - nx * tZ);
+      mz += qS * (nx * tY - ny * tX);
+      s11 += q * nx * Fx_;
+      s22 += q * ny * Fy_;
+      s33 += q * nz * Fz_;
+      s12 += 0.5 * q * (nx * Fy_ + ny * Fx_);
+      s23 += 0.5 * q * (ny * Fz_ + nz * Fy_);
+      s13 += 0.5 * q * (nx * Fz_ + nz * Fx_);
+    }
+    Fx[i] = fx;
+    Fy[i] = fy;
+    Fz[i] = fz;
+    Mx[i] = mx;
+    My[i] = my;
+    Mz[i] = mz;
+    S11[i] = s11;
+    S22[i] = s22;
+    S33[i] = s33;
+    S12[i] = s12;
+    S23[i] = s23;
+    S13[i] = s13;
+  }
+}
+
+// ---------------------------------------------------------------------------
+// B2. The other half of every pair (from the new pair state of its owner),
+// the load, averaged stress (A4-A6), kick (A1) and drift.
 template <bool kPeriodic, bool kFluid>
-void Simulation::forces() {
+void Simulation::integrate() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
   const int c = cur_, o = 1 - cur_;
@@ -264,18 +393,12 @@ void Simulation::forces() {
   double* ox = omg_[o][0].data();
   double* oy = omg_[o][1].data();
   double* oz = omg_[o][2].data();
-  const double* sn0 = sn_[c].data();
-  const double* tx0 = tx_[c].data();
-  const double* ty0 = ty_[c].data();
-  const double* tz0 = tz_[c].data();
-  double* sn1 = sn_[o].data();
-  double* tx1 = tx_[o].data();
-  double* ty1 = ty_[o].data();
-  double* tz1 = tz_[o].data();
+  const double* sn1 = sn_[o].data();
+  const double* tx1 = tx_[o].data();
+  const double* ty1 = ty_[o].data();
+  const double* tz1 = tz_[o].data();
   const std::int32_t* nb = model_.neighbours.data();
   const std::uint8_t* tis = model_.tissue.data();
-  const double* w = w_.data();
-  const double* b = b_.data();
   const double S = model_.lattice.contact_area;
   const double R = model_.lattice.radius;
   const double invV = 1.0 / model_.lattice.cell_volume;
@@ -290,18 +413,17 @@ void Simulation::forces() {
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)
   for (int i = 0; i < n; ++i) {
     const int ti = tis[i];
-    double fx = 0, fy = 0, fz = 0, mx = 0, my = 0, mz = 0;
-    double s11 = 0, s22 = 0, s33 = 0, s12 = 0, s23 = 0, s13 = 0;
-    for (int s = 0; s < K; ++s) {
-      const int j = nb[static_cast<size_t>(s) * n + i];
+    double fx = acc_[0][i], fy = acc_[1][i], fz = acc_[2][i];
+    double mx = acc_[3][i], my = acc_[4][i], mz = acc_[5][i];
+    double s11 = acc_[6][i], s22 = acc_[7][i], s33 = acc_[8][i];
+    double s12 = acc_[9][i], s23 = acc_[10][i], s13 = acc_[11][i];
+    const double xi = px[i], yi = py[i], zi = pz[i];
+    for (int s = H; s < K; ++s) {
+      const int j = nb[static_cast<size_t>(s) * n + i];  // the owner of this pair
       if (j < 0) continue;
-      // Every pair is computed in the frame of its owner (the automaton of
-      // the forward direction), so both halves produce the same bits.
-      const bool own = s < H;
-      const int io = own ? i : j;  // owner
-      const int it = own ? j : i;  // the other
-      const size_t bi = static_cast<size_t>(own ? s : s - H) * n + io;
-      double dx = px[it] - px[io], dy = py[it] - py[io], dz = pz[it] - pz[io];
+      const size_t bi = static_cast<size_t>(s - H) * n + j;
+      // The owner's frame, as in pair_forces: the same bits.
+      double dx = xi - px[j], dy = yi - py[j], dz = zi - pz[j];
       if constexpr (kPeriodic) {
         dx = wrap(dx, Lx, iLx);
         dy = wrap(dy, Ly, iLy);
@@ -310,59 +432,22 @@ void Simulation::forces() {
       const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
       const double inv_r = 1.0 / r;
       const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
-      const double dvx = vx[it] - vx[io], dvy = vy[it] - vy[io], dvz = vz[it] - vz[io];
-      const double dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
-      const double wo = w[tis[io]], wt = w[tis[it]];
-      const double inv_w = 1.0 / (wo + wt);
-      // A8: normal specific force.
-      const double sig = sn0[bi] + (dr + (wo * b[io] + wt * b[it])) * inv_w;
-      // Relative shear displacement at the contact point, (v_t - v_o) -
-      // q (omega_o + omega_t) x n, tangential part, times dt.
+      const double sig = sn1[bi], tX = tx1[bi], tY = ty1[bi], tZ = tz1[bi];
+      const double Fx_ = S * (sig * nx + tX), Fy_ = S * (sig * ny + tY), Fz_ = S * (sig * nz + tZ);
+      fx -= Fx_;
+      fy -= Fy_;
+      fz -= Fz_;
       const double q = 0.5 * r;
-      const double osx = wx[io] + wx[it], osy = wy[io] + wy[it], osz = wz[io] + wz[it];
-      double lx = (dvx - q * (osy * nz - osz * ny)) * dt;
-      double ly = (dvy - q * (osz * nx - osx * nz)) * dt;
-      double lz = (dvz - q * (osx * ny - osy * nx)) * dt;
-      const double ln = lx * nx + ly * ny + lz * nz;
-      lx -= ln * nx;
-      ly -= ln * ny;
-      lz -= ln * nz;
-      // Stored tangential force, turned into the current contact plane, plus
-      // the A8 increment.
-      double tX = tx0[bi], tY = ty0[bi], tZ = tz0[bi];
-      const double tn = tX * nx + tY * ny + tZ * nz;
-      tX += lx * inv_w - tn * nx;
-      tY += ly * inv_w - tn * ny;
-      tZ += lz * inv_w - tn * nz;
-      if (own) {
-        sn1[bi] = sig;
-        tx1[bi] = tX;
-        ty1[bi] = tY;
-        tz1[bi] = tZ;
-      }
-      // A3: force on the owner.
-      const double Fx = S * (sig * nx + tX), Fy = S * (sig * ny + tY), Fz = S * (sig * nz + tZ);
-      if (own) {
-        fx += Fx;
-        fy += Fy;
-        fz += Fz;
-      } else {
-        fx -= Fx;
-        fy -= Fy;
-        fz -= Fz;
-      }
-      // A1: moment q n x F^tau, the same on both automata.
       const double qS = q * S;
       mx += qS * (ny * tZ - nz * tY);
       my += qS * (nz * tX - nx * tZ);
       mz += qS * (nx * tY - ny * tX);
-      // A4: q n (x) F, the same for both automata (n and F both change sign).
-      s11 += q * nx * Fx;
-      s22 += q * ny * Fy;
-      s33 += q * nz * Fz;
-      s12 += 0.5 * q * (nx * Fy + ny * Fx);
-      s23 += 0.5 * q * (ny * Fz + nz * Fy);
-      s13 += 0.5 * q * (nx * Fz + nz * Fx);
+      s11 += q * nx * Fx_;
+      s22 += q * ny * Fy_;
+      s33 += q * nz * Fz_;
+      s12 += 0.5 * q * (nx * Fy_ + ny * Fx_);
+      s23 += 0.5 * q * (ny * Fz_ + nz * Fy_);
+      s13 += 0.5 * q * (nx * Fz_ + nz * Fx_);
     }
     const int li = load_of_[i];
     double fex = 0, fey = 0, fez = 0;
@@ -417,9 +502,9 @@ void Simulation::forces() {
     ux[i] = nvx;
     uy[i] = nvy;
     uz[i] = nvz;
-    qx[i] = px[i] + nvx * dt;
-    qy[i] = py[i] + nvy * dt;
-    qz[i] = pz[i] + nvz * dt;
+    qx[i] = xi + nvx * dt;
+    qy[i] = yi + nvy * dt;
+    qz[i] = zi + nvz * dt;
     const double wxi = wx[i], wyi = wy[i], wzi = wz[i];
     const double nwx = wxi * damp + mx * iJ * dt;
     const double nwy = wyi * damp + my * iJ * dt;
@@ -450,11 +535,11 @@ void Simulation::forces() {
 void Simulation::step() {
   const bool fluid = fluid_on_;
   if (periodic_) {
-    if (fluid) { predictor<true, true>(); forces<true, true>(); }
-    else { predictor<true, false>(); forces<true, false>(); }
+    if (fluid) { predictor<true, true>(); pair_forces<true>(); integrate<true, true>(); }
+    else { predictor<true, false>(); pair_forces<true>(); integrate<true, false>(); }
   } else {
-    if (fluid) { predictor<false, true>(); forces<false, true>(); }
-    else { predictor<false, false>(); forces<false, false>(); }
+    if (fluid) { predictor<false, true>(); pair_forces<false>(); integrate<false, true>(); }
+    else { predictor<false, false>(); pair_forces<false>(); integrate<false, false>(); }
   }
   if (track_energy_) {
     kinetic_now_ = deterministic_sum(n_, [&](std::int64_t i) { return kinetic_[i]; });

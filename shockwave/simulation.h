@@ -17,7 +17,9 @@
 //     with the relative shear displacement at the contact point including
 //     the automata's rotations, F_ij = S (sigma n + tau) (A3), moments
 //     M_ij = q n x F^tau (A1, q = r/2, no bending-torsion moment K_ij);
-//     averaged stress (A4), pressure (A5), von Mises stress (A6); kick
+//     each pair is updated once, by its owner (the automaton whose forward
+//     direction it is), the other half takes the new pair state in a second
+//     pass; averaged stress (A4), pressure (A5), von Mises stress (A6); kick
 //     v += F/m h, omega += M/J h (A1, J = 2/5 m R^2 of the equivalent sphere);
 //     drift x += v h.
 //  C. filtration (A11-A12, filtration.h) over the step with theta fixed.
@@ -34,6 +36,7 @@
 // (reduce.h). Results are bit-identical for any number of OpenMP threads.
 #include <cstdint>
 #include <functional>
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -186,8 +189,10 @@ class Simulation {
  private:
   template <bool kPeriodic, bool kFluid>
   void predictor();
+  template <bool kPeriodic>
+  void pair_forces();
   template <bool kPeriodic, bool kFluid>
-  void forces();
+  void integrate();
   double potential_energy() const;
 
   const Model& model_;
@@ -206,7 +211,8 @@ class Simulation {
   std::vector<double> w_, D_, K_bulk_, a_, M_, pore_coef_, inv3G_, mass_, inv_mass_, inv_inertia_;
   std::vector<std::uint8_t> poro_;
   // Per automaton.
-  std::vector<double> f_;
+  std::vector<double> f_, wa_;  ///< free-surface factor, compliance R/(2G) per automaton
+  std::array<std::vector<double>, 12> acc_;  ///< owner's share: F (3), M (3), A4 sum (6)
   std::vector<std::int32_t> constraint_of_, load_of_;
   std::vector<std::uint8_t> drained_;
   std::vector<double> pos_[2][3], vel_[2][3], omg_[2][3];
