@@ -65,14 +65,62 @@ FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model
     fast_rate[i] = M * frate / V;
   }
   double max_fast = 0.0;
+  std::vector<std::int32_t> local(n, -1);
   for (int i = 0; i < n; ++i)
     if (in_fast[i]) {
+      local[i] = static_cast<std::int32_t>(fast_list_.size());
       fast_list_.push_back(i);
       max_fast = std::max(max_fast, fast_rate[i]);
     }
   substeps_ = fast_list_.empty() ? 1 : std::max(1, static_cast<int>(std::ceil(dt * max_fast / safety)));
+  // Compressed rows of the slow and the fast bonds; conductances by index
+  // into the (few) distinct values of the tissue pairs.
+  auto conductance_index = [this](double C) {
+    for (size_t q = 0; q < ctab_.size(); ++q)
+      if (ctab_[q] == C) return static_cast<std::uint8_t>(q);
+    if (ctab_.size() >= 255) throw std::logic_error("FiltrationTerm: more than 255 conductances");
+    ctab_.push_back(C);
+    return static_cast<std::uint8_t>(ctab_.size() - 1);
+  };
+  slow_row_.push_back(0);
+  for (int i : fluid_) {
+    const int ti = m.tissue[i];
+    for (int s = 0; s < K; ++s) {
+      const int j = m.neighbour(s, i);
+      if (j < 0) continue;
+      const int tj = m.tissue[j];
+      const double C = conductance_[ti * ntissue_ + tj];
+      if (C <= 0.0 || pair_fast_[ti * ntissue_ + tj]) continue;
+      slow_col_.push_back(j);
+      slow_c_.push_back(conductance_index(C));
+    }
+    slow_row_.push_back(static_cast<std::int64_t>(slow_col_.size()));
+  }
+  fast_row_.push_back(0);
+  for (int i : fast_list_) {
+    const int ti = m.tissue[i];
+    for (int s = 0; s < K; ++s) {
+      const int j = m.neighbour(s, i);
+      if (j < 0) continue;
+      const int tj = m.tissue[j];
+      const double C = conductance_[ti * ntissue_ + tj];
+      if (C <= 0.0 || !pair_fast_[ti * ntissue_ + tj]) continue;
+      // A drained neighbour is a reservoir at P = 0: the extra slot at the
+      // end of fast_p_, which stays 0.
+      if (local[j] < 0 && !drained[j]) throw std::logic_error("FiltrationTerm: a fast bond leaves the fast set");
+      fast_col_.push_back(local[j] >= 0 ? local[j] : static_cast<std::int32_t>(fast_list_.size()));
+      fast_c_.push_back(conductance_index(C));
+    }
+    fast_row_.push_back(static_cast<std::int64_t>(fast_col_.size()));
+    fast_m_.push_back(m.constants[ti].biot_modulus);
+    fast_a_.push_back(m.constants[ti].a);
+  }
   p_.assign(n, 0.0);
   delta_.assign(fast_list_.size(), 0.0);
+  fast_zeta_.assign(fast_list_.size(), 0.0);
+  fast_theta_.assign(fast_list_.size(), 0.0);
+  fast_p_.assign(fast_list_.size() + 1, 0.0);
+  slow_delta_.assign(fluid_.size(), 0.0);
   dissip_.assign(n, 0.0);
 }
 
@@ -87,26 +135,20 @@ void FiltrationTerm::pressures(const std::vector<int>& list, const double* theta
 
 void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipation) {
   const Model& m = model_;
-  const int K = m.lattice.directions;
-  const int nt = ntissue_;
   const double V = m.lattice.cell_volume;
   const bool track = dissipation != nullptr;
   if (track) std::fill(dissip_.begin(), dissip_.end(), 0.0);
-  // Flux sum of automaton i over its bonds of one class (fast or slow), from
-  // the pressures in p_ (Jacobi: all fluxes from the same pressures).
-  auto flux = [&](int i, bool fast_class, double h, double* dis) {
-    const int ti = m.tissue[i];
-    const double pi = p_[i];
+  // Flux sum over one automaton's bonds of one class, Jacobi (all fluxes
+  // from the same pressures); "no transfer where rho <= rho_0": a pair with
+  // both pressures <= 0 exchanges nothing.
+  const double* ctab = ctab_.data();
+  auto flux = [&](const std::int64_t* row, const std::int32_t* col, const std::uint8_t* cond, std::int64_t k,
+                  const double* p, double pi, double h, double* dis) {
     double sum = 0.0, e = 0.0;
-    for (int s = 0; s < K; ++s) {
-      const int j = m.neighbour(s, i);
-      if (j < 0) continue;
-      const int tj = m.tissue[j];
-      const double C = conductance_[ti * nt + tj];
-      if (C <= 0.0 || (pair_fast_[ti * nt + tj] != 0) != fast_class) continue;
-      const double pj = p_[j];
-      if (pi <= 0.0 && pj <= 0.0) continue;  // rho <= rho_0 on both sides: no transfer
-      const double dp = pj - pi;
+    for (std::int64_t q = row[k]; q < row[k + 1]; ++q) {
+      const double pj = p[col[q]];
+      const double dp = (pi > 0.0 || pj > 0.0) ? pj - pi : 0.0;
+      const double C = ctab[cond[q]];
       sum += C * dp;
       e += C * dp * dp;
     }
@@ -116,32 +158,41 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
   // Slow bonds: one step of dt.
   pressures(fluid_, theta, zeta);
   const std::int64_t nf = static_cast<std::int64_t>(fluid_.size());
-  std::vector<double>& slow_delta = slow_delta_;
-  slow_delta.resize(fluid_.size());
 #pragma omp parallel for schedule(static) if (nf >= kParallelMin)
   for (std::int64_t k = 0; k < nf; ++k) {
     const int i = fluid_[k];
-    slow_delta[k] = dt_ / V * flux(i, false, dt_, track ? &dissip_[i] : nullptr);
+    slow_delta_[k] = dt_ / V * flux(slow_row_.data(), slow_col_.data(), slow_c_.data(), k, p_.data(), p_[i], dt_,
+                                    track ? &dissip_[i] : nullptr);
   }
 #pragma omp parallel for schedule(static) if (nf >= kParallelMin)
-  for (std::int64_t k = 0; k < nf; ++k) zeta[fluid_[k]] += slow_delta[k];
-  // Fast bonds: sub-cycled.
+  for (std::int64_t k = 0; k < nf; ++k) zeta[fluid_[k]] += slow_delta_[k];
+  // Fast bonds: sub-cycled on a compact copy of the fast set (one parallel
+  // region for all sub-steps).
   if (!fast_list_.empty()) {
     const double h = dt_ / substeps_;
     const std::int64_t nfast = static_cast<std::int64_t>(fast_list_.size());
-    pressures(fast_list_, theta, zeta);
-    for (int sub = 0; sub < substeps_; ++sub) {
-#pragma omp parallel for schedule(static) if (nfast >= kParallelMin)
+#pragma omp parallel if (nfast >= kParallelMin)
+    {
+#pragma omp for schedule(static)
       for (std::int64_t k = 0; k < nfast; ++k) {
         const int i = fast_list_[k];
-        delta_[k] = h / V * flux(i, true, h, track ? &dissip_[i] : nullptr);
+        fast_zeta_[k] = zeta[i];
+        fast_theta_[k] = theta[i];
+        fast_p_[k] = fast_m_[k] * (fast_zeta_[k] - fast_a_[k] * fast_theta_[k]);
       }
-#pragma omp parallel for schedule(static) if (nfast >= kParallelMin)
-      for (std::int64_t k = 0; k < nfast; ++k) {
-        const int i = fast_list_[k];
-        zeta[i] += delta_[k];
-        p_[i] = pressure(i, zeta[i], theta[i]);
+      for (int sub = 0; sub < substeps_; ++sub) {
+#pragma omp for schedule(static)
+        for (std::int64_t k = 0; k < nfast; ++k)
+          delta_[k] = h / V * flux(fast_row_.data(), fast_col_.data(), fast_c_.data(), k, fast_p_.data(), fast_p_[k], h,
+                                   track ? &dissip_[fast_list_[k]] : nullptr);
+#pragma omp for schedule(static)
+        for (std::int64_t k = 0; k < nfast; ++k) {
+          fast_zeta_[k] += delta_[k];
+          fast_p_[k] = fast_m_[k] * (fast_zeta_[k] - fast_a_[k] * fast_theta_[k]);
+        }
       }
+#pragma omp for schedule(static)
+      for (std::int64_t k = 0; k < nfast; ++k) zeta[fast_list_[k]] = fast_zeta_[k];
     }
   }
   if (track) *dissipation += deterministic_sum(m.size(), [&](std::int64_t i) { return dissip_[i]; });

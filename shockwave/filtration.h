@@ -65,8 +65,16 @@ class FiltrationTerm {
   std::vector<double> a_, biot_modulus_;
   std::vector<double> conductance_;  ///< [t1 * ntissue + t2], 0 = impermeable
   std::vector<std::uint8_t> pair_fast_;  ///< per tissue pair: sub-cycled
-  std::vector<int> fluid_;               ///< poroelastic automata
+  std::vector<int> fluid_;               ///< poroelastic automata (not drained)
   std::vector<int> fast_list_;           ///< automata with at least one sub-cycled bond
+  // Bonds as compressed rows: slow bonds per fluid automaton (neighbour
+  // automaton index), fast bonds per fast automaton (neighbour's index in
+  // fast_list_); each with its conductance C (an index into ctab_).
+  std::vector<std::int64_t> slow_row_, fast_row_;
+  std::vector<std::int32_t> slow_col_, fast_col_;
+  std::vector<std::uint8_t> slow_c_, fast_c_;  ///< index into ctab_
+  std::vector<double> ctab_;
+  std::vector<double> fast_m_, fast_a_, fast_zeta_, fast_theta_, fast_p_;  ///< per fast automaton
   std::vector<double> p_;                ///< pore pressure scratch, per automaton
   std::vector<double> delta_;            ///< zeta increments, per fast automaton
   std::vector<double> slow_delta_;       ///< zeta increments, per poroelastic automaton

@@ -113,7 +113,16 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
     throw common::InputError(src, 0, "expected damping * dt <= 0.5, found " + std::to_string(options.damping * dt_));
 
   wa_.resize(n_);
-  for (int i = 0; i < n_; ++i) wa_[i] = w_[model.tissue[i]];
+  inv3G_a_.resize(n_);
+  inv_mass_a_.resize(n_);
+  inv_inertia_a_.resize(n_);
+  for (int i = 0; i < n_; ++i) {
+    const int t = model.tissue[i];
+    wa_[i] = w_[t];
+    inv3G_a_[i] = inv3G_[t];
+    inv_mass_a_[i] = inv_mass_[t];
+    inv_inertia_a_[i] = inv_inertia_[t];
+  }
   for (auto& a : acc_) a.assign(n_, 0.0);
   // Free-surface factor of the volumetric strain (see simulation.h).
   f_.resize(n_);
@@ -125,14 +134,17 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
     constraint_of_[a] = static_cast<std::int32_t>(k);
   }
   constraint_force_.assign(model.constraints.size(), common::Vec3::Zero());
-  load_of_.assign(n_, -1);
   if (load_) {
+    std::vector<char> seen(n_, 0);
     for (size_t k = 0; k < model.loaded.automata.size(); ++k) {
       const int a = model.loaded.automata[k];
       if (a < 0 || a >= n_) throw common::InputError(src, 0, "load on a non-existent automaton " + std::to_string(a));
-      load_of_[a] = static_cast<std::int32_t>(k);
+      if (seen[a]++) throw common::InputError(src, 0, "automaton " + std::to_string(a) + " loaded twice");
+      if (!(model.loaded.area[k].norm() > 0.0)) throw common::InputError(src, 0, "a loaded automaton with zero area");
     }
+    loaded_peaks_.assign(2 * model.loaded.automata.size(), 0.0);
   }
+  build_rows();
   drained_.assign(n_, 0);
   for (int a : model.drained) {
     if (a < 0 || a >= n_) throw common::InputError(src, 0, "drained boundary on a non-existent automaton " + std::to_string(a));
@@ -164,7 +176,6 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
   pore_.assign(n_, 0.0);
   if (fluid_on_) zeta_.assign(n_, 0.0);
   pressure_.assign(n_, 0.0);
-  von_mises_.assign(n_, 0.0);
   distortional_.assign(n_, 0.0);
   peak_pressure_.assign(n_, 0.0);
   peak_distortional_.assign(n_, 0.0);
@@ -186,184 +197,335 @@ void Simulation::set_angular_velocity(int i, const common::Vec3& w) {
 }
 
 // ---------------------------------------------------------------------------
-// A. Stress predictor.
-template <bool kPeriodic, bool kFluid>
-void Simulation::predictor() {
+// The three passes work on lattice rows (consecutive automata with the same
+// grid j, k). Along a row the neighbour in a given direction is, for most
+// automata, at a constant index offset (Run): those pair halves are computed
+// in `omp simd` loops with contiguous loads; the rest of the row (row ends,
+// holes, periodic models) takes the general path through the neighbour table.
+// Both paths do the same floating-point operations in the same order (no FMA
+// contraction, -ffp-contract=off), so the results do not depend on which path
+// or vector width computed them. Every automaton accumulates its pair halves
+// in direction order.
+
+#define SW_INLINE inline __attribute__((always_inline))
+// The row kernels are also compiled for AVX2 (4 doubles per vector) and the
+// variant is chosen at run time; without FMA contraction both give the same
+// bits.
+#define SW_CLONES __attribute__((target_clones("avx2", "default")))
+
+namespace {
+
+// d r of a pair (A8's distance increment) times i's share w_i / (w_i + w_j).
+SW_INLINE double predictor_side(double dx, double dy, double dz, double dvx, double dvy, double dvz, double wi,
+                                double wj, double dt) {
+  const double inv_r = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
+  const double dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
+  return dr * (wi / (wi + wj));
+}
+
+struct PairIn {
+  double dx, dy, dz;     // x_other - x_owner
+  double dvx, dvy, dvz;  // v_other - v_owner (half step)
+  double osx, osy, osz;  // omega_owner + omega_other
+  double wo, wt, bo, bt;
+  double sn, tx, ty, tz;  // old pair state
+};
+struct PairOut {
+  double sn, tx, ty, tz;                    // new pair state
+  double fx, fy, fz, mx, my, mz;            // force on the owner, moment (both)
+  double s11, s22, s33, s12, s23, s13;      // q n (x) F (both)
+};
+
+// A3, A7-A8 for one pair in its owner's frame.
+SW_INLINE PairOut pair_update(const PairIn& in, double S, double dt) {
+  PairOut out;
+  const double r = std::sqrt(in.dx * in.dx + in.dy * in.dy + in.dz * in.dz);
+  const double inv_r = 1.0 / r;
+  const double nx = in.dx * inv_r, ny = in.dy * inv_r, nz = in.dz * inv_r;
+  const double dr = (in.dx * in.dvx + in.dy * in.dvy + in.dz * in.dvz) * inv_r * dt;
+  const double inv_w = 1.0 / (in.wo + in.wt);
+  // A8: normal specific force.
+  const double sig = in.sn + (dr + (in.wo * in.bo + in.wt * in.bt)) * inv_w;
+  // Relative shear displacement at the contact point, (v_t - v_o) -
+  // q (omega_o + omega_t) x n, tangential part, times dt.
+  const double q = 0.5 * r;
+  double lx = (in.dvx - q * (in.osy * nz - in.osz * ny)) * dt;
+  double ly = (in.dvy - q * (in.osz * nx - in.osx * nz)) * dt;
+  double lz = (in.dvz - q * (in.osx * ny - in.osy * nx)) * dt;
+  const double ln = lx * nx + ly * ny + lz * nz;
+  lx -= ln * nx;
+  ly -= ln * ny;
+  lz -= ln * nz;
+  // Stored tangential force turned into the current contact plane, plus the
+  // A8 increment.
+  double tX = in.tx, tY = in.ty, tZ = in.tz;
+  const double tn = tX * nx + tY * ny + tZ * nz;
+  tX += lx * inv_w - tn * nx;
+  tY += ly * inv_w - tn * ny;
+  tZ += lz * inv_w - tn * nz;
+  out.sn = sig;
+  out.tx = tX;
+  out.ty = tY;
+  out.tz = tZ;
+  // A3: force on the owner; A1: moment q n x F^tau, the same on both;
+  // A4: q n (x) F, the same for both automata.
+  out.fx = S * (sig * nx + tX);
+  out.fy = S * (sig * ny + tY);
+  out.fz = S * (sig * nz + tZ);
+  const double qS = q * S;
+  out.mx = qS * (ny * tZ - nz * tY);
+  out.my = qS * (nz * tX - nx * tZ);
+  out.mz = qS * (nx * tY - ny * tX);
+  out.s11 = q * nx * out.fx;
+  out.s22 = q * ny * out.fy;
+  out.s33 = q * nz * out.fz;
+  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
+  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
+  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  return out;
+}
+
+// The other half of a pair: force, moment and A4 term from the owner's new
+// state and the geometry (the same operations as pair_update).
+SW_INLINE PairOut pair_other(double dx, double dy, double dz, double sig, double tX, double tY, double tZ, double S) {
+  PairOut out;
+  const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
+  const double inv_r = 1.0 / r;
+  const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
+  const double q = 0.5 * r;
+  out.fx = S * (sig * nx + tX);
+  out.fy = S * (sig * ny + tY);
+  out.fz = S * (sig * nz + tZ);
+  const double qS = q * S;
+  out.mx = qS * (ny * tZ - nz * tY);
+  out.my = qS * (nz * tX - nx * tZ);
+  out.mz = qS * (nx * tY - ny * tX);
+  out.s11 = q * nx * out.fx;
+  out.s22 = q * ny * out.fy;
+  out.s33 = q * nz * out.fz;
+  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
+  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
+  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  return out;
+}
+
+}  // namespace
+
+void Simulation::build_rows() {
+  rows_.clear();
+  runs_.clear();
   const int n = n_, K = K_;
-  const double dt = dt_;
-  const double* px = pos_[cur_][0].data();
-  const double* py = pos_[cur_][1].data();
-  const double* pz = pos_[cur_][2].data();
-  const double* vx = vel_[cur_][0].data();
-  const double* vy = vel_[cur_][1].data();
-  const double* vz = vel_[cur_][2].data();
-  const std::int32_t* nb = model_.neighbours.data();
-  const std::uint8_t* tis = model_.tissue.data();
-  const double* w = wa_.data();
-  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
-  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
-  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
-#pragma omp parallel for schedule(static) if (n >= kParallelMin)
-  for (int i = 0; i < n; ++i) {
-    const int ti = tis[i];
-    const double xi = px[i], yi = py[i], zi = pz[i];
-    const double vxi = vx[i], vyi = vy[i], vzi = vz[i];
-    const double wi = w[i];
-    double sum = 0.0;
+  int start = 0;
+  for (int i = 1; i <= n; ++i) {
+    if (i < n && model_.cell[i][1] == model_.cell[start][1] && model_.cell[i][2] == model_.cell[start][2]) continue;
+    rows_.push_back({start, i - start});
+    start = i;
+  }
+  max_row_ = 0;
+  for (const Row& r : rows_) max_row_ = std::max(max_row_, r.len);
+  runs_.assign(rows_.size() * K, Run{0, 0, 0});
+  if (periodic_) return;  // minimum images: the general path only
+  for (size_t r = 0; r < rows_.size(); ++r) {
+    const int a0 = rows_[r].start, a1 = a0 + rows_[r].len;
     for (int s = 0; s < K; ++s) {
-      const int j = nb[static_cast<size_t>(s) * n + i];
-      if (j < 0) continue;
-      double dx = px[j] - xi, dy = py[j] - yi, dz = pz[j] - zi;
-      if constexpr (kPeriodic) {
-        dx = wrap(dx, Lx, iLx);
-        dy = wrap(dy, Ly, iLy);
-        dz = wrap(dz, Lz, iLz);
+      // The longest stretch of the row with a constant, valid offset.
+      Run best{a0, a0, 0};
+      int i = a0;
+      while (i < a1) {
+        const int j = model_.neighbour(s, i);
+        if (j < 0) { ++i; continue; }
+        const int off = j - i;
+        int e = i + 1;
+        while (e < a1 && model_.neighbour(s, e) == e + off) ++e;
+        if (e - i > best.b - best.a) best = Run{i, e, off};
+        i = e;
       }
-      const double inv_r = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
-      const double dr = (dx * (vx[j] - vxi) + dy * (vy[j] - vyi) + dz * (vz[j] - vzi)) * inv_r * dt;
-      const double wj = w[j];
-      sum += dr * (wi / (wi + wj));
+      runs_[r * K + s] = best;
     }
-    const double dtheta = f_[i] * sv * sum;
-    theta_[i] += dtheta;
-    double dp = 0.0;
-    if constexpr (kFluid) {
-      if (poro_[ti]) {
-        if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
-        const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
-        dp = p - pore_[i];
-        pore_[i] = p;
-      }
-    }
-    // Predicted mean stress increment (equation of state), then A7/A9's b.
-    const double fa_dp = f_[i] * a_[ti] * dp;
-    const double dsm = K_bulk_[ti] * dtheta - fa_dp;
-    b_[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
   }
 }
 
 // ---------------------------------------------------------------------------
-// B1. Pair forces (A3, A7-A9) of the bonds each automaton owns (its forward
+// A. Stress predictor.
+template <bool kPeriodic, bool kFluid>
+SW_CLONES void Simulation::predictor() {
+  const int n = n_, K = K_;
+  const double dt = dt_;
+  const double* __restrict px = pos_[cur_][0].data();
+  const double* __restrict py = pos_[cur_][1].data();
+  const double* __restrict pz = pos_[cur_][2].data();
+  const double* __restrict vx = vel_[cur_][0].data();
+  const double* __restrict vy = vel_[cur_][1].data();
+  const double* __restrict vz = vel_[cur_][2].data();
+  const std::int32_t* __restrict nb = model_.neighbours.data();
+  const double* __restrict w = wa_.data();
+  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
+  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
+  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
+  const int nrows = static_cast<int>(rows_.size());
+#pragma omp parallel if (n >= kParallelMin)
+  {
+    std::vector<double> sum_buf(static_cast<size_t>(max_row_));
+    double* __restrict sum = sum_buf.data();
+#pragma omp for schedule(static)
+    for (int row = 0; row < nrows; ++row) {
+      const int a0 = rows_[row].start, len = rows_[row].len, a1 = a0 + len;
+      for (int k = 0; k < len; ++k) sum[k] = 0.0;
+      for (int s = 0; s < K; ++s) {
+        const Run run = runs_[static_cast<size_t>(row) * K + s];
+        const int off = run.off;
+#pragma omp simd
+        for (int i = run.a; i < run.b; ++i) {
+          const int j = i + off;
+          sum[i - a0] += predictor_side(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i], vy[j] - vy[i],
+                                        vz[j] - vz[i], w[i], w[j], dt);
+        }
+        for (int i = a0; i < a1; ++i) {
+          if (i >= run.a && i < run.b) continue;
+          const int j = nb[static_cast<size_t>(s) * n + i];
+          if (j < 0) continue;
+          double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+          if constexpr (kPeriodic) {
+            dx = wrap(dx, Lx, iLx);
+            dy = wrap(dy, Ly, iLy);
+            dz = wrap(dz, Lz, iLz);
+          }
+          sum[i - a0] += predictor_side(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt);
+        }
+      }
+      for (int i = a0; i < a1; ++i) {
+        const int ti = model_.tissue[i];
+        const double dtheta = f_[i] * sv * sum[i - a0];
+        theta_[i] += dtheta;
+        double dp = 0.0;
+        if constexpr (kFluid) {
+          if (poro_[ti]) {
+            if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
+            const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
+            dp = p - pore_[i];
+            pore_[i] = p;
+          }
+        }
+        // Predicted mean stress increment (equation of state), then A7/A9's b.
+        const double fa_dp = f_[i] * a_[ti] * dp;
+        const double dsm = K_bulk_[ti] * dtheta - fa_dp;
+        b_[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// B1. Pair forces (A3, A7-A9) of the pairs each automaton owns (its forward
 // directions): new pair state, and the owner's share of force, moment and
-// averaged stress.
+// averaged stress (into acc_).
 template <bool kPeriodic>
-void Simulation::pair_forces() {
-  const int n = n_, H = K_ / 2;
+SW_CLONES void Simulation::pair_forces() {
+  const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
   const int c = cur_, o = 1 - cur_;
-  const double* px = pos_[c][0].data();
-  const double* py = pos_[c][1].data();
-  const double* pz = pos_[c][2].data();
-  const double* vx = vel_[c][0].data();
-  const double* vy = vel_[c][1].data();
-  const double* vz = vel_[c][2].data();
-  const double* wx = omg_[c][0].data();
-  const double* wy = omg_[c][1].data();
-  const double* wz = omg_[c][2].data();
-  const double* sn0 = sn_[c].data();
-  const double* tx0 = tx_[c].data();
-  const double* ty0 = ty_[c].data();
-  const double* tz0 = tz_[c].data();
-  double* sn1 = sn_[o].data();
-  double* tx1 = tx_[o].data();
-  double* ty1 = ty_[o].data();
-  double* tz1 = tz_[o].data();
-  const std::int32_t* nb = model_.neighbours.data();
-  const double* w = wa_.data();
-  const double* b = b_.data();
+  const double* __restrict px = pos_[c][0].data();
+  const double* __restrict py = pos_[c][1].data();
+  const double* __restrict pz = pos_[c][2].data();
+  const double* __restrict vx = vel_[c][0].data();
+  const double* __restrict vy = vel_[c][1].data();
+  const double* __restrict vz = vel_[c][2].data();
+  const double* __restrict wx = omg_[c][0].data();
+  const double* __restrict wy = omg_[c][1].data();
+  const double* __restrict wz = omg_[c][2].data();
+  const double* __restrict sn0 = sn_[c].data();
+  const double* __restrict tx0 = tx_[c].data();
+  const double* __restrict ty0 = ty_[c].data();
+  const double* __restrict tz0 = tz_[c].data();
+  double* __restrict sn1 = sn_[o].data();
+  double* __restrict tx1 = tx_[o].data();
+  double* __restrict ty1 = ty_[o].data();
+  double* __restrict tz1 = tz_[o].data();
+  const std::int32_t* __restrict nb = model_.neighbours.data();
+  const double* __restrict w = wa_.data();
+  const double* __restrict b = b_.data();
   const double S = model_.lattice.contact_area;
   const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
   const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
-  double* Fx = acc_[0].data();
-  double* Fy = acc_[1].data();
-  double* Fz = acc_[2].data();
-  double* Mx = acc_[3].data();
-  double* My = acc_[4].data();
-  double* Mz = acc_[5].data();
-  double* S11 = acc_[6].data();
-  double* S22 = acc_[7].data();
-  double* S33 = acc_[8].data();
-  double* S12 = acc_[9].data();
-  double* S23 = acc_[10].data();
-  double* S13 = acc_[11].data();
+  double* __restrict A0 = acc_[0].data();
+  double* __restrict A1 = acc_[1].data();
+  double* __restrict A2 = acc_[2].data();
+  double* __restrict A3 = acc_[3].data();
+  double* __restrict A4 = acc_[4].data();
+  double* __restrict A5 = acc_[5].data();
+  double* __restrict A6 = acc_[6].data();
+  double* __restrict A7 = acc_[7].data();
+  double* __restrict A8 = acc_[8].data();
+  double* __restrict A9 = acc_[9].data();
+  double* __restrict A10 = acc_[10].data();
+  double* __restrict A11 = acc_[11].data();
+  auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz) __attribute__((always_inline)) {
+    PairIn in;
+    in.dx = dx;
+    in.dy = dy;
+    in.dz = dz;
+    in.dvx = vx[j] - vx[i];
+    in.dvy = vy[j] - vy[i];
+    in.dvz = vz[j] - vz[i];
+    in.osx = wx[i] + wx[j];
+    in.osy = wy[i] + wy[j];
+    in.osz = wz[i] + wz[j];
+    in.wo = w[i];
+    in.wt = w[j];
+    in.bo = b[i];
+    in.bt = b[j];
+    in.sn = sn0[bi];
+    in.tx = tx0[bi];
+    in.ty = ty0[bi];
+    in.tz = tz0[bi];
+    const PairOut out = pair_update(in, S, dt);
+    sn1[bi] = out.sn;
+    tx1[bi] = out.tx;
+    ty1[bi] = out.ty;
+    tz1[bi] = out.tz;
+    A0[i] += out.fx;
+    A1[i] += out.fy;
+    A2[i] += out.fz;
+    A3[i] += out.mx;
+    A4[i] += out.my;
+    A5[i] += out.mz;
+    A6[i] += out.s11;
+    A7[i] += out.s22;
+    A8[i] += out.s33;
+    A9[i] += out.s12;
+    A10[i] += out.s23;
+    A11[i] += out.s13;
+  };
+  const int nrows = static_cast<int>(rows_.size());
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)
-  for (int i = 0; i < n; ++i) {
-    double fx = 0, fy = 0, fz = 0, mx = 0, my = 0, mz = 0;
-    double s11 = 0, s22 = 0, s33 = 0, s12 = 0, s23 = 0, s13 = 0;
-    const double xi = px[i], yi = py[i], zi = pz[i];
-    const double vxi = vx[i], vyi = vy[i], vzi = vz[i];
-    const double wxi = wx[i], wyi = wy[i], wzi = wz[i];
-    const double wi = w[i], wbi = w[i] * b[i];
-    for (int s = 0; s < H; ++s) {
-      const size_t bi = static_cast<size_t>(s) * n + i;
-      const int j = nb[bi];
-      if (j < 0) continue;
-      double dx = px[j] - xi, dy = py[j] - yi, dz = pz[j] - zi;
-      if constexpr (kPeriodic) {
-        dx = wrap(dx, Lx, iLx);
-        dy = wrap(dy, Ly, iLy);
-        dz = wrap(dz, Lz, iLz);
-      }
-      const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
-      const double inv_r = 1.0 / r;
-      const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
-      const double dvx = vx[j] - vxi, dvy = vy[j] - vyi, dvz = vz[j] - vzi;
-      const double dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
-      const double wj = w[j];
-      const double inv_w = 1.0 / (wi + wj);
-      // A8: normal specific force.
-      const double sig = sn0[bi] + (dr + (wbi + wj * b[j])) * inv_w;
-      // Relative shear displacement at the contact point, (v_j - v_i) -
-      // q (omega_i + omega_j) x n, tangential part, times dt.
-      const double q = 0.5 * r;
-      const double osx = wxi + wx[j], osy = wyi + wy[j], osz = wzi + wz[j];
-      double lx = (dvx - q * (osy * nz - osz * ny)) * dt;
-      double ly = (dvy - q * (osz * nx - osx * nz)) * dt;
-      double lz = (dvz - q * (osx * ny - osy * nx)) * dt;
-      const double ln = lx * nx + ly * ny + lz * nz;
-      lx -= ln * nx;
-      ly -= ln * ny;
-      lz -= ln * nz;
-      // Stored tangential force, turned into the current contact plane, plus
-      // the A8 increment.
-      double tX = tx0[bi], tY = ty0[bi], tZ = tz0[bi];
-      const double tn = tX * nx + tY * ny + tZ * nz;
-      tX += lx * inv_w - tn * nx;
-      tY += ly * inv_w - tn * ny;
-      tZ += lz * inv_w - tn * nz;
-      sn1[bi] = sig;
-      tx1[bi] = tX;
-      ty1[bi] = tY;
-      tz1[bi] = tZ;
-      // A3: force on the owner; A1: moment q n x F^tau (the same on both);
-      // A4: q n (x) F (the same for both automata).
-      const double Fx_ = S * (sig * nx + tX), Fy_ = S * (sig * ny + tY), Fz_ = S * (sig * nz + tZ);
-      fx += Fx_;
-      fy += Fy_;
-      fz += Fz_;
-      const double qS = q * S;
-      mx += qS * (ny * tZ - nz * tY);
-      my += qS * (nz * tX - nx * tZ);
-      mz += qS * (nx * tY - ny * tX);
-      s11 += q * nx * Fx_;
-      s22 += q * ny * Fy_;
-      s33 += q * nz * Fz_;
-      s12 += 0.5 * q * (nx * Fy_ + ny * Fx_);
-      s23 += 0.5 * q * (ny * Fz_ + nz * Fy_);
-      s13 += 0.5 * q * (nx * Fz_ + nz * Fx_);
+  for (int row = 0; row < nrows; ++row) {
+    const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
+    for (int i = a0; i < a1; ++i) {
+      A0[i] = A1[i] = A2[i] = A3[i] = A4[i] = A5[i] = 0.0;
+      A6[i] = A7[i] = A8[i] = A9[i] = A10[i] = A11[i] = 0.0;
     }
-    Fx[i] = fx;
-    Fy[i] = fy;
-    Fz[i] = fz;
-    Mx[i] = mx;
-    My[i] = my;
-    Mz[i] = mz;
-    S11[i] = s11;
-    S22[i] = s22;
-    S33[i] = s33;
-    S12[i] = s12;
-    S23[i] = s23;
-    S13[i] = s13;
+    for (int s = 0; s < H; ++s) {
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const size_t base = static_cast<size_t>(s) * n;
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;
+        side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i]);
+      }
+      for (int i = a0; i < a1; ++i) {
+        if (i >= run.a && i < run.b) continue;
+        const int j = nb[base + i];
+        if (j < 0) continue;
+        double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        side(i, j, base + i, dx, dy, dz);
+      }
+    }
   }
 }
 
@@ -371,34 +533,33 @@ void Simulation::pair_forces() {
 // B2. The other half of every pair (from the new pair state of its owner),
 // the load, averaged stress (A4-A6), kick (A1) and drift.
 template <bool kPeriodic, bool kFluid>
-void Simulation::integrate() {
+SW_CLONES void Simulation::integrate() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
   const int c = cur_, o = 1 - cur_;
-  const double* px = pos_[c][0].data();
-  const double* py = pos_[c][1].data();
-  const double* pz = pos_[c][2].data();
-  const double* vx = vel_[c][0].data();
-  const double* vy = vel_[c][1].data();
-  const double* vz = vel_[c][2].data();
-  const double* wx = omg_[c][0].data();
-  const double* wy = omg_[c][1].data();
-  const double* wz = omg_[c][2].data();
-  double* qx = pos_[o][0].data();
-  double* qy = pos_[o][1].data();
-  double* qz = pos_[o][2].data();
-  double* ux = vel_[o][0].data();
-  double* uy = vel_[o][1].data();
-  double* uz = vel_[o][2].data();
-  double* ox = omg_[o][0].data();
-  double* oy = omg_[o][1].data();
-  double* oz = omg_[o][2].data();
-  const double* sn1 = sn_[o].data();
-  const double* tx1 = tx_[o].data();
-  const double* ty1 = ty_[o].data();
-  const double* tz1 = tz_[o].data();
-  const std::int32_t* nb = model_.neighbours.data();
-  const std::uint8_t* tis = model_.tissue.data();
+  const double* __restrict px = pos_[c][0].data();
+  const double* __restrict py = pos_[c][1].data();
+  const double* __restrict pz = pos_[c][2].data();
+  const double* __restrict vx = vel_[c][0].data();
+  const double* __restrict vy = vel_[c][1].data();
+  const double* __restrict vz = vel_[c][2].data();
+  const double* __restrict wx = omg_[c][0].data();
+  const double* __restrict wy = omg_[c][1].data();
+  const double* __restrict wz = omg_[c][2].data();
+  double* __restrict qx = pos_[o][0].data();
+  double* __restrict qy = pos_[o][1].data();
+  double* __restrict qz = pos_[o][2].data();
+  double* __restrict ux = vel_[o][0].data();
+  double* __restrict uy = vel_[o][1].data();
+  double* __restrict uz = vel_[o][2].data();
+  double* __restrict ox = omg_[o][0].data();
+  double* __restrict oy = omg_[o][1].data();
+  double* __restrict oz = omg_[o][2].data();
+  const double* __restrict sn1 = sn_[o].data();
+  const double* __restrict tx1 = tx_[o].data();
+  const double* __restrict ty1 = ty_[o].data();
+  const double* __restrict tz1 = tz_[o].data();
+  const std::int32_t* __restrict nb = model_.neighbours.data();
   const double S = model_.lattice.contact_area;
   const double R = model_.lattice.radius;
   const double invV = 1.0 / model_.lattice.cell_volume;
@@ -407,133 +568,185 @@ void Simulation::integrate() {
   const double t = static_cast<double>(steps_) * dt;
   const double p_load = load_ ? load_(t) : 0.0;
   const double p_prev = load_ ? load_(t - dt) : 0.0;
-  const double cscale = model_.constraint_scale ? model_.constraint_scale(t + 0.5 * dt) : 1.0;
   const double damp = 1.0 - options_.damping * dt;
   const bool track = track_energy_;
+  double* __restrict A0 = acc_[0].data();
+  double* __restrict A1 = acc_[1].data();
+  double* __restrict A2 = acc_[2].data();
+  double* __restrict A3 = acc_[3].data();
+  double* __restrict A4 = acc_[4].data();
+  double* __restrict A5 = acc_[5].data();
+  double* __restrict A6 = acc_[6].data();
+  double* __restrict A7 = acc_[7].data();
+  double* __restrict A8 = acc_[8].data();
+  double* __restrict A9 = acc_[9].data();
+  double* __restrict A10 = acc_[10].data();
+  double* __restrict A11 = acc_[11].data();
+  const double* __restrict inv3G = inv3G_a_.data();
+  const double* __restrict im_a = inv_mass_a_.data();
+  const double* __restrict iJ_a = inv_inertia_a_.data();
+  double* __restrict Pout = pressure_.data();
+  double* __restrict Eout = distortional_.data();
+  double* __restrict Ppk = peak_pressure_.data();
+  double* __restrict Epk = peak_distortional_.data();
+  auto other = [&](int i, size_t bi, double dx, double dy, double dz) __attribute__((always_inline)) {
+    const PairOut out = pair_other(dx, dy, dz, sn1[bi], tx1[bi], ty1[bi], tz1[bi], S);
+    A0[i] -= out.fx;
+    A1[i] -= out.fy;
+    A2[i] -= out.fz;
+    A3[i] += out.mx;
+    A4[i] += out.my;
+    A5[i] += out.mz;
+    A6[i] += out.s11;
+    A7[i] += out.s22;
+    A8[i] += out.s33;
+    A9[i] += out.s12;
+    A10[i] += out.s23;
+    A11[i] += out.s13;
+  };
+  const int nrows = static_cast<int>(rows_.size());
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)
-  for (int i = 0; i < n; ++i) {
-    const int ti = tis[i];
-    double fx = acc_[0][i], fy = acc_[1][i], fz = acc_[2][i];
-    double mx = acc_[3][i], my = acc_[4][i], mz = acc_[5][i];
-    double s11 = acc_[6][i], s22 = acc_[7][i], s33 = acc_[8][i];
-    double s12 = acc_[9][i], s23 = acc_[10][i], s13 = acc_[11][i];
-    const double xi = px[i], yi = py[i], zi = pz[i];
+  for (int row = 0; row < nrows; ++row) {
+    const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
     for (int s = H; s < K; ++s) {
-      const int j = nb[static_cast<size_t>(s) * n + i];  // the owner of this pair
-      if (j < 0) continue;
-      const size_t bi = static_cast<size_t>(s - H) * n + j;
-      // The owner's frame, as in pair_forces: the same bits.
-      double dx = xi - px[j], dy = yi - py[j], dz = zi - pz[j];
-      if constexpr (kPeriodic) {
-        dx = wrap(dx, Lx, iLx);
-        dy = wrap(dy, Ly, iLy);
-        dz = wrap(dz, Lz, iLz);
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const size_t base = static_cast<size_t>(s - H) * n;
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;  // the owner of this pair
+        // The owner's frame, as in pair_forces: the same bits.
+        other(i, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j]);
       }
-      const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
-      const double inv_r = 1.0 / r;
-      const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
-      const double sig = sn1[bi], tX = tx1[bi], tY = ty1[bi], tZ = tz1[bi];
-      const double Fx_ = S * (sig * nx + tX), Fy_ = S * (sig * ny + tY), Fz_ = S * (sig * nz + tZ);
-      fx -= Fx_;
-      fy -= Fy_;
-      fz -= Fz_;
-      const double q = 0.5 * r;
-      const double qS = q * S;
-      mx += qS * (ny * tZ - nz * tY);
-      my += qS * (nz * tX - nx * tZ);
-      mz += qS * (nx * tY - ny * tX);
-      s11 += q * nx * Fx_;
-      s22 += q * ny * Fy_;
-      s33 += q * nz * Fz_;
-      s12 += 0.5 * q * (nx * Fy_ + ny * Fx_);
-      s23 += 0.5 * q * (ny * Fz_ + nz * Fy_);
-      s13 += 0.5 * q * (nx * Fz_ + nz * Fx_);
+      for (int i = a0; i < a1; ++i) {
+        if (i >= run.a && i < run.b) continue;
+        const int j = nb[static_cast<size_t>(s) * n + i];
+        if (j < 0) continue;
+        double dx = px[i] - px[j], dy = py[i] - py[j], dz = pz[i] - pz[j];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        other(i, base + j, dx, dy, dz);
+      }
     }
-    const int li = load_of_[i];
-    double fex = 0, fey = 0, fez = 0;
-    if (li >= 0) {
-      const common::Vec3& A = model_.loaded.area[li];
-      fex = p_load * A.x();
-      fey = p_load * A.y();
-      fez = p_load * A.z();
-      // The load acts on the outer face: q = R, n = -A/|A| (outward).
+#pragma omp simd
+    for (int i = a0; i < a1; ++i) {
+      const double s11 = A6[i] * invV, s22 = A7[i] * invV, s33 = A8[i] * invV;
+      const double s12 = A9[i] * invV, s23 = A10[i] * invV, s13 = A11[i] * invV;
+      const double P = -(s11 + s22 + s33) / 3.0;  // A5
+      const double d12 = s11 - s22, d23 = s22 - s33, d31 = s33 - s11;
+      const double seq = std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) +
+                                   3.0 * (s12 * s12 + s23 * s23 + s13 * s13));  // A6
+      const double eps = seq * inv3G[i];
+      Pout[i] = P;
+      Eout[i] = eps;
+      Ppk[i] = P > Ppk[i] ? P : Ppk[i];
+      Epk[i] = eps > Epk[i] ? eps : Epk[i];
+      // Kick (A1) and drift.
+      const double im = im_a[i], iJ = iJ_a[i];
+      const double nvx = vx[i] * damp + A0[i] * im * dt;
+      const double nvy = vy[i] * damp + A1[i] * im * dt;
+      const double nvz = vz[i] * damp + A2[i] * im * dt;
+      ux[i] = nvx;
+      uy[i] = nvy;
+      uz[i] = nvz;
+      qx[i] = px[i] + nvx * dt;
+      qy[i] = py[i] + nvy * dt;
+      qz[i] = pz[i] + nvz * dt;
+      ox[i] = wx[i] * damp + A3[i] * iJ * dt;
+      oy[i] = wy[i] * damp + A4[i] * iJ * dt;
+      oz[i] = wz[i] * damp + A5[i] * iJ * dt;
+    }
+    if constexpr (kFluid) {
+      for (int i = a0; i < a1; ++i)
+        if (pore_[i] > peak_pore_[i]) peak_pore_[i] = pore_[i];
+    }
+    if (track) {
+      for (int i = a0; i < a1; ++i) {
+        const double m = 1.0 / im_a[i], J = 1.0 / iJ_a[i];
+        const double vxi = vx[i], vyi = vy[i], vzi = vz[i], wxi = wx[i], wyi = wy[i], wzi = wz[i];
+        const double nvx = ux[i], nvy = uy[i], nvz = uz[i], nwx = ox[i], nwy = oy[i], nwz = oz[i];
+        const double sx = 0.5 * (vxi + nvx), sy = 0.5 * (vyi + nvy), sz = 0.5 * (vzi + nvz);
+        const double gx = 0.5 * (wxi + nwx), gy = 0.5 * (wyi + nwy), gz = 0.5 * (wzi + nwz);
+        // Leapfrog's exact discrete energy uses the product of the half-step
+        // velocities: E = 1/2 m v^{n-1/2} . v^{n+1/2} + U(x^n).
+        kinetic_[i] = 0.5 * m * (vxi * nvx + vyi * nvy + vzi * nvz) + 0.5 * J * (wxi * nwx + wyi * nwy + wzi * nwz);
+        // Work over the last drift, (f^{n-1} + f^n)/2 . (x^n - x^{n-1}): with
+        // the kinetic energy above the balance is exact for a linear system.
+        work_[i] = 0.0;
+        damp_[i] = options_.damping * dt * (m * (sx * sx + sy * sy + sz * sz) + J * (gx * gx + gy * gy + gz * gz));
+      }
+    }
+  }
+  // The loaded automata (the applicator's outer face, few): redo their
+  // stress and kick with the pressure on the outer face (q = R, n outward).
+  if (load_) {
+    const std::vector<int>& la = model_.loaded.automata;
+    for (size_t k = 0; k < la.size(); ++k) {
+      const int i = la[k];
+      const common::Vec3& A = model_.loaded.area[k];
+      const double fex = p_load * A.x(), fey = p_load * A.y(), fez = p_load * A.z();
       const double inv_a = 1.0 / A.norm();
       const double nx = -A.x() * inv_a, ny = -A.y() * inv_a, nz = -A.z() * inv_a;
-      s11 += R * nx * fex;
-      s22 += R * ny * fey;
-      s33 += R * nz * fez;
-      s12 += 0.5 * R * (nx * fey + ny * fex);
-      s23 += 0.5 * R * (ny * fez + nz * fey);
-      s13 += 0.5 * R * (nx * fez + nz * fex);
-    }
-    s11 *= invV;
-    s22 *= invV;
-    s33 *= invV;
-    s12 *= invV;
-    s23 *= invV;
-    s13 *= invV;
-    const double P = -(s11 + s22 + s33) / 3.0;  // A5
-    const double d12 = s11 - s22, d23 = s22 - s33, d31 = s33 - s11;
-    const double seq = std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) +
-                                 3.0 * (s12 * s12 + s23 * s23 + s13 * s13));  // A6
-    const double eps = seq * inv3G_[ti];
-    pressure_[i] = P;
-    von_mises_[i] = seq;
-    distortional_[i] = eps;
-    if (P > peak_pressure_[i]) peak_pressure_[i] = P;
-    if (eps > peak_distortional_[i]) peak_distortional_[i] = eps;
-    if constexpr (kFluid) {
-      if (pore_[i] > peak_pore_[i]) peak_pore_[i] = pore_[i];
-    }
-    // Kick (A1) and drift.
-    const double im = inv_mass_[ti], iJ = inv_inertia_[ti];
-    const double vxi = vx[i], vyi = vy[i], vzi = vz[i];
-    double nvx = vxi * damp + (fx + fex) * im * dt;
-    double nvy = vyi * damp + (fy + fey) * im * dt;
-    double nvz = vzi * damp + (fz + fez) * im * dt;
-    const int ci = constraint_of_[i];
-    if (ci >= 0) {
-      const VelocityConstraint& con = model_.constraints[ci];
-      if (con.axes & 1) nvx = con.velocity.x() * cscale;
-      if (con.axes & 2) nvy = con.velocity.y() * cscale;
-      if (con.axes & 4) nvz = con.velocity.z() * cscale;
-      constraint_force_[ci] = common::Vec3(fx, fy, fz);
-    }
-    ux[i] = nvx;
-    uy[i] = nvy;
-    uz[i] = nvz;
-    qx[i] = xi + nvx * dt;
-    qy[i] = yi + nvy * dt;
-    qz[i] = zi + nvz * dt;
-    const double wxi = wx[i], wyi = wy[i], wzi = wz[i];
-    const double nwx = wxi * damp + mx * iJ * dt;
-    const double nwy = wyi * damp + my * iJ * dt;
-    const double nwz = wzi * damp + mz * iJ * dt;
-    ox[i] = nwx;
-    oy[i] = nwy;
-    oz[i] = nwz;
-    if (track) {
-      const double m = mass_[ti], J = 1.0 / iJ;
-      const double sx = 0.5 * (vxi + nvx), sy = 0.5 * (vyi + nvy), sz = 0.5 * (vzi + nvz);
-      const double gx = 0.5 * (wxi + nwx), gy = 0.5 * (wyi + nwy), gz = 0.5 * (wzi + nwz);
-      // Leapfrog's exact discrete energy uses the product of the half-step
-      // velocities: E = 1/2 m v^{n-1/2} . v^{n+1/2} + U(x^n).
-      kinetic_[i] = 0.5 * m * (vxi * nvx + vyi * nvy + vzi * nvz) + 0.5 * J * (wxi * nwx + wyi * nwy + wzi * nwz);
-      // Work over the last drift, (f^{n-1} + f^n)/2 . (x^n - x^{n-1}): with the
-      // kinetic energy above the balance is exact for a linear system.
-      if (li >= 0) {
-        const common::Vec3& A = model_.loaded.area[li];
-        work_[i] = 0.5 * (p_prev + p_load) * (A.x() * vxi + A.y() * vyi + A.z() * vzi) * dt;
-      } else {
-        work_[i] = 0.0;
+      const double s11 = (A6[i] + R * nx * fex) * invV;
+      const double s22 = (A7[i] + R * ny * fey) * invV;
+      const double s33 = (A8[i] + R * nz * fez) * invV;
+      const double s12 = (A9[i] + 0.5 * R * (nx * fey + ny * fex)) * invV;
+      const double s23 = (A10[i] + 0.5 * R * (ny * fez + nz * fey)) * invV;
+      const double s13 = (A11[i] + 0.5 * R * (nx * fez + nz * fex)) * invV;
+      const double P = -(s11 + s22 + s33) / 3.0;
+      const double d12 = s11 - s22, d23 = s22 - s33, d31 = s33 - s11;
+      const double seq = std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) + 3.0 * (s12 * s12 + s23 * s23 + s13 * s13));
+      const double eps = seq * inv3G[i];
+      Pout[i] = P;
+      Eout[i] = eps;
+      Ppk[i] = std::max(loaded_peaks_[2 * k], P);
+      Epk[i] = std::max(loaded_peaks_[2 * k + 1], eps);
+      const double im = im_a[i];
+      ux[i] = vx[i] * damp + (A0[i] + fex) * im * dt;
+      uy[i] = vy[i] * damp + (A1[i] + fey) * im * dt;
+      uz[i] = vz[i] * damp + (A2[i] + fez) * im * dt;
+      qx[i] = px[i] + ux[i] * dt;
+      qy[i] = py[i] + uy[i] * dt;
+      qz[i] = pz[i] + uz[i] * dt;
+      if (track) {
+        const double m = 1.0 / im;
+        kinetic_[i] = 0.5 * m * (vx[i] * ux[i] + vy[i] * uy[i] + vz[i] * uz[i]) +
+                      0.5 / iJ_a[i] * (wx[i] * ox[i] + wy[i] * oy[i] + wz[i] * oz[i]);
+        // Work over the last drift, (f^{n-1} + f^n)/2 . (x^n - x^{n-1}):
+        // with the kinetic energy above the balance is exact for a linear system.
+        work_[i] = 0.5 * (p_prev + p_load) * (A.x() * vx[i] + A.y() * vy[i] + A.z() * vz[i]) * dt;
       }
-      damp_[i] = options_.damping * dt * (m * (sx * sx + sy * sy + sz * sz) + J * (gx * gx + gy * gy + gz * gz));
+    }
+  }
+  // Prescribed velocities (few automata): override the kick on the fixed axes.
+  if (!model_.constraints.empty()) {
+    const double cscale = model_.constraint_scale ? model_.constraint_scale(t + 0.5 * dt) : 1.0;
+    for (size_t k = 0; k < model_.constraints.size(); ++k) {
+      const VelocityConstraint& con = model_.constraints[k];
+      const int i = con.automaton;
+      if (con.axes & 1) ux[i] = con.velocity.x() * cscale;
+      if (con.axes & 2) uy[i] = con.velocity.y() * cscale;
+      if (con.axes & 4) uz[i] = con.velocity.z() * cscale;
+      qx[i] = px[i] + ux[i] * dt;
+      qy[i] = py[i] + uy[i] * dt;
+      qz[i] = pz[i] + uz[i] * dt;
+      constraint_force_[k] = common::Vec3(A0[i], A1[i], A2[i]);
     }
   }
 }
 
 void Simulation::step() {
   const bool fluid = fluid_on_;
+  if (load_) {
+    const std::vector<int>& la = model_.loaded.automata;
+    for (size_t k = 0; k < la.size(); ++k) {
+      loaded_peaks_[2 * k] = peak_pressure_[la[k]];
+      loaded_peaks_[2 * k + 1] = peak_distortional_[la[k]];
+    }
+  }
   if (periodic_) {
     if (fluid) { predictor<true, true>(); pair_forces<true>(); integrate<true, true>(); }
     else { predictor<true, false>(); pair_forces<true>(); integrate<true, false>(); }

@@ -141,8 +141,8 @@ class Simulation {
   // Fields at the time of the last step (per automaton).
   /// Hydrostatic pressure P = -sigma_mean (A5), compression > 0 [Pa].
   const std::vector<double>& pressure() const { return pressure_; }
-  /// Von Mises stress (A6) [Pa].
-  const std::vector<double>& von_mises() const { return von_mises_; }
+  /// Von Mises stress (A6) of automaton i [Pa] (= 3 G times the distortional strain).
+  double von_mises(int i) const { return distortional_[i] / inv3G_a_[i]; }
   /// Distortional strain: von Mises equivalent strain sqrt(2/3 e:e) of the
   /// deviatoric strain e = s / (2G) = sigma_eq / (3G) [-].
   const std::vector<double>& distortional_strain() const { return distortional_; }
@@ -187,6 +187,13 @@ class Simulation {
   void set_angular_velocity(int i, const common::Vec3& w);
 
  private:
+  struct Row {
+    int start, len;  ///< automata [start, start + len) share grid j, k
+  };
+  struct Run {
+    int a, b, off;  ///< automata [a, b) of a row have their neighbour at i + off
+  };
+  void build_rows();
   template <bool kPeriodic, bool kFluid>
   void predictor();
   template <bool kPeriodic>
@@ -213,12 +220,17 @@ class Simulation {
   // Per automaton.
   std::vector<double> f_, wa_;  ///< free-surface factor, compliance R/(2G) per automaton
   std::array<std::vector<double>, 12> acc_;  ///< owner's share: F (3), M (3), A4 sum (6)
-  std::vector<std::int32_t> constraint_of_, load_of_;
+  std::vector<std::int32_t> constraint_of_;
+  std::vector<double> loaded_peaks_;  ///< peaks of the loaded automata before the step
+  std::vector<Row> rows_;
+  std::vector<Run> runs_;  ///< [row * K + direction]
+  int max_row_ = 0;
+  std::vector<double> inv3G_a_, inv_mass_a_, inv_inertia_a_;  ///< per automaton
   std::vector<std::uint8_t> drained_;
   std::vector<double> pos_[2][3], vel_[2][3], omg_[2][3];
   std::vector<double> sn_[2], tx_[2], ty_[2], tz_[2];  ///< pair state [s * n + owner], s < K/2
   std::vector<double> theta_, zeta_, pore_, b_;
-  std::vector<double> pressure_, von_mises_, distortional_;
+  std::vector<double> pressure_, distortional_;
   std::vector<double> peak_pressure_, peak_distortional_, peak_pore_;
   std::vector<common::Vec3> constraint_force_;
   std::unique_ptr<FiltrationTerm> filtration_;
