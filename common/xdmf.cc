@@ -136,10 +136,12 @@ class Builder {
     if (out.geometry.is_int) fail(out.geometry.dataset, "expected floating-point coordinates, found integer");
     // Topology: (M x 3) triangles or (M x 4) quads, int, indices in [0, N).
     out.topology = inspect(s.topology_dataset);
-    const std::int64_t per_cell = s.cell_type == XdmfCellType::kTriangle ? 3 : 4;
+    const std::int64_t per_cell =
+        s.cell_type == XdmfCellType::kTriangle ? 3 : (s.cell_type == XdmfCellType::kQuadrilateral ? 4 : 1);
     const auto& t = out.topology.dims;
     if (!out.topology.is_int || t.size() != 2 || t[1] != per_cell) {
-      fail(out.topology.dataset, "expected integer " + std::string(per_cell == 3 ? "triangles" : "quads") +
+      fail(out.topology.dataset, "expected integer " +
+                                     std::string(per_cell == 3 ? "triangles" : (per_cell == 4 ? "quads" : "points")) +
                                      " of dims (M, " + std::to_string(per_cell) + "), found " +
                                      (out.topology.is_int ? "integer" : "floating-point") + " dims " +
                                      dims_text(t));
@@ -215,9 +217,12 @@ class Builder {
     const XdmfSurface& surf = *s.surface;
     out_ << pad << "<Grid Name=\"" << escape(surf.name) << "\" GridType=\"Uniform\">\n";
     if (with_time) out_ << pad << "  <Time Value=\"" << number(series_.times[step]) << "\"/>\n";
-    const bool tri = surf.cell_type == XdmfCellType::kTriangle;
-    out_ << pad << "  <Topology TopologyType=\"" << (tri ? "Triangle" : "Quadrilateral") << "\" NumberOfElements=\""
-         << s.n_cells << "\" NodesPerElement=\"" << (tri ? 3 : 4) << "\">\n";
+    const XdmfCellType ct = surf.cell_type;
+    const char* type = ct == XdmfCellType::kTriangle ? "Triangle"
+                       : ct == XdmfCellType::kQuadrilateral ? "Quadrilateral" : "Polyvertex";
+    const int per = ct == XdmfCellType::kTriangle ? 3 : (ct == XdmfCellType::kQuadrilateral ? 4 : 1);
+    out_ << pad << "  <Topology TopologyType=\"" << type << "\" NumberOfElements=\"" << s.n_cells
+         << "\" NodesPerElement=\"" << per << "\">\n";
     data_item(s.topology, step, pad + "    ");
     out_ << pad << "  </Topology>\n";
     out_ << pad << "  <Geometry GeometryType=\"XYZ\">\n";

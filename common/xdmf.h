@@ -35,14 +35,17 @@ struct XdmfField {
   bool per_step = true;
 };
 
-enum class XdmfCellType { kTriangle, kQuadrilateral };
+/// kPolyvertex: a point cloud (e.g. movable cellular automata); its
+/// topology dataset is (M x 1) point indices.
+enum class XdmfCellType { kTriangle, kQuadrilateral, kPolyvertex };
 
 struct XdmfSurface {
   std::string name;
   /// Node coordinates [m]: (N x 3) static, or (n_steps x N x 3) when the
   /// surface deforms (detected from the rank).
   std::string geometry_dataset;
-  /// Connectivity, 0-based int: (M x 3) triangles or (M x 4) quads.
+  /// Connectivity, 0-based int: (M x 3) triangles, (M x 4) quads or (M x 1)
+  /// points.
   std::string topology_dataset;
   XdmfCellType cell_type = XdmfCellType::kTriangle;
   std::vector<XdmfField> fields;

@@ -17,7 +17,7 @@ inline double wrap(double d, double period, double inv_period) {
 }
 }  // namespace
 
-double free_surface_factor(const Model& model, int i, bool undrained) {
+double free_surface_factor(const Model& model, int i, bool undrained, bool loaded) {
   const int K = model.lattice.directions;
   Eigen::Matrix3d T = Eigen::Matrix3d::Zero();
   common::Vec3 sum = common::Vec3::Zero();
@@ -42,6 +42,12 @@ double free_surface_factor(const Model& model, int i, bool undrained) {
   const double fallback = (D > 0.0 && D < 1.0) ? 1.0 / (1.0 + static_cast<double>(missing) / K * D / (1.0 - D)) : 1.0;
   if (sum.norm() < 1e-9) return fallback;
   const common::Vec3 e = sum.normalized();
+  if (loaded) {
+    // A face pressed by a load: uniaxial strain along its normal (a plane
+    // wave entering), eps = beta e e^T: theta_e = beta (1 - c e.T.e).
+    const double x = 1.0 - c * e.dot(T * e);
+    return x > 0.1 ? 1.0 / x : fallback;
+  }
   const double alpha = 1.0, beta = -2.0 * lambda * alpha / (lambda + 2.0 * G);
   const double theta = 2.0 * alpha + beta;
   const double eTe = e.dot(T * e);
@@ -124,9 +130,17 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
     inv_inertia_a_[i] = inv_inertia_[t];
   }
   for (auto& a : acc_) a.assign(n_, 0.0);
+  strain_scale_.resize(n_);
+  for (int i = 0; i < n_; ++i)
+    strain_scale_[i] = model.neighbour_count[i] > 0 ? 3.0 / model.neighbour_count[i] : 0.0;
   // Free-surface factor of the volumetric strain (see simulation.h).
   f_.resize(n_);
-  for (int i = 0; i < n_; ++i) f_[i] = free_surface_factor(model, i, poro_[model.tissue[i]] != 0);
+  {
+    std::vector<char> loaded(n_, 0);
+    for (int a : model.loaded.automata)
+      if (a >= 0 && a < n_) loaded[a] = 1;
+    for (int i = 0; i < n_; ++i) f_[i] = free_surface_factor(model, i, poro_[model.tissue[i]] != 0, loaded[i] != 0);
+  }
   constraint_of_.assign(n_, -1);
   for (size_t k = 0; k < model.constraints.size(); ++k) {
     const int a = model.constraints[k].automaton;
@@ -215,16 +229,55 @@ void Simulation::set_angular_velocity(int i, const common::Vec3& w) {
 
 namespace {
 
+// Pair geometry in the owner's frame from d = x_other - x_owner: the unit
+// vector n, the distance r and the lever arm q of the contact point.
+//  - geometrically nonlinear (Geometry::kNonlinear): the current direction,
+//    r = |d|, q = r/2 (the MCA form of the seed: large rotations exact);
+//  - small strain (Geometry::kLinear): n the pair's rest direction u, r = u . d
+//    (the rest distance plus the normal displacement), q = d0/2. The forces
+//    then follow from a quadratic energy and carry no geometric stiffness:
+//    a large pressure carried by the pairs (the pore fluid of a nearly
+//    incompressible tissue) cannot buckle the lattice (simulation.h).
+template <bool kLinear>
+struct PairGeo {
+  double nx, ny, nz, r, inv_r, q;
+};
+template <bool kLinear>
+SW_INLINE PairGeo<kLinear> pair_geometry(double dx, double dy, double dz, double ux, double uy, double uz, double d0) {
+  PairGeo<kLinear> g;
+  if constexpr (kLinear) {
+    g.nx = ux;
+    g.ny = uy;
+    g.nz = uz;
+    g.r = ux * dx + uy * dy + uz * dz;
+    g.inv_r = 1.0;  // unused
+    g.q = 0.5 * d0;
+  } else {
+    g.r = std::sqrt(dx * dx + dy * dy + dz * dz);
+    g.inv_r = 1.0 / g.r;
+    g.nx = dx * g.inv_r;
+    g.ny = dy * g.inv_r;
+    g.nz = dz * g.inv_r;
+    g.q = 0.5 * g.r;
+  }
+  return g;
+}
+
 // d r of a pair (A8's distance increment) times i's share w_i / (w_i + w_j).
+template <bool kLinear>
 SW_INLINE double predictor_side(double dx, double dy, double dz, double dvx, double dvy, double dvz, double wi,
-                                double wj, double dt) {
-  const double inv_r = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
-  const double dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
+                                double wj, double dt, double ux, double uy, double uz) {
+  double dr;
+  if constexpr (kLinear) {
+    dr = (ux * dvx + uy * dvy + uz * dvz) * dt;
+  } else {
+    const double inv_r = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
+    dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
+  }
   return dr * (wi / (wi + wj));
 }
 
 struct PairIn {
-  double dx, dy, dz;     // x_other - x_owner
   double dvx, dvy, dvz;  // v_other - v_owner (half step)
   double osx, osy, osz;  // omega_owner + omega_other
   double wo, wt, bo, bt;
@@ -234,21 +287,65 @@ struct PairOut {
   double sn, tx, ty, tz;                    // new pair state
   double fx, fy, fz, mx, my, mz;            // force on the owner, moment (both)
   double s11, s22, s33, s12, s23, s13;      // q n (x) F (both)
+  double e11, e22, e33, e12, e23, e13;      // sym(g (x) n), g the pair's strain vector (both)
 };
 
-// A3, A7-A8 for one pair in its owner's frame.
-SW_INLINE PairOut pair_update(const PairIn& in, double S, double dt) {
+// The pair's strain vector g = e_n n + l / d: normal strain (r - d)/d and the
+// accumulated relative shear displacement l = tau (w_o + w_t) over the rest
+// length d; for a homogeneous strain eps, g = eps n, and
+// (3/K) sum_j sym(g_j (x) n_j) = eps (the averaged strain, simulation.h).
+SW_INLINE void pair_strain(PairOut& out, double r, double nx, double ny, double nz, double tX, double tY, double tZ,
+                           double wsum, double inv_d) {
+  const double en = (r * inv_d - 1.0);
+  const double gx = en * nx + tX * wsum * inv_d, gy = en * ny + tY * wsum * inv_d, gz = en * nz + tZ * wsum * inv_d;
+  out.e11 = gx * nx;
+  out.e22 = gy * ny;
+  out.e33 = gz * nz;
+  out.e12 = 0.5 * (gx * ny + gy * nx);
+  out.e23 = 0.5 * (gy * nz + gz * ny);
+  out.e13 = 0.5 * (gx * nz + gz * nx);
+}
+
+// Force, moment, A4 term and strain of a pair from its (new) state.
+template <bool kLinear>
+SW_INLINE void pair_loads(PairOut& out, const PairGeo<kLinear>& g, double sig, double tX, double tY, double tZ, double S,
+                          double wsum, double inv_d) {
+  const double nx = g.nx, ny = g.ny, nz = g.nz, q = g.q;
+  // A3: force on the owner; A1: moment q n x F^tau, the same on both;
+  // A4: q n (x) F, the same for both automata.
+  out.fx = S * (sig * nx + tX);
+  out.fy = S * (sig * ny + tY);
+  out.fz = S * (sig * nz + tZ);
+  const double qS = q * S;
+  out.mx = qS * (ny * tZ - nz * tY);
+  out.my = qS * (nz * tX - nx * tZ);
+  out.mz = qS * (nx * tY - ny * tX);
+  out.s11 = q * nx * out.fx;
+  out.s22 = q * ny * out.fy;
+  out.s33 = q * nz * out.fz;
+  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
+  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
+  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  pair_strain(out, g.r, nx, ny, nz, tX, tY, tZ, wsum, inv_d);
+}
+
+// A7-A8 for one pair in its owner's frame.
+template <bool kLinear>
+SW_INLINE PairOut pair_update(const PairIn& in, const PairGeo<kLinear>& g, double dx, double dy, double dz, double S,
+                              double dt, double inv_d) {
   PairOut out;
-  const double r = std::sqrt(in.dx * in.dx + in.dy * in.dy + in.dz * in.dz);
-  const double inv_r = 1.0 / r;
-  const double nx = in.dx * inv_r, ny = in.dy * inv_r, nz = in.dz * inv_r;
-  const double dr = (in.dx * in.dvx + in.dy * in.dvy + in.dz * in.dvz) * inv_r * dt;
+  const double nx = g.nx, ny = g.ny, nz = g.nz, q = g.q;
+  double dr;
+  if constexpr (kLinear) {
+    dr = (nx * in.dvx + ny * in.dvy + nz * in.dvz) * dt;
+  } else {
+    dr = (dx * in.dvx + dy * in.dvy + dz * in.dvz) * g.inv_r * dt;
+  }
   const double inv_w = 1.0 / (in.wo + in.wt);
   // A8: normal specific force.
   const double sig = in.sn + (dr + (in.wo * in.bo + in.wt * in.bt)) * inv_w;
   // Relative shear displacement at the contact point, (v_t - v_o) -
   // q (omega_o + omega_t) x n, tangential part, times dt.
-  const double q = 0.5 * r;
   double lx = (in.dvx - q * (in.osy * nz - in.osz * ny)) * dt;
   double ly = (in.dvy - q * (in.osz * nx - in.osx * nz)) * dt;
   double lz = (in.dvz - q * (in.osx * ny - in.osy * nx)) * dt;
@@ -267,45 +364,7 @@ SW_INLINE PairOut pair_update(const PairIn& in, double S, double dt) {
   out.tx = tX;
   out.ty = tY;
   out.tz = tZ;
-  // A3: force on the owner; A1: moment q n x F^tau, the same on both;
-  // A4: q n (x) F, the same for both automata.
-  out.fx = S * (sig * nx + tX);
-  out.fy = S * (sig * ny + tY);
-  out.fz = S * (sig * nz + tZ);
-  const double qS = q * S;
-  out.mx = qS * (ny * tZ - nz * tY);
-  out.my = qS * (nz * tX - nx * tZ);
-  out.mz = qS * (nx * tY - ny * tX);
-  out.s11 = q * nx * out.fx;
-  out.s22 = q * ny * out.fy;
-  out.s33 = q * nz * out.fz;
-  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
-  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
-  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
-  return out;
-}
-
-// The other half of a pair: force, moment and A4 term from the owner's new
-// state and the geometry (the same operations as pair_update).
-SW_INLINE PairOut pair_other(double dx, double dy, double dz, double sig, double tX, double tY, double tZ, double S) {
-  PairOut out;
-  const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
-  const double inv_r = 1.0 / r;
-  const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
-  const double q = 0.5 * r;
-  out.fx = S * (sig * nx + tX);
-  out.fy = S * (sig * ny + tY);
-  out.fz = S * (sig * nz + tZ);
-  const double qS = q * S;
-  out.mx = qS * (ny * tZ - nz * tY);
-  out.my = qS * (nz * tX - nx * tZ);
-  out.mz = qS * (nx * tY - ny * tX);
-  out.s11 = q * nx * out.fx;
-  out.s22 = q * ny * out.fy;
-  out.s33 = q * nz * out.fz;
-  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
-  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
-  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  pair_loads(out, g, sig, tX, tY, tZ, S, in.wo + in.wt, inv_d);
   return out;
 }
 
@@ -347,7 +406,7 @@ void Simulation::build_rows() {
 
 // ---------------------------------------------------------------------------
 // A. Stress predictor.
-template <bool kPeriodic, bool kFluid>
+template <bool kPeriodic, bool kFluid, bool kLinear>
 SW_CLONES void Simulation::predictor() {
   const int n = n_, K = K_;
   const double dt = dt_;
@@ -374,11 +433,12 @@ SW_CLONES void Simulation::predictor() {
       for (int s = 0; s < K; ++s) {
         const Run run = runs_[static_cast<size_t>(row) * K + s];
         const int off = run.off;
+        const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
 #pragma omp simd
         for (int i = run.a; i < run.b; ++i) {
           const int j = i + off;
-          sum[i - a0] += predictor_side(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i], vy[j] - vy[i],
-                                        vz[j] - vz[i], w[i], w[j], dt);
+          sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
+                                                 vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ux, uy, uz);
         }
         for (int i = a0; i < a1; ++i) {
           if (i >= run.a && i < run.b) continue;
@@ -390,7 +450,8 @@ SW_CLONES void Simulation::predictor() {
             dy = wrap(dy, Ly, iLy);
             dz = wrap(dz, Lz, iLz);
           }
-          sum[i - a0] += predictor_side(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt);
+          sum[i - a0] += predictor_side<kLinear>(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j],
+                                                 dt, ux, uy, uz);
         }
       }
       for (int i = a0; i < a1; ++i) {
@@ -419,7 +480,7 @@ SW_CLONES void Simulation::predictor() {
 // B1. Pair forces (A3, A7-A9) of the pairs each automaton owns (its forward
 // directions): new pair state, and the owner's share of force, moment and
 // averaged stress (into acc_).
-template <bool kPeriodic>
+template <bool kPeriodic, bool kLinear>
 SW_CLONES void Simulation::pair_forces() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
@@ -459,11 +520,18 @@ SW_CLONES void Simulation::pair_forces() {
   double* __restrict A9 = acc_[9].data();
   double* __restrict A10 = acc_[10].data();
   double* __restrict A11 = acc_[11].data();
-  auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz) __attribute__((always_inline)) {
+  double* __restrict E0 = acc_[12].data();
+  double* __restrict E1 = acc_[13].data();
+  double* __restrict E2 = acc_[14].data();
+  double* __restrict E3 = acc_[15].data();
+  double* __restrict E4 = acc_[16].data();
+  double* __restrict E5 = acc_[17].data();
+  const double inv_d = 1.0 / model_.lattice.diameter;
+  const double d0 = model_.lattice.diameter;
+  auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
+                  __attribute__((always_inline)) {
+    const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
     PairIn in;
-    in.dx = dx;
-    in.dy = dy;
-    in.dz = dz;
     in.dvx = vx[j] - vx[i];
     in.dvy = vy[j] - vy[i];
     in.dvz = vz[j] - vz[i];
@@ -478,7 +546,7 @@ SW_CLONES void Simulation::pair_forces() {
     in.tx = tx0[bi];
     in.ty = ty0[bi];
     in.tz = tz0[bi];
-    const PairOut out = pair_update(in, S, dt);
+    const PairOut out = pair_update<kLinear>(in, g, dx, dy, dz, S, dt, inv_d);
     sn1[bi] = out.sn;
     tx1[bi] = out.tx;
     ty1[bi] = out.ty;
@@ -495,6 +563,12 @@ SW_CLONES void Simulation::pair_forces() {
     A9[i] += out.s12;
     A10[i] += out.s23;
     A11[i] += out.s13;
+    E0[i] += out.e11;
+    E1[i] += out.e22;
+    E2[i] += out.e33;
+    E3[i] += out.e12;
+    E4[i] += out.e23;
+    E5[i] += out.e13;
   };
   const int nrows = static_cast<int>(rows_.size());
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)
@@ -503,15 +577,17 @@ SW_CLONES void Simulation::pair_forces() {
     for (int i = a0; i < a1; ++i) {
       A0[i] = A1[i] = A2[i] = A3[i] = A4[i] = A5[i] = 0.0;
       A6[i] = A7[i] = A8[i] = A9[i] = A10[i] = A11[i] = 0.0;
+      E0[i] = E1[i] = E2[i] = E3[i] = E4[i] = E5[i] = 0.0;
     }
     for (int s = 0; s < H; ++s) {
       const Run run = runs_[static_cast<size_t>(row) * K + s];
       const int off = run.off;
       const size_t base = static_cast<size_t>(s) * n;
+      const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
 #pragma omp simd
       for (int i = run.a; i < run.b; ++i) {
         const int j = i + off;
-        side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i]);
+        side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i], ux, uy, uz);
       }
       for (int i = a0; i < a1; ++i) {
         if (i >= run.a && i < run.b) continue;
@@ -523,7 +599,7 @@ SW_CLONES void Simulation::pair_forces() {
           dy = wrap(dy, Ly, iLy);
           dz = wrap(dz, Lz, iLz);
         }
-        side(i, j, base + i, dx, dy, dz);
+        side(i, j, base + i, dx, dy, dz, ux, uy, uz);
       }
     }
   }
@@ -532,7 +608,7 @@ SW_CLONES void Simulation::pair_forces() {
 // ---------------------------------------------------------------------------
 // B2. The other half of every pair (from the new pair state of its owner),
 // the load, averaged stress (A4-A6), kick (A1) and drift.
-template <bool kPeriodic, bool kFluid>
+template <bool kPeriodic, bool kFluid, bool kLinear>
 SW_CLONES void Simulation::integrate() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
@@ -582,15 +658,27 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict A9 = acc_[9].data();
   double* __restrict A10 = acc_[10].data();
   double* __restrict A11 = acc_[11].data();
-  const double* __restrict inv3G = inv3G_a_.data();
+  double* __restrict E0 = acc_[12].data();
+  double* __restrict E1 = acc_[13].data();
+  double* __restrict E2 = acc_[14].data();
+  double* __restrict E3 = acc_[15].data();
+  double* __restrict E4 = acc_[16].data();
+  double* __restrict E5 = acc_[17].data();
+  const double* __restrict w = wa_.data();
+  const double* __restrict escale = strain_scale_.data();
+  const double inv_d = 1.0 / model_.lattice.diameter;
   const double* __restrict im_a = inv_mass_a_.data();
   const double* __restrict iJ_a = inv_inertia_a_.data();
   double* __restrict Pout = pressure_.data();
   double* __restrict Eout = distortional_.data();
   double* __restrict Ppk = peak_pressure_.data();
   double* __restrict Epk = peak_distortional_.data();
-  auto other = [&](int i, size_t bi, double dx, double dy, double dz) __attribute__((always_inline)) {
-    const PairOut out = pair_other(dx, dy, dz, sn1[bi], tx1[bi], ty1[bi], tz1[bi], S);
+  const double d0 = model_.lattice.diameter;
+  auto other = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
+                   __attribute__((always_inline)) {
+    const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
+    PairOut out;
+    pair_loads(out, g, sn1[bi], tx1[bi], ty1[bi], tz1[bi], S, w[j] + w[i], inv_d);
     A0[i] -= out.fx;
     A1[i] -= out.fy;
     A2[i] -= out.fz;
@@ -603,6 +691,12 @@ SW_CLONES void Simulation::integrate() {
     A9[i] += out.s12;
     A10[i] += out.s23;
     A11[i] += out.s13;
+    E0[i] += out.e11;
+    E1[i] += out.e22;
+    E2[i] += out.e33;
+    E3[i] += out.e12;
+    E4[i] += out.e23;
+    E5[i] += out.e13;
   };
   const int nrows = static_cast<int>(rows_.size());
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)
@@ -612,11 +706,14 @@ SW_CLONES void Simulation::integrate() {
       const Run run = runs_[static_cast<size_t>(row) * K + s];
       const int off = run.off;
       const size_t base = static_cast<size_t>(s - H) * n;
+      // The owner's forward direction (from the owner j to i).
+      const common::Vec3& u = model_.lattice.unit[s - H];
+      const double ux = u.x(), uy = u.y(), uz = u.z();
 #pragma omp simd
       for (int i = run.a; i < run.b; ++i) {
         const int j = i + off;  // the owner of this pair
         // The owner's frame, as in pair_forces: the same bits.
-        other(i, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j]);
+        other(i, j, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j], ux, uy, uz);
       }
       for (int i = a0; i < a1; ++i) {
         if (i >= run.a && i < run.b) continue;
@@ -628,7 +725,7 @@ SW_CLONES void Simulation::integrate() {
           dy = wrap(dy, Ly, iLy);
           dz = wrap(dz, Lz, iLz);
         }
-        other(i, base + j, dx, dy, dz);
+        other(i, j, base + j, dx, dy, dz, ux, uy, uz);
       }
     }
 #pragma omp simd
@@ -636,12 +733,19 @@ SW_CLONES void Simulation::integrate() {
       const double s11 = A6[i] * invV, s22 = A7[i] * invV, s33 = A8[i] * invV;
       const double s12 = A9[i] * invV, s23 = A10[i] * invV, s13 = A11[i] * invV;
       const double P = -(s11 + s22 + s33) / 3.0;  // A5
-      const double d12 = s11 - s22, d23 = s22 - s33, d31 = s33 - s11;
-      const double seq = std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) +
-                                   3.0 * (s12 * s12 + s23 * s23 + s13 * s13));  // A6
-      const double eps = seq * inv3G[i];
+      // Averaged strain tensor from the pairs' strains, its deviatoric part
+      // and the equivalent (von Mises) strain sqrt(2/3 e:e).
+      const double c = escale[i];
+      const double e11 = E0[i] * c, e22 = E1[i] * c, e33 = E2[i] * c;
+      const double e12 = E3[i] * c, e23 = E4[i] * c, e13 = E5[i] * c;
+      const double em = (e11 + e22 + e33) / 3.0;
+      const double d1 = e11 - em, d2 = e22 - em, d3 = e33 - em;
+      const double eps = std::sqrt(2.0 / 3.0 * (d1 * d1 + d2 * d2 + d3 * d3 + 2.0 * (e12 * e12 + e23 * e23 + e13 * e13)));
       Pout[i] = P;
       Eout[i] = eps;
+      (void)s12;
+      (void)s23;
+      (void)s13;
       Ppk[i] = P > Ppk[i] ? P : Ppk[i];
       Epk[i] = eps > Epk[i] ? eps : Epk[i];
       // Kick (A1) and drift.
@@ -697,13 +801,11 @@ SW_CLONES void Simulation::integrate() {
       const double s23 = (A10[i] + 0.5 * R * (ny * fez + nz * fey)) * invV;
       const double s13 = (A11[i] + 0.5 * R * (nx * fez + nz * fex)) * invV;
       const double P = -(s11 + s22 + s33) / 3.0;
-      const double d12 = s11 - s22, d23 = s22 - s33, d31 = s33 - s11;
-      const double seq = std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) + 3.0 * (s12 * s12 + s23 * s23 + s13 * s13));
-      const double eps = seq * inv3G[i];
+      (void)s12;
+      (void)s23;
+      (void)s13;
       Pout[i] = P;
-      Eout[i] = eps;
       Ppk[i] = std::max(loaded_peaks_[2 * k], P);
-      Epk[i] = std::max(loaded_peaks_[2 * k + 1], eps);
       const double im = im_a[i];
       ux[i] = vx[i] * damp + (A0[i] + fex) * im * dt;
       uy[i] = vy[i] * damp + (A1[i] + fey) * im * dt;
@@ -744,16 +846,24 @@ void Simulation::step() {
     const std::vector<int>& la = model_.loaded.automata;
     for (size_t k = 0; k < la.size(); ++k) {
       loaded_peaks_[2 * k] = peak_pressure_[la[k]];
-      loaded_peaks_[2 * k + 1] = peak_distortional_[la[k]];
+      loaded_peaks_[2 * k + 1] = 0.0;
     }
   }
-  if (periodic_) {
-    if (fluid) { predictor<true, true>(); pair_forces<true>(); integrate<true, true>(); }
-    else { predictor<true, false>(); pair_forces<true>(); integrate<true, false>(); }
-  } else {
-    if (fluid) { predictor<false, true>(); pair_forces<false>(); integrate<false, true>(); }
-    else { predictor<false, false>(); pair_forces<false>(); integrate<false, false>(); }
+  const bool linear = options_.geometry == Geometry::kLinear;
+#define SW_STEP(P, F, L)        \
+  {                             \
+    predictor<P, F, L>();       \
+    pair_forces<P, L>();        \
+    integrate<P, F, L>();       \
   }
+  if (periodic_) {
+    if (fluid) { if (linear) SW_STEP(true, true, true) else SW_STEP(true, true, false) }
+    else { if (linear) SW_STEP(true, false, true) else SW_STEP(true, false, false) }
+  } else {
+    if (fluid) { if (linear) SW_STEP(false, true, true) else SW_STEP(false, true, false) }
+    else { if (linear) SW_STEP(false, false, true) else SW_STEP(false, false, false) }
+  }
+#undef SW_STEP
   if (track_energy_) {
     kinetic_now_ = deterministic_sum(n_, [&](std::int64_t i) { return kinetic_[i]; });
     work_total_ += deterministic_sum(n_, [&](std::int64_t i) { return work_[i]; });
@@ -868,11 +978,18 @@ common::Vec3 Simulation::velocity(int i) const {
   return 0.5 * common::Vec3(vel_[0][0][i] + vel_[1][0][i], vel_[0][1][i] + vel_[1][1][i], vel_[0][2][i] + vel_[1][2][i]);
 }
 
+double Simulation::von_mises(int i) const {
+  const std::array<double, 6> s = stress(i);
+  const double d12 = s[0] - s[1], d23 = s[1] - s[2], d31 = s[2] - s[0];
+  return std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) + 3.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));  // A6
+}
+
 std::array<double, 6> Simulation::stress(int i) const {
-  // Recomputed from the pair state of the fields' level (buffer 1 - cur_ after
-  // the swap is the old one; the new pair state is in cur_).
+  // Recomputed from the pair state of the fields' level (after the step the
+  // new pair state is in cur_, the positions of that level in 1 - cur_).
   const int c = cur_, o = 1 - cur_;
   const int K = K_, H = K_ / 2, n = n_;
+  const bool linear = options_.geometry == Geometry::kLinear;
   std::array<double, 6> s{0, 0, 0, 0, 0, 0};
   for (int d = 0; d < K; ++d) {
     const int j = model_.neighbour(d, i);
@@ -883,10 +1000,9 @@ std::array<double, 6> Simulation::stress(int i) const {
     common::Vec3 dv(pos_[o][0][it] - pos_[o][0][io], pos_[o][1][it] - pos_[o][1][io], pos_[o][2][it] - pos_[o][2][io]);
     for (int a = 0; a < 3; ++a)
       if (period_[a] > 0) dv[a] = wrap(dv[a], period_[a], 1.0 / period_[a]);
-    const double r = dv.norm();
-    const common::Vec3 nv = dv / r;
+    const common::Vec3 nv = linear ? model_.lattice.unit[own ? d : d - H] : common::Vec3(dv / dv.norm());
+    const double q = linear ? 0.5 * model_.lattice.diameter : 0.5 * dv.norm();
     const common::Vec3 F = model_.lattice.contact_area * (sn_[c][bi] * nv + common::Vec3(tx_[c][bi], ty_[c][bi], tz_[c][bi]));
-    const double q = 0.5 * r;
     s[0] += q * nv.x() * F.x();
     s[1] += q * nv.y() * F.y();
     s[2] += q * nv.z() * F.z();

@@ -59,8 +59,11 @@ namespace arthrosim::shockwave {
 /// in span{I, e e^T}); approximate at edges and corners. For one missing SC
 /// neighbour f = 4G / (4G + lambda), LIGGGHTS-MCA's free-surface correction
 /// of its mean stress predictor. `undrained`: use K_u (pore fluid on). 1 for
-/// an automaton with all neighbours.
-double free_surface_factor(const Model& model, int i, bool undrained);
+/// an automaton with all neighbours. A `loaded` automaton (model.loaded: its
+/// missing neighbours are replaced by a pressure) takes the strain of a plane
+/// wave entering through that face instead, uniaxial along e: f = 1 / (1 -
+/// (S q/V) e.T.e) (2 for a face of either packing).
+double free_surface_factor(const Model& model, int i, bool undrained, bool loaded = false);
 
 struct SimulationOptions;
 
@@ -75,9 +78,25 @@ struct SimulationOptions;
 /// `limiting_tissue`, if not null, receives the name of the limiting tissue.
 double critical_time_step(const Model& model, const SimulationOptions& options, std::string* limiting_tissue = nullptr);
 
+/// Pair geometry (simulation.cc, pair_geometry):
+enum class Geometry {
+  /// Small strain: pair directions and lever arms of the rest lattice. The
+  /// scheme is then exactly energy conserving and a pressure carried by the
+  /// pairs has no geometric stiffness. For the knee (strains of a few per
+  /// cent at most) the default: with the current directions, the pore
+  /// pressure of the nearly incompressible undrained soft tissues (K_u / G up
+  /// to 5600) buckles the lattice once it exceeds about G (0.43 MPa in the
+  /// fibrous tissue; tests/shockwave/wave_speed_test.cc, StrongPulse...).
+  kLinear,
+  /// Current pair directions and distances (the MCA form of the seed; exact
+  /// for large rotations).
+  kNonlinear,
+};
+
 struct SimulationOptions {
   /// Many-body coefficient of A7 (pair_law.h). kHooke reproduces the input moduli.
   DForm d_form = DForm::kHooke;
+  Geometry geometry = Geometry::kLinear;
   /// Effect pore_fluid: Biot coupling (A9-A10) in poroelastic tissues. Off:
   /// a single-phase (drained) elastic run, no fluid quantity is built.
   bool pore_fluid = true;
@@ -141,10 +160,17 @@ class Simulation {
   // Fields at the time of the last step (per automaton).
   /// Hydrostatic pressure P = -sigma_mean (A5), compression > 0 [Pa].
   const std::vector<double>& pressure() const { return pressure_; }
-  /// Von Mises stress (A6) of automaton i [Pa] (= 3 G times the distortional strain).
-  double von_mises(int i) const { return distortional_[i] / inv3G_a_[i]; }
-  /// Distortional strain: von Mises equivalent strain sqrt(2/3 e:e) of the
-  /// deviatoric strain e = s / (2G) = sigma_eq / (3G) [-].
+  /// Von Mises stress (A6) of automaton i from its averaged stress (A4) [Pa].
+  double von_mises(int i) const;
+  /// Distortional strain: the equivalent (von Mises) strain sqrt(2/3 e:e) of
+  /// the deviatoric part e of the automaton's averaged strain tensor
+  /// eps = (3/N) sum_j sym(g_j (x) n_j), g_j = e_n n + l/d the pairs' strain
+  /// vectors (normal strain (r - d)/d, relative shear displacement l = tau
+  /// (w_i + w_j)); exact for a homogeneous strain, where it equals
+  /// sigma_eq / (3G) of A6. (In a steep pressure gradient of a nearly
+  /// incompressible undrained tissue A4's averaged stress carries a spurious
+  /// deviatoric part of order d |grad P|, which sigma_eq / (3G) would divide
+  /// by G << K_u; tests/shockwave/wave_speed_test.cc) [-].
   const std::vector<double>& distortional_strain() const { return distortional_; }
   /// Pore fluid pressure (gauge) [Pa]; all 0 without pore fluid.
   const std::vector<double>& pore_pressure() const { return pore_; }
@@ -194,11 +220,11 @@ class Simulation {
     int a, b, off;  ///< automata [a, b) of a row have their neighbour at i + off
   };
   void build_rows();
-  template <bool kPeriodic, bool kFluid>
+  template <bool kPeriodic, bool kFluid, bool kLinear>
   void predictor();
-  template <bool kPeriodic>
+  template <bool kPeriodic, bool kLinear>
   void pair_forces();
-  template <bool kPeriodic, bool kFluid>
+  template <bool kPeriodic, bool kFluid, bool kLinear>
   void integrate();
   double potential_energy() const;
 
@@ -219,7 +245,8 @@ class Simulation {
   std::vector<std::uint8_t> poro_;
   // Per automaton.
   std::vector<double> f_, wa_;  ///< free-surface factor, compliance R/(2G) per automaton
-  std::array<std::vector<double>, 12> acc_;  ///< owner's share: F (3), M (3), A4 sum (6)
+  std::array<std::vector<double>, 18> acc_;  ///< F (3), M (3), A4 sum (6), strain sum (6)
+  std::vector<double> strain_scale_;  ///< 3 / (number of pairs)
   std::vector<std::int32_t> constraint_of_;
   std::vector<double> loaded_peaks_;  ///< peaks of the loaded automata before the step
   std::vector<Row> rows_;

@@ -18,6 +18,7 @@ using testing::ramp_velocity;
 
 struct Moduli {
   double E = 0.0, nu = 0.0, E_platen = 0.0;
+  double distortional = 0.0, vm_over_3G = 0.0;  ///< per unit axial strain
 };
 
 // Uniaxial compression of a prism (n x n x 3n automata): the bottom layer on
@@ -79,11 +80,13 @@ Moduli compress(LatticeKind kind, int nsites, DForm form, double K, double G) {
   const double area = top * lat.area_per_surface_site();
   const double platen_stress = Fz / area;  // compressive (the pairs push the platen up)
   const int k0 = n, k1 = 2 * n;
-  double szz = 0.0;
+  double szz = 0.0, eq = 0.0, vm = 0.0;
   int inner = 0;
   for (int a = 0; a < m.size(); ++a)
     if (m.cell[a][2] >= k0 && m.cell[a][2] <= k1 && m.neighbour_count[a] == lat.directions) {
       szz += -sim.stress(a)[2];
+      eq += sim.distortional_strain()[a];
+      vm += sim.von_mises(a);
       ++inner;
     }
   const double stress = szz / inner;
@@ -110,6 +113,8 @@ Moduli compress(LatticeKind kind, int nsites, DForm form, double K, double G) {
   out.E = stress / eps_zz;
   out.nu = lat_strain / eps_zz;
   out.E_platen = platen_stress / eps_zz;
+  out.distortional = eq / inner / eps_zz;
+  out.vm_over_3G = vm / inner / (3.0 * G) / eps_zz;
   return out;
 }
 
@@ -136,6 +141,13 @@ TEST_P(EffectiveModuli, HookeFormMatchesInputSeedFormDoesNot) {
   // for a nearly incompressible skeleton (fibrous, K >> G) E and nu hardly
   // notice (measured 2-3 %), so the form is decided on the nu = 0.25 material.
   if (nu < 0.3) EXPECT_GT(std::abs(seed.E / E - 1.0) + std::abs(seed.nu / nu - 1.0), 0.3);
+  // Uniaxial stress: equivalent strain (2/3)(1 + nu) eps_zz, from the pairs'
+  // strains and, in this homogeneous state, equally from A6's sigma_eq / 3G.
+  const double eq = 2.0 / 3.0 * (1.0 + nu);
+  std::printf("  distortional strain / eps_zz %.4f, sigma_eq/(3G eps_zz) %.4f, closed form %.4f\n", hooke.distortional,
+              hooke.vm_over_3G, eq);
+  EXPECT_NEAR(hooke.distortional / eq, 1.0, 0.01);
+  EXPECT_NEAR(hooke.vm_over_3G / eq, 1.0, 0.01);
 }
 
 INSTANTIATE_TEST_SUITE_P(
