@@ -223,7 +223,7 @@ ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& o, const std::
 }
 
 ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const std::vector<std::string>& argv,
-                                         bool progress) {
+                                         bool progress, bool dry_run) {
   const std::string source = "arthrosim-shockwave options";
   ShockwaveStageResult result;
   const auto t_build = std::chrono::steady_clock::now();
@@ -332,6 +332,11 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       if (sim.filtration()) s << ", filtration sub-steps " << sim.filtration()->substeps();
       if (pulse) s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa (T_p " << number(pulse->time_to_90_percent() * 1e6) << " us)";
       common::log_info(s.str());
+    }
+    if (dry_run) {
+      rr.steps = steps;
+      result.runs.push_back(std::move(rr));
+      continue;
     }
     ShockwaveWriter writer(rr.file, run_model, rr.label, o.write_frames, sim.pore_fluid(), options_text, argv);
     // The effect ledger: what this run built.
@@ -447,6 +452,7 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     common::log_info(s.str());
     result.runs.push_back(std::move(rr));
   }
+  if (dry_run) return result;
   // Summary: JSON and the volumes-vs-EFD plot.
   result.summary_json = fs::path(o.out.string() + "_summary.json");
   {

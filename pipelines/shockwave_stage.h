@@ -200,7 +200,9 @@ ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& options, const
 
 /// Runs every run of the options (one per EFD, or the compression) on a built
 /// model, writing the files; `argv` goes into the run metadata.
+/// `dry_run`: build the model and choose the time step, report the steps of
+/// every run (ShockwaveRunResult::steps), simulate and write nothing.
 ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& options, const std::vector<std::string>& argv,
-                                         bool progress = true);
+                                         bool progress = true, bool dry_run = false);
 
 }  // namespace arthrosim::pipelines

@@ -101,36 +101,48 @@ int main(int argc, char** argv) {
       "points for ParaView) and the regeneration-criteria volumes of cartilage and menisci; a summary JSON and a\n"
       "volumes-vs-EFD plot (SVG). Method, options, units, limits: docs/shockwave.md."};
   pipelines::ShockwaveStageOptions o;
-  bool verbose = false, quiet = false;
+  bool verbose = false, quiet = false, dry_run = false;
   app.add_option("--prepared", o.prepared, "prepared-model HDF5 (arthrosim-prepare); not needed with --geometry bar");
   app.add_option("--model", o.model, "model folder with <name>_meniscus.{stl,obj,ply} (the menisci)");
   app.add_option("--out", o.out, "output stem: <stem>_efd<EFD>.h5/.xdmf per run, <stem>_summary.json, <stem>_volumes.svg")
       ->required();
   CliVisitor visitor(app);
   o.declare(visitor);
+  app.add_flag("--dry-run", dry_run, "build the model and print what each run would take; simulate nothing");
   app.add_flag("--verbose", verbose, "more messages");
   app.add_flag("--quiet", quiet, "warnings and errors only (no progress)");
   app.footer(
       "Sample runs:\n"
       "  arthrosim-prepare --model data/models/knee_parametric/coarse --out prepared_coarse.h5\n"
       "  arthrosim-shockwave --prepared prepared_coarse.h5 --model data/models/knee_parametric/coarse \\\n"
-      "      --automaton-diameter-mm 2 --end-time-us 40 --out sw_quick\n"
-      "      # a quick look (about a minute): one pulse of 0.33 mJ/mm^2 on the 2 mm knee\n"
+      "      --automaton-diameter-mm 2 --end-time-us 10 --out sw_quick\n"
+      "      # a quick look (seconds): the first 10 us of a 0.33 mJ/mm^2 pulse on the 2 mm knee\n"
       "  arthrosim-shockwave --prepared prepared_coarse.h5 --model data/models/knee_parametric/coarse \\\n"
-      "      --efd-mj-per-mm2 0.12 0.33 0.8 --out sw      # the seed's three runs at d = 1 mm (an hour or more on 2 cores)\n"
+      "      --efd-mj-per-mm2 0.12 0.33 0.8 --out sw [--dry-run]\n"
+      "      # the seed's three runs at d = 1 mm (20-40 min each on one loaded core; --dry-run: the plan)\n"
       "  paraview sw_efd0.33.xdmf                        # pressure, distortional strain, pore pressure per automaton\n"
-      "  arthrosim-shockwave --prepared prepared_coarse.h5 --automaton-diameter-mm 2 \\\n"
-      "      --effects mca_elastic pore_fluid filtration platen_compression --out sw_stiff\n"
-      "      # slow compression of the knee between its cut faces: stiffness (convergence study)\n"
-      "  arthrosim-shockwave --geometry bar --bar-tissue cartilage --end-time-us 80 --out sw_bar\n"
-      "      # seconds: the p-wave speed of a cartilage bar against Gassmann's undrained value\n");
+      "  arthrosim-shockwave --prepared prepared_coarse.h5 --model data/models/knee_parametric/coarse \\\n"
+      "      --automaton-diameter-mm 2 --effects mca_elastic pore_fluid filtration platen_compression \\\n"
+      "      --out sw_stiff [--dry-run]   # slow compression between the cut faces: stiffness (minutes)\n"
+      "  arthrosim-shockwave --geometry bar --bar-tissue cartilage --end-time-us 60 --pulse-rise-time-us 10 \\\n"
+      "      --pulse-fall-time-us 10 --pulse-positive-duration-us 20 --pulse-tail-duration-us 0 --out sw_bar\n"
+      "      # under a second: the p-wave speed of a cartilage bar against Gassmann's undrained value\n");
   CLI11_PARSE(app, argc, argv);
   visitor.finish();
   common::set_log_program("arthrosim-shockwave");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
   std::vector<std::string> args(argv, argv + argc);
   try {
-    const pipelines::ShockwaveStageResult r = pipelines::run_shockwave_stage(o, args, !quiet);
+    const pipelines::ShockwaveStageResult r = pipelines::run_shockwave_stage(o, args, !quiet, dry_run);
+    if (dry_run) {
+      std::printf("%d automata, %lld bonds; time step %.4g ns (stability limit %.4g ns, %s)\n", r.automata,
+                  static_cast<long long>(r.bonds), r.time_step_s * 1e9, r.critical_time_step_s * 1e9,
+                  r.critical_tissue.c_str());
+      for (const auto& rr : r.runs)
+        std::printf("would run %s: %lld steps, %.3g automaton-steps\n", rr.label.c_str(),
+                    static_cast<long long>(rr.steps), r.automata * static_cast<double>(rr.steps));
+      return 0;
+    }
     std::printf("%d automata, %lld bonds; time step %.4g ns (stability limit %.4g ns, %s; d/c_p %.4g ns, %s %.0f m/s)\n",
                 r.automata, static_cast<long long>(r.bonds), r.time_step_s * 1e9, r.critical_time_step_s * 1e9,
                 r.critical_tissue.c_str(), o.automaton_diameter_m / r.fastest_p_wave * 1e9,
