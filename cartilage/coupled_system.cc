@@ -152,7 +152,7 @@ bool CoupledShellSystem::tangent_symmetric() const {
   return contacts_.empty();
 }
 
-void CoupledShellSystem::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+void CoupledShellSystem::evaluate(const numerics::EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
                                   Eigen::SparseMatrix<double>* K) {
   ++stats_.evaluations;
   if (K) ++stats_.tangent_evaluations;
@@ -207,7 +207,7 @@ void CoupledShellSystem::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Ei
     Eigen::VectorXd vm, am, Fm, Mam;
     if (req.v) vm = segment(m, *req.v);
     if (req.a) am = segment(m, *req.a);
-    EvalRequest r = req;
+    numerics::EvalRequest r = req;
     r.q = &qm;
     r.v = req.v ? &vm : nullptr;
     r.a = req.a ? &am : nullptr;

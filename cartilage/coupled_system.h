@@ -1,6 +1,6 @@
 #pragma once
 // CoupledShellSystem: several ShellModels (one per cartilage surface) solved
-// as one TimeIntegrable, coupled by deformable mesh contact
+// as one numerics::TimeIntegrable, coupled by deformable mesh contact
 // (cartilage/mesh_contact.h). Coordinates are the models' coordinates
 // concatenated in the order given; every model keeps its own terms,
 // constraints and mass matrix (block-diagonal), the contact pairs add forces
@@ -24,7 +24,7 @@
 
 #include "cartilage/mesh_contact.h"
 #include "cartilage/shell_model.h"
-#include "cartilage/time_integrable.h"
+#include "numerics/time_integrable.h"
 
 namespace arthrosim::common {
 class EffectLedger;
@@ -56,7 +56,7 @@ struct CoupledSystemStatistics {
   long max_active_contacts = 0;
 };
 
-class CoupledShellSystem : public TimeIntegrable {
+class CoupledShellSystem : public numerics::TimeIntegrable {
  public:
   /// models: not owned, must outlive the system; names as given (messages).
   explicit CoupledShellSystem(std::vector<ShellModel*> models, std::vector<std::string> names);
@@ -88,7 +88,7 @@ class CoupledShellSystem : public TimeIntegrable {
   int num_dofs() const override { return n_; }
   bool has_inertia() const override;
   bool tangent_symmetric() const override;
-  void evaluate(const EvalRequest& request, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+  void evaluate(const numerics::EvalRequest& request, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
                 Eigen::SparseMatrix<double>* K) override;
   const Eigen::SparseMatrix<double>& tangent_pattern() const override { return pattern_; }
   long pattern_revision() const override { return revision_; }

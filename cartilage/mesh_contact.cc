@@ -11,6 +11,37 @@
 #include "common/error.h"
 
 namespace arthrosim::cartilage {
+
+void ContactOptions::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.number("contact_stiffness_n_per_mm3", stiffness_N_m3, Unit::kNewtonPerCubicMillimetre, {1e-6, 1e9},
+           "penalty pressure per unit interpenetration; the seed's accuracy rule (penetration below a tenth of the "
+           "deflection) needs about ten times the foundation stiffness or more");
+  v.number("contact_damping_n_s_per_mm3", damping_N_s_m3, Unit::kNewtonSecondPerCubicMillimetre, {0, 1e12},
+           "penalty damping per unit interpenetration rate (0: none, symmetric tangent)");
+  v.number("contact_max_depth_mm", max_depth_m, Unit::kMillimetre, {1e-3, 100},
+           "deeper overlaps are not contacts (the far side of a surface)");
+  v.number("contact_smoothing_mm", smoothing_m, Unit::kMillimetre, {1e-9, 1},
+           "width of the quadratic toe of the penalty law (continuous tangent at first touch)");
+  v.flag("contact_edge_edge", edge_edge,
+         "also evaluate edge-edge pairs (sharp features); the vertex test with edge and corner features covers smooth "
+         "surfaces");
+  v.choice("contact_rim", rim, {{"fade_inside", RimTreatment::kFadeInside}, {"rim_contacts", RimTreatment::kRimContacts}},
+           "how contact ends at a surface's rim: fade_inside weights contacts on the faces next to a rim by a node weight "
+           "interpolated from 0 on the rim to 1 inside (continuous, never sideways); rim_contacts: a vertex beyond a rim "
+           "keeps its distance to it, faded by angle (docs/contact.md)");
+  v.number("contact_rim_max_depth_mm", rim_max_depth_m, Unit::kMillimetre, {0, 100},
+           "contact_rim: rim_contacts: cut-off depth of rim contacts (a vertex beside the other surface's rim), faded "
+           "over its last quarter; 0: contact_max_depth_mm");
+  v.flag("contact_rim_vertices", rim_vertices,
+         "nodes on a surface's rim may be penetrating vertices; by default they only carry their triangles, as stage 1 "
+         "samples the casting surface at triangle centres, never at its rim (docs/contact.md)");
+  v.choice("contact_vertex_weights", faded_vertex_weights, {{"tributary", false}, {"faded", true}},
+           "a node's weight as the penetrating vertex of a contact: tributary = a third of its triangles' areas (rim "
+           "nodes per contact_rim_vertices); faded = the integral of the rim fade times its shape function over its "
+           "triangles, so each surface samples itself with the fade the other surface's vertices see, and rim nodes "
+           "carry a reduced weight (fade_inside only, not with contact_rim_vertices; docs/contact.md, \"Rims\")");
+}
 namespace {
 
 using Vec12 = Eigen::Matrix<double, 12, 1>;

@@ -77,6 +77,7 @@
 
 #include "common/broad_phase.h"
 #include "common/mesh.h"
+#include "common/options.h"
 
 namespace arthrosim::cartilage {
 
@@ -119,11 +120,14 @@ enum class RimTreatment {
 };
 
 struct ContactOptions {
-  double stiffness_N_m3 = 7e9;   ///< k: penalty pressure per unit penetration [N/m^3], > 0
+  /// k: penalty pressure per unit penetration [N/m^3], > 0. The seed's
+  /// accuracy rule (penetration below a tenth of the deflection) needs about
+  /// ten times the foundation stiffness or more.
+  double stiffness_N_m3 = 20 * common::units::n_per_mm3;
   double damping_N_s_m3 = 0;     ///< c [N s/m^3], >= 0 (0: symmetric tangent)
-  double max_depth_m = 1e-3;     ///< deeper overlaps are not contacts (far side), > 0
+  double max_depth_m = 1 * common::units::mm;  ///< deeper overlaps are not contacts (far side), > 0
   /// Width delta of the quadratic toe of the penalty law [m], in (0, max_depth).
-  double smoothing_m = 1e-6;
+  double smoothing_m = 0.001 * common::units::mm;
   /// Evaluate edge-edge pairs (for sharp features). Off by default: the
   /// vertex test with edge and corner features already covers smooth
   /// surfaces, and the edge-edge exclusion rule switches forces on and off
@@ -140,7 +144,7 @@ struct ContactOptions {
   /// centres and never at the rim; on the bundled knee the rim nodes of the
   /// tibial eminence slopes otherwise end up 3 mm deep in the condyles' flanks
   /// (docs/contact.md, "Rims").
-  bool rim_vertices = true;
+  bool rim_vertices = false;
   /// kFadeInside only: a node's weight as the penetrating vertex is its
   /// fade-weighted tributary area, sum over its triangles of the integral of
   /// phi N_i dA (phi the rim fade that the other surface's vertices see on
@@ -148,7 +152,7 @@ struct ContactOptions {
   /// each triangle's area. Each surface then samples itself with the same
   /// fade near its rim as the other surface's vertices do; rim nodes get a
   /// nonzero weight (1/15 or 1/6 of a rim-row triangle's area) and so
-  /// support the rim; rim_vertices is then ignored (docs/contact.md, "Rims").
+  /// support the rim; rim_vertices must then be false (docs/contact.md, "Rims").
   bool faded_vertex_weights = false;
   /// Cut-off depth of rim contacts [m] (a vertex beside the other surface's
   /// open boundary and behind its boundary triangle's plane), with the same
@@ -156,8 +160,14 @@ struct ContactOptions {
   /// for a penetrating vertex sliding off an edge, so its depth is of the
   /// order of the penetrations; a vertex millimetres beside and below a rim
   /// has crossed no triangle and is not a contact.
-  double rim_max_depth_m = 0;
+  double rim_max_depth_m = 0.5 * common::units::mm;
   RimTreatment rim = RimTreatment::kFadeInside;
+
+  /// Scene keys (common/options.h): contact_stiffness_n_per_mm3,
+  /// contact_damping_n_s_per_mm3, contact_max_depth_mm, contact_smoothing_mm,
+  /// contact_edge_edge, contact_rim, contact_rim_max_depth_mm,
+  /// contact_rim_vertices, contact_vertex_weights.
+  void declare(common::OptionVisitor& v);
 };
 
 /// Vertex contacts are classified by the feature of the other surface that

@@ -10,7 +10,7 @@
 #include <set>
 #include <sstream>
 
-#include "cartilage/linear_solver.h"
+#include "numerics/sparse_direct_solver.h"
 #include "common/effects.h"
 #include "common/error.h"
 
@@ -623,7 +623,7 @@ std::string ShellModel::describe_dof(int i) const {
   return "node " + std::to_string(i / 6) + (on_rim ? " (rim) " : " ") + names[i % 6];
 }
 
-void ShellModel::evaluate(const EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+void ShellModel::evaluate(const numerics::EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
                           Eigen::SparseMatrix<double>* K) {
   const int n = num_dofs();
   if (!req.q || req.q->size() != n) throw common::NumericalError("ShellModel::evaluate: q has the wrong size");
@@ -707,7 +707,7 @@ void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {
     for (int j = 0; j < M.outerSize(); ++j)
       for (Eigen::SparseMatrix<double>::InnerIterator it(M, j); it; ++it)
         if (constrained_[it.row()] || constrained_[j]) it.valueRef() = (it.row() == j) ? 1.0 : 0.0;
-    mass_solver_ = std::make_unique<SparseDirectSolver>(LinearSolverKind::kCholmod);
+    mass_solver_ = std::make_unique<numerics::SparseDirectSolver>(numerics::LinearSolverKind::kCholmod);
     mass_solver_->analyze(M);
     if (!mass_solver_->factorize(M))
       throw common::NumericalError("shell model: mass matrix factorisation failed: " + mass_solver_->message());

@@ -28,17 +28,19 @@
 #include <vector>
 
 #include "cartilage/shell_element.h"
-#include "cartilage/time_integrable.h"
+#include "numerics/time_integrable.h"
 #include "common/mesh.h"
 
 namespace arthrosim::common {
 class EffectLedger;
 }
+namespace arthrosim::numerics {
+class SparseDirectSolver;
+}
 
 namespace arthrosim::cartilage {
 
 class ShellModel;
-class SparseDirectSolver;
 
 /// Rigid motion of a bone: pose X_WB(t) and its spatial velocity
 /// (angular w_W, linear velocity of the bone origin v_WBo_W), both at time t.
@@ -107,7 +109,7 @@ struct ShellModelStatistics {
   double scatter_time_s = 0;  ///< wall time summing element results (serial)
 };
 
-class ShellModel : public TimeIntegrable {
+class ShellModel : public numerics::TimeIntegrable {
  public:
   /// mesh: nodes [m] and counter-clockwise quads; directors: per-node reference
   /// transverse gradient (N x 3, normalised here; must lie on the side of the
@@ -190,8 +192,8 @@ class ShellModel : public TimeIntegrable {
   /// General prescribed motion.
   void add_constraint(NodeConstraint c);
 
-  /// Step predictor (TimeIntegrable::predict): the surface carried rigidly by
-  /// `bone` from t0 to t1 (positions r -> T r, directors d -> R d with
+  /// Step predictor (TimeIntegrable::predict): the surface carried rigidly
+  /// by `bone` from t0 to t1 (positions r -> T r, directors d -> R d with
   /// T = X_WB(t1) X_WB(t0)^-1), so that Newton starts from the bone's motion
   /// and only has to find the deformation change.
   void set_motion_predictor(BoneMotion bone) { predictor_ = std::move(bone); has_predictor_ = true; }
@@ -221,7 +223,7 @@ class ShellModel : public TimeIntegrable {
   int num_dofs() const override { return 6 * num_nodes_; }
   bool has_inertia() const override { return has_inertia_; }
   bool tangent_symmetric() const override;
-  void evaluate(const EvalRequest& request, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+  void evaluate(const numerics::EvalRequest& request, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
                 Eigen::SparseMatrix<double>* K) override;
   const Eigen::SparseMatrix<double>& tangent_pattern() const override { return pattern_; }
   const std::vector<char>& constrained() const override { return constrained_; }
@@ -263,7 +265,7 @@ class ShellModel : public TimeIntegrable {
   common::EffectLedger* ledger_ = nullptr;
   BoneMotion predictor_;
   bool has_predictor_ = false;
-  std::unique_ptr<SparseDirectSolver> mass_solver_;
+  std::unique_ptr<numerics::SparseDirectSolver> mass_solver_;
   ShellModelStatistics stats_;
 };
 

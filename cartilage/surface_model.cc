@@ -11,6 +11,27 @@
 
 namespace arthrosim::cartilage {
 
+void SurfaceParameters::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.number("shell_thickness_mm", shell_thickness_m, Unit::kMillimetre, {0.01, 20},
+           "thickness of the superficial-layer shells");
+  v.number("youngs_modulus_mpa", material.youngs_modulus_Pa, Unit::kMegapascal, {1e-3, 1e6},
+           "Young's modulus of the shells");
+  v.number("poisson_ratio", material.poisson_ratio, Unit::kNone, {0, 0.499}, "Poisson's ratio of the shells");
+  v.number("density_kg_per_m3", material.density_kg_m3, Unit::kKilogramPerCubicMetre, {1, 1e5},
+           "density of the shells (used by inertia)");
+  v.number("foundation_stiffness_n_per_mm3", foundation_stiffness_N_m3, Unit::kNewtonPerCubicMillimetre, {0, 1e6},
+           "foundation spring stiffness per unit area and unit compression (foundation_springs)");
+  v.number("foundation_damping_n_s_per_mm3", foundation_damping_N_s_m3, Unit::kNewtonSecondPerCubicMillimetre,
+           {0, 1e12}, "foundation damping per unit area and unit compression rate (foundation_damping)");
+  v.number("osmotic_pressure_mpa", osmotic_pressure_Pa, Unit::kMegapascal, {0, 100},
+           "pressure on the internal face of the shells (osmotic_pressure)");
+  v.number("osmotic_ramp_s", osmotic_ramp_s, Unit::kSecond, {0, 1e4},
+           "without imposed_kinematics: the osmotic pressure rises from 0 over this time by the smoothstep "
+           "3 s^2 - 2 s^3 of the seating ramp (0: full pressure from t = 0; with imposed_kinematics the pressure rises "
+           "over seating_time_s instead); at most end_time_s");
+}
+
 std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, const SurfaceParameters& parameters,
                                                 const std::vector<std::string>& effects, const BoneMotion& bone,
                                                 common::EffectLedger* ledger) {

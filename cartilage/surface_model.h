@@ -20,6 +20,7 @@
 
 #include "cartilage/shell_model.h"
 #include "common/mesh.h"
+#include "common/options.h"
 
 namespace arthrosim::common {
 class EffectLedger;
@@ -50,14 +51,16 @@ struct SurfaceInput {
   GenericLoads generic;        ///< used only by the generic effects
 };
 
-/// Material and effect parameters (SI). Defaults: seed 002 values (the
-/// scene's defaults, common/scene.cc, are the same).
+/// Material and effect parameters (SI). Defaults: seed 002 values; they are
+/// the scene's defaults too (declare()).
 struct SurfaceParameters {
   ShellMaterial material;                   ///< E 400 MPa, nu 0.3, rho 1000 kg/m^3
-  double shell_thickness_m = 1e-3;          ///< constant shell thickness [m], > 0
-  double foundation_stiffness_N_m3 = 7e8;   ///< k [N/m^3] (0.7 N/mm^3)
-  double foundation_damping_N_s_m3 = 7e15;  ///< c [N s/m^3] (7e6 N s/mm^3)
-  double osmotic_pressure_Pa = 0.2e6;       ///< on the internal face [Pa]
+  double shell_thickness_m = 1 * common::units::mm;  ///< constant shell thickness [m], > 0
+  /// k [N/m^3] (0.7 N/mm^3)
+  double foundation_stiffness_N_m3 = 0.7 * common::units::n_per_mm3;
+  /// c [N s/m^3] (7e6 N s/mm^3)
+  double foundation_damping_N_s_m3 = 7e6 * common::units::n_s_per_mm3;
+  double osmotic_pressure_Pa = 0.2 * common::units::mpa;  ///< on the internal face [Pa]
   /// > 0: the osmotic pressure rises from 0 to its value over this time with
   /// a smoothstep (e.g. during the seating of imposed kinematics) instead of
   /// acting in full from t = 0 [s].
@@ -73,6 +76,11 @@ struct SurfaceParameters {
   /// the normal to the foundation and the directors free
   /// (ShellModel::add_periphery_tangential).
   double periphery_tie_N_m3 = 0;
+
+  /// Scene keys (common/options.h): shell_thickness_mm, youngs_modulus_mpa,
+  /// poisson_ratio, density_kg_per_m3, foundation_stiffness_n_per_mm3,
+  /// foundation_damping_n_s_per_mm3, osmotic_pressure_mpa, osmotic_ramp_s.
+  void declare(common::OptionVisitor& v);
 };
 
 /// Per-node foundation modulus of an elastic layer of thickness h_i with the

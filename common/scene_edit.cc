@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/edit_distance.h"
 #include "common/error.h"
 
 namespace arthrosim::common {
@@ -16,20 +17,6 @@ namespace {
 bool scalar_type(OptionType t) {
   return t == OptionType::kNumber || t == OptionType::kInteger || t == OptionType::kFlag ||
          t == OptionType::kText || t == OptionType::kPath;
-}
-
-// Levenshtein distance for the "did you mean" hint.
-std::size_t distance(const std::string& a, const std::string& b) {
-  std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    cur[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] != b[j - 1])});
-    }
-    std::swap(prev, cur);
-  }
-  return prev[b.size()];
 }
 
 std::vector<std::string> split_dots(const std::string& s) {
@@ -77,25 +64,28 @@ YAML::Node child_map(YAML::Node parent, const std::string& key) {
 
 std::vector<SceneKey> settable_scene_keys(const Scene& scene) {
   std::vector<SceneKey> keys;
-  auto add_block = [&](std::string_view block, const std::string& prefix, bool overridable_only) {
-    for (const OptionSpec& s : option_schema()) {
-      if (s.block != block || !scalar_type(s.type)) continue;
+  const SceneSchema& schema = *scene.schema;
+  auto add = [&](const std::vector<OptionSpec>& specs, const std::string& prefix, bool overridable_only) {
+    for (const OptionSpec& s : specs) {
+      if (!scalar_type(s.type)) continue;
       if (overridable_only && !s.overridable) continue;
-      keys.push_back({prefix + std::string(s.key), &s});
+      keys.push_back({prefix + s.key, &s});
     }
   };
-  add_block("scene", "", false);
-  add_block("prepare", "prepare.", false);
-  if (scene.comak) add_block("comak", "comak.", false);
-  if (scene.surface) {
-    add_block("surface", "surface.", false);
-    for (const Scenario& sc : scene.scenarios) {
-      const std::string prefix = "surface.scenarios." + sc.name + ".";
-      add_block("scenario", prefix, false);
-      add_block("surface", prefix, true);
+  add(schema.top, "", false);
+  for (const BlockSchema& b : schema.blocks) {
+    // A block that is not written can take a setting only when it needs
+    // nothing else (no required key, no instances).
+    bool self_sufficient = b.instances_key.empty();
+    for (const OptionSpec& s : b.keys) self_sufficient = self_sufficient && !s.required;
+    if (!scene.has_block(b.name) && !self_sufficient) continue;
+    add(b.keys, b.name + ".", false);
+    for (const BlockInstance& inst : scene.instances(b.name)) {
+      const std::string prefix = b.name + "." + b.instances_key + "." + inst.name + ".";
+      add(b.instance_keys, prefix, false);
+      add(b.keys, prefix, true);
     }
   }
-  add_block("post", "post.", false);
   return keys;
 }
 
@@ -104,54 +94,57 @@ const OptionSpec& find_settable_key(const Scene& scene, const std::string& dotte
   for (const SceneKey& k : keys) {
     if (k.dotted == dotted) return *k.spec;
   }
-  std::string best;
-  std::size_t best_d = 5;  // close enough for e.g. a missing unit suffix "_mpa"
+  std::vector<std::string> names;
   std::string all;
   for (const SceneKey& k : keys) {
-    const std::size_t d = distance(dotted, k.dotted);
-    if (d < best_d) best_d = d, best = k.dotted;
+    names.push_back(k.dotted);
     all += (all.empty() ? "" : ", ") + k.dotted;
   }
+  // Close enough for e.g. a missing unit suffix "_mpa".
+  const std::string best = closest_match(dotted, names, 5);
   std::string why;
   const std::vector<std::string> parts = split_dots(dotted);
-  if (parts.size() == 4 && parts[0] == "surface" && parts[1] == "scenarios" &&
-      scene.scenario(parts[2]) == nullptr) {
-    std::string names;
-    for (const Scenario& sc : scene.scenarios) names += (names.empty() ? "" : ", ") + sc.name;
-    why = " (the scene has no scenario '" + parts[2] + "'; its scenarios: " +
-          (names.empty() ? "none" : names) + ")";
-  } else if (parts.size() == 2 && parts[0] == "comak" && !scene.comak) {
-    why = " (the scene has no comak block)";
+  const BlockSchema* block = parts.empty() ? nullptr : scene.schema->block(parts[0]);
+  if (block && !block->instances_key.empty() && parts.size() == 4 && parts[1] == block->instances_key &&
+      scene.instance(block->name, parts[2]) == nullptr) {
+    std::string have;
+    for (const BlockInstance& i : scene.instances(block->name)) have += (have.empty() ? "" : ", ") + i.name;
+    why = " (the scene has no " + block->instance_label + " '" + parts[2] + "'; its " + block->instance_label +
+          "s: " + (have.empty() ? "none" : have) + ")";
+  } else if (block && parts.size() == 2 && !scene.has_block(block->name) &&
+             std::none_of(keys.begin(), keys.end(),
+                          [&](const SceneKey& k) { return k.dotted.rfind(block->name + ".", 0) == 0; })) {
+    why = " (the scene has no " + block->name + " block)";
   } else {
-    for (const OptionSpec& s : option_schema()) {
-      if (!parts.empty() && s.key == parts.back() && !scalar_type(s.type)) {
+    for (const OptionSpec* s : scene.schema->all()) {
+      if (!parts.empty() && s->key == parts.back() && !scalar_type(s->type)) {
         why = " ('" + parts.back() + "' is a list or block; only single values can be varied)";
       }
     }
   }
   throw InputError(scene.file.string(), 0,
-                   "unknown scene key '" + dotted + "'" + why +
-                       (best.empty() ? "" : " (did you mean '" + best + "'?)") +
+                   "unknown scene key '" + dotted + "'" + why + (best.empty() ? "" : " (did you mean '" + best + "'?)") +
                        "; this scene's keys: " + all);
 }
 
-std::string edit_scene_text(const fs::path& file,
+std::string edit_scene_text(const fs::path& file, const SceneSchema& schema,
                             const std::vector<std::pair<std::string, std::string>>& settings) {
-  const Scene scene = load_scene(file);  // the original must be valid
+  const Scene scene = load_scene(file, schema);  // the original must be valid
   const fs::path dir = scene.file.parent_path();
   YAML::Node root = YAML::LoadFile(scene.file.string());
 
   // Paths as the reader resolved them, so the copy names the same files.
-  root["model"] = scene.model.string();
-  if (scene.trial) root["trial"] = scene.trial->string();
-  const YAML::Node& croot = root;
-  if (croot["post"] && croot["post"]["splitline_map"]) {
-    root["post"]["splitline_map"] = scene.post.path("splitline_map").string();
-  }
-  for (const Scenario& sc : scene.scenarios) {
-    if (sc.options.given("mesh")) {
-      root["surface"]["scenarios"][sc.name]["mesh"] = sc.options.path("mesh").string();
-    }
+  for (const auto& [k, v] : scene.top.values())
+    if (v.given && v.spec->type == OptionType::kPath) root[k] = v.path.string();
+  for (const BlockSchema& b : schema.blocks) {
+    if (!scene.has_block(b.name)) continue;
+    for (const auto& [k, v] : scene.block(b.name).values())
+      if (v.given && v.spec->type == OptionType::kPath) root[b.name][k] = v.path.string();
+    const YAML::Node& croot = root;
+    for (const BlockInstance& inst : scene.instances(b.name))
+      for (const auto& [k, v] : inst.options.values())
+        if (v.given && v.spec->type == OptionType::kPath && croot[b.name][b.instances_key][inst.name][k])
+          root[b.name][b.instances_key][inst.name][k] = v.path.string();
   }
 
   std::string header = "# written by arthrosim from " + scene.file.string() + "\n";

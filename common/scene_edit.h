@@ -2,12 +2,13 @@
 // Changing single options of a scene by dotted key, for studies that run one
 // scene at several settings (`arthrosim study accuracy`, docs/studies.md).
 //
-// A dotted key names one scalar option of a scene:
+// A dotted key names one scalar option of a scene (keys as in the scene's
+// schema, common/scene.h):
 //   model, trial, description                  top level
 //   prepare.edge_length_mm, comak.ipopt_tolerance, post.outline_points
-//   surface.time_step_s                         the surface block (every scenario
-//                                               that does not set it itself)
-//   surface.scenarios.osmotic.time_step_s       one scenario
+//   surface.time_step_s                         a block (for surface: every
+//                                               scenario that does not set it itself)
+//   surface.scenarios.osmotic.time_step_s       one instance of a block
 // Only scalar options (number, whole number, flag, text, path) can be set this
 // way; lists and blocks cannot. yaml-cpp stays inside scene_edit.cc.
 #include <filesystem>
@@ -26,9 +27,9 @@ struct SceneKey {
 };
 
 /// Every dotted key of `scene` that edit_scene_text() accepts, in schema order:
-/// the top-level scalars, prepare and post (always), comak (when the scene has
-/// a comak block), the surface block's per-scenario keys and every scenario's
-/// scalar keys (when it has a surface block).
+/// the top-level scalars, then per block its scalars (a block that is not
+/// written only when it has no required key and no instances) and every
+/// instance's scalars.
 std::vector<SceneKey> settable_scene_keys(const Scene& scene);
 
 /// The spec of `dotted` in `scene`. An unknown key throws InputError naming
@@ -36,15 +37,15 @@ std::vector<SceneKey> settable_scene_keys(const Scene& scene);
 const OptionSpec& find_settable_key(const Scene& scene, const std::string& dotted);
 
 /// The text of a copy of the scene file `file` with each (dotted key, value as
-/// written in a scene) of `settings` set, and every path option (model, trial,
-/// post.splitline_map, a scenario's mesh) made absolute, so the copy can live
+/// written in a scene) of `settings` set, and every path option written in it
+/// (model, trial, post.splitline_map, a scenario's mesh) made absolute, so the copy can live
 /// in any folder and still name the same files. A relative path given as a
 /// setting is resolved like one written in the scene (against the scene's
 /// folder, then its repository). Comments of the original are not kept; the
 /// text starts with a comment naming the original and the settings. Throws
 /// InputError for an unreadable or invalid original scene or an unknown key;
 /// the value itself is checked when the returned text is parsed (parse_scene).
-std::string edit_scene_text(const std::filesystem::path& file,
+std::string edit_scene_text(const std::filesystem::path& file, const SceneSchema& schema,
                             const std::vector<std::pair<std::string, std::string>>& settings);
 
 }  // namespace arthrosim::common

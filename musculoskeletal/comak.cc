@@ -144,7 +144,7 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
   KinematicsData kin;
   forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), kin);
   for (int i = 0; i < nm; ++i) {
-    const PathState p = evaluate_path(model.muscles[i].path, kin.X_WB);
+    const PathState p = evaluate_path(model.muscles[i].path, kin.X_WB, Eigen::VectorXd::Zero(model.num_coordinates()));
     V_[i] = model.muscles[i].max_isometric_force * p.length / options.muscle_stress;
   }
   if (options.ankle_equilibrium) {
@@ -157,7 +157,8 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
     d0.kinematics = k0;
     bool plantar = false, dorsi = false;
     for (int i = 0; i < nm; ++i) {
-      const double r = moment_arms(model, d0, evaluate_path(model.muscles[i].path, k0.X_WB))[ankle_];
+      const double r = moment_arms(
+          model, d0, evaluate_path(model.muscles[i].path, k0.X_WB, Eigen::VectorXd::Zero(model.num_coordinates())))[ankle_];
       plantar = plantar || r < -1e-3;
       dorsi = dorsi || r > 1e-3;
     }

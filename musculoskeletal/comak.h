@@ -91,6 +91,7 @@
 #include <vector>
 
 #include "common/error.h"
+#include "common/options.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model.h"
 #include "musculoskeletal/settle.h"
@@ -194,6 +195,11 @@ struct ComakOptions {
   /// Passive settle of the first frame and of retry 1 (its `fixed` is set
   /// by the solver to the flexion).
   SettleOptions settle;
+
+  /// Scene keys of the comak block (common/options.h; comak_options.cc):
+  /// ipopt_tolerance, ipopt_max_iterations, activation_min,
+  /// reserve_actuators, ankle_equilibrium, body_inertia, second_start.
+  void declare(common::OptionVisitor& v);
 };
 
 /// Inputs of one frame.

@@ -22,6 +22,7 @@
 
 #include "common/cpd.h"
 #include "common/mesh.h"
+#include "common/options.h"
 #include "pipelines/splitline.h"
 
 namespace arthrosim::pipelines {
@@ -103,7 +104,7 @@ struct ComparisonOptions {
   /// Averaging radius in view units (m); 0 = max(warped map resolution, 1.5 x median
   /// projected node spacing), so each sample sees the model at the map's resolution.
   double radius = 0.0;
-  double threshold_rad = 20.0 * 3.14159265358979323846 / 180.0;  ///< "within" threshold
+  double threshold_rad = 20 * common::units::deg;  ///< "within" threshold
   double min_projected_length = 0.3;  ///< nodes whose line is this foreshortened are skipped
 };
 

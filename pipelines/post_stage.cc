@@ -14,6 +14,7 @@
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/scene.h"
+#include "pipelines/stages.h"
 #include "pipelines/report.h"
 
 namespace arthrosim::pipelines {
@@ -21,21 +22,46 @@ namespace arthrosim::pipelines {
 using common::InputError;
 namespace fs = std::filesystem;
 
+void PostOptions::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.path("splitline_map", splitline_map, "split-line map (SVG or CSV) to compare the averaged strain directions with");
+  v.number("angle_threshold_deg", comparison.threshold_rad, Unit::kDegree, {0, 90},
+           "report the fraction of samples whose model-map angle is below this");
+  v.number("cpd_outlier_weight", registration.w, Unit::kNone, {0, 0.99}, "Coherent Point Drift outlier weight w");
+  v.number("cpd_beta", registration.beta, Unit::kNone, {1e-6, 1e6},
+           "Coherent Point Drift kernel width beta (normalised units)");
+  v.number("cpd_lambda", registration.lambda, Unit::kNone, {1e-9, 1e9}, "Coherent Point Drift regularisation lambda");
+  v.flag("cpd_nonrigid", registration.nonrigid, "register the map non-rigidly after the affine fit (false: affine only)");
+  v.integer("outline_points", registration.outline_points, {8, 5000},
+            "both outlines are resampled to this many points for registration");
+  v.number("average_radius_mm", comparison.radius, Unit::kMillimetre, {0, 100},
+           "radius of the spatial averaging of model directions at each map sample; 0 = the registered map's "
+           "resolution (at least 1.5 model node spacings)");
+  v.text("view_surface", view_surface, "",
+         "surface of the surface-output files that is projected and compared with the map");
+  const char* dir = "component of the viewing direction (model frame; default (0, 1, 0): distal view of the femur, "
+                    "looking superiorly)";
+  const char* up = "component of the direction shown upwards in the view (default (1, 0, 0): anterior up)";
+  v.number("view_direction_x", view.direction.x(), Unit::kNone, {-1e6, 1e6}, std::string("x ") + dir);
+  v.number("view_direction_y", view.direction.y(), Unit::kNone, {-1e6, 1e6}, std::string("y ") + dir);
+  v.number("view_direction_z", view.direction.z(), Unit::kNone, {-1e6, 1e6}, std::string("z ") + dir);
+  v.number("view_up_x", view.up.x(), Unit::kNone, {-1e6, 1e6}, std::string("x ") + up);
+  v.number("view_up_y", view.up.y(), Unit::kNone, {-1e6, 1e6}, std::string("y ") + up);
+  v.number("view_up_z", view.up.z(), Unit::kNone, {-1e6, 1e6}, std::string("z ") + up);
+}
+
 PostOptions post_options_from_scene(const common::Scene& scene) {
-  const common::OptionBlock& b = scene.post;
-  PostOptions o;
-  o.view_surface = b.text("view_surface");
-  o.view.direction = Eigen::Vector3d(b.si("view_direction_x"), b.si("view_direction_y"), b.si("view_direction_z"));
-  o.view.up = Eigen::Vector3d(b.si("view_up_x"), b.si("view_up_y"), b.si("view_up_z"));
-  o.registration.w = b.si("cpd_outlier_weight");
-  o.registration.beta = b.si("cpd_beta");
-  o.registration.lambda = b.si("cpd_lambda");
-  o.registration.nonrigid = b.flag("cpd_nonrigid");
-  o.registration.outline_points = static_cast<int>(b.integer("outline_points"));
-  o.comparison.radius = b.si("average_radius_mm");
-  o.comparison.threshold_rad = b.si("angle_threshold_deg");
-  if (b.has("splitline_map")) o.splitline_map = b.path("splitline_map").string();
-  return o;
+  return common::read_options<PostOptions>(scene.block("post"));
+}
+
+StageDescriptor post_stage_descriptor() {
+  StageDescriptor d;
+  d.name = "post";
+  d.executable = "arthrosim-post";
+  d.summary = "averaged principal strain directions against split-line maps (CPD); report.html, summary.json";
+  d.block = block_schema<PostOptions>("post", "options of the post stage");
+  d.outputs = {"report"};
+  return d;
 }
 
 namespace {
@@ -284,10 +310,10 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   SplitLineMap map;
   if (!opt.splitline_map.empty()) {
     const auto t0 = Clock::now();
-    map = read_splitline_map(opt.splitline_map, opt.map_sample_spacing);
+    map = read_splitline_map(opt.splitline_map.string(), opt.map_sample_spacing);
     timing.emplace_back("read split-line map", seconds_since(t0));
     json.begin_object("map")
-        .value("file", opt.splitline_map)
+        .value("file", opt.splitline_map.string())
         .value("synthetic", map.synthetic)
         .value("samples", static_cast<int>(map.samples.rows()))
         .value("outline_points", static_cast<int>(map.outline.rows()))
@@ -448,7 +474,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     h += "</ul>\n";
   }
   if (!opt.splitline_map.empty() && !summary.scenarios.empty()) {
-    h += "<h2>Split-line comparison</h2>\n<p>Map: " + report::escape(opt.splitline_map) +
+    h += "<h2>Split-line comparison</h2>\n<p>Map: " + report::escape(opt.splitline_map.string()) +
          ". Acute angle between the model's averaged first principal strain line and the registered map line, per sample.</p>\n";
     std::vector<std::vector<std::string>> rows;
     for (const auto& s : summary.scenarios)

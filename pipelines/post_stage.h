@@ -4,10 +4,12 @@
 // DIR/report.html (self-contained XHTML with inline SVG figures) and DIR/summary.json
 // (the same numbers). Optional inputs that are absent are listed in both files under
 // "missing"; they never stop the run.
+#include <filesystem>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "common/options.h"
 #include "pipelines/post_compare.h"
 
 namespace arthrosim::common {
@@ -16,16 +18,24 @@ struct Scene;
 
 namespace arthrosim::pipelines {
 
+struct StageDescriptor;
+/// The post stage's entry in the stage table (pipelines/stages.h).
+StageDescriptor post_stage_descriptor();
+
+/// The scene's post block (docs/scenes.md).
 struct PostOptions {
+  /// Surface of the surface-output files that is projected and compared.
   std::string view_surface = "femur";
+  /// Default view: distal view of the femur, looking superiorly, anterior up.
   ViewOptions view{Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(1, 0, 0)};
   RegistrationOptions registration;
   ComparisonOptions comparison;
-  std::string splitline_map;  ///< empty = none
+  std::filesystem::path splitline_map;  ///< empty = none
   double map_sample_spacing = 0.0;  ///< SVG sampling (map units), 0 = automatic
+  void declare(common::OptionVisitor& v);
 };
 
-/// The scene's post block (docs/scenes.md) as options.
+/// The scene's post block as options.
 PostOptions post_options_from_scene(const common::Scene& scene);
 
 struct PostInputs {

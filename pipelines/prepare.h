@@ -36,6 +36,7 @@
 
 #include "common/mesh.h"
 #include "common/mesh_io.h"
+#include "common/options.h"
 
 namespace arthrosim::common {
 struct RunMetadata;
@@ -43,24 +44,29 @@ struct RunMetadata;
 
 namespace arthrosim::pipelines {
 
+struct StageDescriptor;
+/// The prepare stage's entry in the stage table (pipelines/stages.h).
+StageDescriptor prepare_stage_descriptor();
+
 struct PrepareOptions {
-  /// Target edge length of the remeshed cartilage surfaces [m]. Range
-  /// 0.2e-3 .. 20e-3 (scene key prepare.edge_length_mm, default 3 mm).
-  double edge_length = 3e-3;
-  /// Per-surface target edge lengths [m] (cartilage name -> length, same
-  /// range) in place of edge_length, e.g. a femoral mesh coarser than the
-  /// tibial ones (scene key prepare.surface_edge_length_mm, "name=mm" items).
+  /// Target edge length of the remeshed cartilage surfaces [m].
+  double edge_length = 3 * common::units::mm;
+  /// Per-surface target edge lengths [m] (cartilage name -> length) in place
+  /// of edge_length, e.g. a femoral mesh coarser than the tibial ones.
   std::map<std::string, double> surface_edge_length;
   /// Unit of the coordinates in the input files.
   common::LengthUnit unit = common::LengthUnit::kMillimetre;
   /// Longest thickness ray [m]; a ray that meets no bone within it falls
-  /// back to the closest-point distance. Range 1e-3 .. 50e-3 (articular
-  /// cartilage is at most ~6 mm thick).
-  double max_cast_distance = 10e-3;
-  /// Isotropic remeshing iterations. Range 1 .. 20.
+  /// back to the closest-point distance (articular cartilage is at most
+  /// ~6 mm thick).
+  double max_cast_distance = 10 * common::units::mm;
+  /// Isotropic remeshing iterations.
   int remesh_iterations = 5;
   /// Vertices closer than this are merged by the repair [m]. Range 0 .. 1e-5.
   double merge_tolerance = 1e-9;
+
+  /// The scene's prepare block (common/options.h; ranges there).
+  void declare(common::OptionVisitor& v);
 };
 
 /// Where a thickness value came from (stored per vertex / node).

@@ -24,10 +24,10 @@
 #include "common/effects.h"
 #include "common/hashing.h"
 #include "common/hdf5.h"
+#include "pipelines/stages.h"
 
 namespace arthrosim::pipelines {
 namespace fs = std::filesystem;
-using common::Output;
 using common::Scene;
 
 namespace {
@@ -313,20 +313,23 @@ class OutputFolderLock {
 }  // namespace
 
 std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) {
-  const bool want_report = scene.wants(Output::kReport);
-  const bool want_surface = scene.wants(Output::kSurface) || want_report;
+  const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
+  const bool want_report = wants_output(scene, "report");
+  const bool want_surface = wants_output(scene, "surface") || want_report;
   bool surface_moves = false;
   if (want_surface) {
-    for (const common::Scenario& s : scene.scenarios) {
+    for (const common::BlockInstance& s : scenarios) {
       surface_moves = surface_moves || s.wants("imposed_kinematics");
     }
   }
-  const bool want_comak = scene.wants(Output::kKinematics) || surface_moves;
-  const bool want_prepare = scene.wants(Output::kPreparedModel) || want_comak || want_surface;
+  const bool want_comak = wants_output(scene, "kinematics") || surface_moves;
+  const bool want_prepare = wants_output(scene, "prepared_model") || want_comak || want_surface;
   const fs::path scene_file = scene.file;
+  const SceneInputs in = scene_inputs(scene);
+  const common::OptionBlock& prepare = scene.block("prepare");
 
-  auto first_reason = [&](Output direct, const std::string& otherwise) {
-    return scene.wants(direct) ? "output " + std::string(common::to_string(direct)) : otherwise;
+  auto first_reason = [&](const std::string& direct, const std::string& otherwise) {
+    return wants_output(scene, direct) ? "output " + direct : otherwise;
   };
 
   std::vector<StageStep> plan;
@@ -334,47 +337,51 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     StageStep s;
     s.name = "prepare";
     s.executable = "arthrosim-prepare";
-    s.needed_for = first_reason(Output::kPreparedModel, "the prepared model used by later stages");
-    s.inputs.emplace_back("model", scene.model);
-    s.options = scene.prepare.canonical();
-    add_path_inputs(scene.prepare, s);
+    s.needed_for = first_reason("prepared_model", "the prepared model used by later stages");
+    s.inputs.emplace_back("model", in.model);
+    s.options = prepare.canonical();
+    add_path_inputs(prepare, s);
     // arthrosim-prepare writes prepared.xdmf next to prepared.h5.
     s.outputs = {out_dir / kPrepared, out_dir / "prepared.xdmf"};
     // Every prepare key of the schema maps to one flag, values as written
     // (arthrosim-prepare takes millimetres).
-    s.arguments = {"--model", scene.model.string(),
-                   "--edge-length-mm", scene.prepare.value("edge_length_mm").canonical,
-                   "--unit", scene.prepare.value("mesh_unit").canonical,
-                   "--max-cast-distance-mm", scene.prepare.value("max_cast_distance_mm").canonical,
-                   "--remesh-iterations", scene.prepare.value("remesh_iterations").canonical,
+    s.arguments = {"--model", in.model.string(),
+                   "--edge-length-mm", prepare.value("edge_length_mm").canonical,
+                   "--unit", prepare.value("mesh_unit").canonical,
+                   "--max-cast-distance-mm", prepare.value("max_cast_distance_mm").canonical,
+                   "--remesh-iterations", prepare.value("remesh_iterations").canonical,
                    "--out", (out_dir / kPrepared).string()};
-    for (const std::string& item : scene.prepare.list("surface_edge_length_mm"))
-      s.arguments.insert(s.arguments.end(), {"--surface-edge-length-mm", item});
+    const common::OptionValue& per_surface = prepare.value("surface_edge_length_mm");
+    for (std::size_t i = 0; i < per_surface.list.size(); ++i)
+      s.arguments.insert(s.arguments.end(),
+                         {"--surface-edge-length-mm",
+                          per_surface.list[i] + "=" + common::shortest_text(per_surface.numbers_as_written[i])});
     plan.push_back(std::move(s));
   }
   if (want_comak) {
     StageStep s;
     s.name = "comak";
     s.executable = "arthrosim-comak";
-    s.needed_for = first_reason(Output::kKinematics, "bone motion for imposed_kinematics");
-    s.inputs.emplace_back("model", scene.model);
-    s.inputs.emplace_back("trial", *scene.trial);
+    const common::OptionBlock& comak = scene.block("comak");
+    s.needed_for = first_reason("kinematics", "bone motion for imposed_kinematics");
+    s.inputs.emplace_back("model", in.model);
+    s.inputs.emplace_back("trial", in.trial);
     s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
-    s.options = scene.comak->canonical();
-    s.effects = scene.comak->list("effects");
-    add_path_inputs(*scene.comak, s);
+    s.options = comak.canonical();
+    s.effects = comak.list("effects");
+    add_path_inputs(comak, s);
     s.outputs = {out_dir / kKinematics};
-    s.arguments = {"--model", scene.model.string(), "--prepared", (out_dir / kPrepared).string(),
-                   "--trial", scene.trial->string(), "--scene", scene_file.string(),
+    s.arguments = {"--model", in.model.string(), "--prepared", (out_dir / kPrepared).string(),
+                   "--trial", in.trial.string(), "--scene", scene_file.string(),
                    "--out", (out_dir / kKinematics).string()};
     plan.push_back(std::move(s));
   }
   if (want_surface) {
-    for (const common::Scenario& sc : scene.scenarios) {
+    for (const common::BlockInstance& sc : scenarios) {
       StageStep s;
       s.name = "surface." + sc.name;
       s.executable = "arthrosim-surface";
-      s.needed_for = first_reason(Output::kSurface, "the report");
+      s.needed_for = first_reason("surface", "the report");
       s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
       s.arguments = {"--prepared", (out_dir / kPrepared).string()};
       if (sc.wants("imposed_kinematics")) {
@@ -395,7 +402,7 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.name = "post";
     s.executable = "arthrosim-post";
     s.needed_for = "output report";
-    for (const common::Scenario& sc : scene.scenarios) {
+    for (const common::BlockInstance& sc : scenarios) {
       s.inputs.emplace_back(surface_file(sc.name), out_dir / surface_file(sc.name));
       s.arguments.insert(s.arguments.end(),
                          {"--surface", (out_dir / surface_file(sc.name)).string()});
@@ -404,8 +411,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
       s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
       s.arguments.insert(s.arguments.end(), {"--kinematics", (out_dir / kKinematics).string()});
     }
-    s.options = scene.post.canonical();
-    add_path_inputs(scene.post, s);
+    s.options = scene.block("post").canonical();
+    add_path_inputs(scene.block("post"), s);
     s.outputs = {out_dir / "report.html", out_dir / "summary.json"};
     s.arguments.insert(s.arguments.end(),
                        {"--scene", scene_file.string(), "--out-dir", out_dir.string()});
@@ -429,7 +436,8 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
   const std::vector<StageStep> plan = plan_stages(scene, out_dir);
 
   log << "arthrosim: scene " << scene.file.string() << "\n";
-  if (!scene.description.empty()) log << "  " << scene.description << "\n";
+  if (const std::string description = scene_inputs(scene).description; !description.empty())
+    log << "  " << description << "\n";
   log << "arthrosim: output folder " << out_dir.string() << "\n";
   log << "arthrosim: plan:";
   for (const StageStep& s : plan) log << " " << s.name;
@@ -442,10 +450,10 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
     }
     return false;
   };
-  if (scene.comak && !planned("comak")) {
+  if (scene.has_block("comak") && !planned("comak")) {
     log << "  not run: comak (no output needs kinematics)\n";
   }
-  for (const common::Scenario& sc : scene.scenarios) {
+  for (const common::BlockInstance& sc : scene.instances("surface")) {
     if (!planned("surface." + sc.name)) {
       log << "  not run: surface." << sc.name << " (outputs ask for neither surface nor report)\n";
     }

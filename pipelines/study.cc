@@ -14,6 +14,7 @@
 #include "common/hashing.h"
 #include "common/hdf5.h"
 #include "common/scene.h"
+#include "pipelines/stages.h"
 #include "common/scene_edit.h"
 #include "pipelines/report.h"
 #include "pipelines/runner.h"
@@ -720,9 +721,9 @@ std::string setting_label(const std::vector<std::pair<std::string, std::string>>
 std::string checked_scene_text(const fs::path& scene_file,
                                const std::vector<std::pair<std::string, std::string>>& values,
                                const fs::path& where, common::Scene* parsed = nullptr) {
-  const std::string text = common::edit_scene_text(scene_file, values);
+  const std::string text = common::edit_scene_text(scene_file, scene_schema(), values);
   try {
-    common::Scene s = common::parse_scene(text, where);
+    common::Scene s = parse_scene(text, where);
     if (parsed != nullptr) *parsed = std::move(s);
   } catch (const InputError& e) {
     throw InputError("--vary " + setting_label(values) + ": " + e.what() +
@@ -905,7 +906,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
   if (options.axes.empty()) {
     throw InputError("--vary", 0, "expected at least one --vary KEY=V1,V2,...");
   }
-  const common::Scene scene = common::load_scene(options.scene_file);
+  const common::Scene scene = load_scene(options.scene_file);
   const fs::path out_dir = fs::absolute(options.out_dir).lexically_normal();
 
   // Keys and reference values.
@@ -1029,7 +1030,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
   std::vector<std::map<std::string, std::set<std::string>>> upstream(grid.size());
   for (std::size_t i = 0; i < grid.size(); ++i) {
     SettingResult& r = result.settings[i];
-    const common::Scene s = common::load_scene(r.scene);
+    const common::Scene s = load_scene(r.scene);
     plans[i] = plan_stages(s, r.dir);
     upstream[i] = upstream_stages(plans[i]);
     fs::create_directories(r.dir);

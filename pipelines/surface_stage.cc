@@ -12,7 +12,7 @@
 #include <sstream>
 
 #include "cartilage/coupled_system.h"
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
@@ -23,11 +23,12 @@
 #include "common/progress.h"
 #include "common/scene.h"
 #include "common/xdmf.h"
+#include "pipelines/stages.h"
 
 namespace arthrosim::pipelines {
 namespace {
 
-using cartilage::HhtIntegrator;
+using numerics::HhtIntegrator;
 using cartilage::ShellModel;
 using common::H5File;
 
@@ -247,30 +248,129 @@ cartilage::BoneMotion seated(const cartilage::BoneMotion& base, double T, const 
 
 }  // namespace
 
+void SurfaceScenarioOptions::declare_shared(common::OptionVisitor& v) {
+  using common::Unit;
+  v.text_list("surfaces", surfaces, "", "cartilage surfaces of the prepared model simulated as shells");
+  v.number("end_time_s", end_time_s, Unit::kSecond, {0, 1e4},
+           "simulated time; may be left out only by a scenario with imposed_kinematics, which then runs for the "
+           "kinematics file's duration");
+  v.number("output_interval_ms", output_interval_s, Unit::kMillisecond, {0, 1e6}, "time between written frames");
+  integrator.declare(v);
+  v.flag("steady_state", steady_state,
+         "solve directly for the steady state at end_time_s (static equilibrium: every listed term is built, "
+         "velocities and accelerations are zero there) instead of time stepping");
+  v.number("steady_state_change_mm", steady_state_change_m, Unit::kMillimetre, {0, 1e3},
+           "time-stepping runs: end once the largest weighted coordinate change over one step (positions, and "
+           "transverse gradients x h/2) is at most this, after the pressure ramp; 0: run to end_time_s. The output "
+           "records where and why it stopped (docs/surface_output.md)");
+  physics.declare(v);
+  v.text_list("osmotic_surfaces", osmotic_surfaces, "",
+              "osmotic_pressure: the surfaces that carry it (each one of `surfaces`); empty: every simulated surface "
+              "(the seed's run pressurised the femoral cartilage)");
+  v.flag("foundation_from_thickness", foundation_from_thickness,
+         "foundation_springs stiffness per node k_i = K / h_i (h_i: the prepared cartilage thickness, K from "
+         "matched_youngs_modulus_mpa and matched_poisson_ratio), matching the musculoskeletal stage's "
+         "elastic-foundation contact, instead of foundation_stiffness_n_per_mm3");
+  v.number("matched_youngs_modulus_mpa", matched_youngs_modulus_Pa, Unit::kMegapascal, {1e-6, 1e6},
+           "E of the elastic-foundation layer used by foundation_from_thickness (the bundled knee's contact: 10 MPa)");
+  v.number("matched_poisson_ratio", matched_poisson_ratio, Unit::kNone, {0, 0.499},
+           "nu of the elastic-foundation layer used by foundation_from_thickness (bundled knee: 0.45)");
+  v.choice("periphery_normal", periphery_normal,
+           {{"clamped", PeripheryNormal::kClamped}, {"foundation", PeripheryNormal::kFoundation}},
+           "periphery_fixed: clamped = boundary nodes move with the bone in all six coordinates (seed 002); "
+           "foundation = tied to the bone in their tangent plane only, resting on the foundation along the normal "
+           "(for contact zones that reach the rim, as in stage 1's elastic foundation)");
+  v.number("periphery_tie_stiffness_n_per_mm3", periphery_tie_N_m3, Unit::kNewtonPerCubicMillimetre, {1e-3, 1e9},
+           "periphery_normal: foundation: stiffness per unit area of the tangential tie");
+  v.text_list("contact_pairs", contact_pairs, "",
+              "surface pairs in mesh contact, each 'a:b' (both must be simulated); force output is on b (the tibia: "
+              "/contact/tibiofemoral/...)");
+  contact.declare(v);
+  v.number("penetration_limit", penetration_limit, Unit::kNone, {0, 1e6},
+           "the seed's accuracy rule: largest interpenetration / largest deflection allowed per step");
+  v.choice("penetration_action", stop_on_penetration, {{"warn", false}, {"stop", true}},
+           "when a step breaks penetration_limit: warn (counted, reported) or stop the run");
+  v.choice("predictor", predictor, {{"rigid", Predictor::kRigid}, {"extrapolated", Predictor::kExtrapolated}},
+           "imposed_kinematics: Newton start of a step: the surfaces carried rigidly by their bones (rigid), plus the "
+           "bone-relative deformation change of the step before, extrapolated linearly in time (extrapolated)");
+  v.number("seating_time_s", seating_time_s, Unit::kSecond, {0, 10},
+           "imposed kinematics start with a seating ramp of this duration: bones other than the femur move from "
+           "seating_offset_mm away along their own -Y axis to their first pose (the seed's run began with a 0.02 s "
+           "seating)");
+  v.number("seating_offset_mm", seating_offset_m, Unit::kMillimetre, {0, 100},
+           "initial separation of the seating ramp; must exceed the first frame's overlap");
+}
+
+void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
+  using common::Unit;
+  v.text("description", description, "", "free text for reports");
+  v.path("mesh", mesh,
+         "quad mesh (OBJ with 'v' and 4-node 'f' lines, or legacy ASCII VTK polydata with quad POLYGONS; coordinates "
+         "in mm) simulated instead of the prepared model's surfaces; shell directors on the side of the quad normals");
+  v.number_list("fixed_box_mm", fixed_box_m, Unit::kMillimetre, {6, 6},
+                "[xmin, ymin, zmin, xmax, ymax, zmax]: nodes of `mesh` in this box are clamped (all six coordinates; "
+                "effect fixed_nodes)");
+  v.number_list("load_box_mm", load_box_m, Unit::kMillimetre, {6, 6},
+                "box of the nodes of `mesh` that share point_load_n equally (effect point_loads)");
+  v.number_list("point_load_n", point_load_N, Unit::kNone, {3, 3},
+                "[fx, fy, fz] total force [N] on the nodes in load_box_mm, ramped linearly from 0 at t = 0 to its value "
+                "at end_time_s (effect point_loads)");
+  v.number("pressure_mpa", pressure_Pa, Unit::kMegapascal, {-1e3, 1e3},
+           "pressure on the mid-surface of `mesh`, positive along the directors, ramped like point_load_n (effect "
+           "pressure)");
+  v.number_list("displaced_box_mm", displaced_box_m, Unit::kMillimetre, {6, 6},
+                "box of the nodes of `mesh` whose positions are prescribed (effect prescribed_displacement)");
+  v.number_list("displacement_mm", displacement_m, Unit::kMillimetre, {3, 3},
+                "[ux, uy, uz] displacement of the nodes in displaced_box_mm, ramped like point_load_n");
+  v.effect_list("effects", effects, "surface", "surface effects to simulate in this scenario").required();
+}
+
+StageDescriptor surface_stage_descriptor() {
+  StageDescriptor d;
+  d.name = "surface";
+  d.executable = "arthrosim-surface";
+  d.summary = "ANCF shells on foundations, osmotic pressure, mesh contact, HHT; one run per scenario";
+  d.block = block_schema_with_instances<SurfaceScenarioOptions>(
+      "surface", "options and scenarios of the deformable-surface stage", "scenarios",
+      "the scenarios to run, each with its own effects", "scenario");
+  d.outputs = {"surface"};
+  for (const common::EffectInfo& e : common::known_effects())
+    if (e.stage == common::EffectStage::kSurface)
+      d.effects.push_back({std::string(e.name), "surface", std::string(e.description)});
+  d.check = [](const common::Scene& scene) {
+    // Without imposed kinematics nothing sets the run's duration.
+    for (const common::BlockInstance& sc : scene.instances("surface")) {
+      if (!sc.wants("imposed_kinematics") && !sc.options.has("end_time_s"))
+        throw common::InputError(scene.file.string(), sc.line, sc.column,
+                                 "scenario '" + sc.name +
+                                     "' does not use imposed_kinematics, so it needs 'end_time_s' (in the scenario or "
+                                     "the surface block)");
+    }
+  };
+  return d;
+}
+
 SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   const double t_start = now_s();
-  const common::Scene scene = common::load_scene(options.scene);
-  const common::Scenario* sc = nullptr;
+  const common::Scene scene = load_scene(options.scene);
+  const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
+  const common::BlockInstance* sc = nullptr;
   if (!options.scenario.empty()) {
-    sc = &scene.require_scenario(options.scenario);
+    sc = &scene.require_instance("surface", options.scenario);
   } else {
-    if (scene.scenarios.size() != 1)
-      throw common::InputError(options.scene + ": error: the scene has " + std::to_string(scene.scenarios.size()) +
+    if (scenarios.size() != 1)
+      throw common::InputError(options.scene + ": error: the scene has " + std::to_string(scenarios.size()) +
                                " scenarios; choose one with --scenario");
-    sc = &scene.scenarios.front();
+    sc = &scenarios.front();
   }
-  const common::OptionBlock& o = sc->options;
+  const common::OptionBlock& o = sc->options;  // where each value was written (messages)
+  const SurfaceScenarioOptions opt = common::read_options<SurfaceScenarioOptions>(o);
 
   // ---- parameters (SI from the scene) ------------------------------------
-  cartilage::SurfaceParameters par;
-  par.material.youngs_modulus_Pa = o.si("youngs_modulus_mpa");
-  par.material.poisson_ratio = o.si("poisson_ratio");
-  par.material.density_kg_m3 = o.si("density_kg_per_m3");
-  par.shell_thickness_m = o.si("shell_thickness_mm");
-  par.foundation_stiffness_N_m3 = o.si("foundation_stiffness_n_per_mm3");
-  par.foundation_damping_N_s_m3 = o.si("foundation_damping_n_s_per_mm3");
-  if (o.text("periphery_normal") == "foundation") par.periphery_tie_N_m3 = o.si("periphery_tie_stiffness_n_per_mm3");
-  par.osmotic_pressure_Pa = o.si("osmotic_pressure_mpa");
+  cartilage::SurfaceParameters par = opt.physics;
+  par.osmotic_ramp_s = 0;  // set below (osmotic_ramp_s, or the seating ramp)
+  if (opt.periphery_normal == SurfaceScenarioOptions::PeripheryNormal::kFoundation)
+    par.periphery_tie_N_m3 = opt.periphery_tie_N_m3;
   // ---- kinematics (imposed_kinematics) -------------------------------------
   const bool moving = sc->wants("imposed_kinematics");
   std::unique_ptr<H5File> kin;
@@ -308,35 +408,31 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     return cartilage::interpolated_bone_motion(kin_times, std::move(poses), options.kinematics + ": " + ds);
   };
 
-  if (!o.has("end_time_s") && !moving)
+  if (!opt.end_time_s && !moving)
     throw common::InputError(scene.file.string(), sc->line,
                              "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
-  const double end_time = o.has("end_time_s") ? o.si("end_time_s") : kin_times.back() - kin_times.front();
+  const double end_time = opt.end_time_s ? *opt.end_time_s : kin_times.back() - kin_times.front();
   if (!(end_time > 0))
     throw common::InputError(scene.file.string(), sc->line, "scenario '" + sc->name + "': nothing to simulate (end time 0)");
-  const double dt = o.si("time_step_s");
-  const bool steady = o.flag("steady_state");
+  const double dt = opt.integrator.dt_s;
+  const bool steady = opt.steady_state;
   const bool quasi_static = steady || !sc->wants("inertia");
   if (steady && !(end_time > 0))
     throw common::InputError(scene.file.string(), sc->line, "steady_state needs end_time_s > 0");
-  double interval = o.si("output_interval_ms");
+  double interval = opt.output_interval_s;
   if (steady) interval = end_time;
   if (interval < dt) interval = dt;
 
-  cartilage::IntegratorOptions iopt;
+  numerics::IntegratorOptions iopt = opt.integrator;
+  iopt.same_tolerances();
   iopt.quasi_static = quasi_static;
-  iopt.alpha = o.si("hht_alpha");
   iopt.dt_s = steady ? end_time : dt;
-  const std::string& solver = o.text("linear_solver");
-  iopt.solver = solver == "cholmod"   ? cartilage::LinearSolverChoice::kCholmod
-                : solver == "umfpack" ? cartilage::LinearSolverChoice::kUmfpack
-                                      : cartilage::LinearSolverChoice::kAuto;
   // Opt-in keys of the dynamic path (docs/scenes.md; all off by default).
   // osmotic_ramp_s: without imposed kinematics the osmotic pressure rises
   // over this time, by the same smoothstep the seating ramp uses with
   // imposed kinematics (SurfaceParameters::osmotic_ramp_s, set below from
   // seating_time_s when bones move).
-  const double osmotic_ramp = o.si("osmotic_ramp_s");
+  const double osmotic_ramp = opt.physics.osmotic_ramp_s;
   if (osmotic_ramp > 0) {
     if (moving)
       throw common::InputError(scene.file.string(), o.value("osmotic_ramp_s").line,
@@ -351,7 +447,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   }
   // steady_state_change_mm: a time-stepping run ends once the largest
   // weighted coordinate change over one step is at most this (m here).
-  const double stop_change = o.si("steady_state_change_mm");
+  const double stop_change = opt.steady_state_change_m;
   if (stop_change > 0 && steady)
     throw common::InputError(scene.file.string(), o.value("steady_state_change_mm").line,
                              "scenario '" + sc->name + "': steady_state_change_mm stops a time-stepping run; "
@@ -360,7 +456,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   // ---- models -------------------------------------------------------------
   common::EffectLedger ledger("surface:" + sc->name);
   std::vector<SurfaceRun> runs;
-  const bool generic = o.has("mesh");
+  const bool generic = !opt.mesh.empty();
   const bool contact = sc->wants("mesh_contact");
   for (const char* e : {"fixed_nodes", "point_loads", "pressure", "prescribed_displacement"}) {
     if (sc->wants(e) && !generic)
@@ -383,28 +479,28 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   require("displacement_mm", "prescribed_displacement");
   if (generic) {
     SurfaceRun r;
-    const std::string mesh_file = o.path("mesh").string();
-    std::string ext = o.path("mesh").extension().string();
+    const std::string mesh_file = opt.mesh.string();
+    std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
     if (ext != ".obj" && ext != ".vtk")
       throw common::InputError(scene.file.string(), o.value("mesh").line,
                                "mesh '" + mesh_file + "': expected an .obj or .vtk quad mesh");
     r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file);
-    r.input.name = o.path("mesh").stem().string();
+    r.input.name = opt.mesh.stem().string();
     r.input.mesh.name = r.input.name;
     r.input.normals = cartilage::quad_mesh_vertex_normals(r.input.mesh);
     cartilage::GenericLoads& g = r.input.generic;
     g.ramp_time_s = end_time > 0 ? end_time : 1.0;
-    if (o.has("fixed_box_mm")) g.fixed_nodes = nodes_in_box(r.input.mesh, o.numbers_si("fixed_box_mm"));
-    if (o.has("load_box_mm")) g.load_nodes = nodes_in_box(r.input.mesh, o.numbers_si("load_box_mm"));
-    if (o.has("point_load_n")) {
-      const auto& f = o.numbers_si("point_load_n");
+    if (!opt.fixed_box_m.empty()) g.fixed_nodes = nodes_in_box(r.input.mesh, opt.fixed_box_m);
+    if (!opt.load_box_m.empty()) g.load_nodes = nodes_in_box(r.input.mesh, opt.load_box_m);
+    if (!opt.point_load_N.empty()) {
+      const auto& f = opt.point_load_N;
       g.total_force_N = Eigen::Vector3d(f[0], f[1], f[2]);
     }
-    if (o.has("pressure_mpa")) g.pressure_Pa = o.si("pressure_mpa");
-    if (o.has("displaced_box_mm")) g.displaced_nodes = nodes_in_box(r.input.mesh, o.numbers_si("displaced_box_mm"));
-    if (o.has("displacement_mm")) {
-      const auto& u = o.numbers_si("displacement_mm");
+    if (opt.pressure_Pa) g.pressure_Pa = *opt.pressure_Pa;
+    if (!opt.displaced_box_m.empty()) g.displaced_nodes = nodes_in_box(r.input.mesh, opt.displaced_box_m);
+    if (!opt.displacement_m.empty()) {
+      const auto& u = opt.displacement_m;
       g.displacement_m = Eigen::Vector3d(u[0], u[1], u[2]);
     }
     r.model = cartilage::build_surface_model(r.input, par, sc->effects, cartilage::BoneMotion::fixed(), &ledger);
@@ -423,12 +519,12 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     prepared_file = std::make_unique<H5File>(options.prepared, H5File::Mode::kRead);
     names = prepared_file->read_strings("/surfaces/names");
   }
-  const std::vector<std::string> surface_names = generic ? std::vector<std::string>{} : o.list("surfaces");
+  const std::vector<std::string> surface_names = generic ? std::vector<std::string>{} : opt.surfaces;
   // Contact pairs: "a:b", both simulated.
   std::vector<std::pair<int, int>> pair_index;
   std::vector<std::string> pair_names;
   if (contact) {
-    for (const std::string& pr : o.list("contact_pairs")) {
+    for (const std::string& pr : opt.contact_pairs) {
       const auto colon = pr.find(':');
       const std::string a = pr.substr(0, colon), b = colon == std::string::npos ? "" : pr.substr(colon + 1);
       const auto ia = std::find(surface_names.begin(), surface_names.end(), a);
@@ -447,17 +543,17 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   // osmotic_surfaces: which surfaces carry osmotic_pressure (empty: all).
   std::vector<std::string> osmotic_surfaces;
   if (!generic && sc->wants("osmotic_pressure")) {
-    osmotic_surfaces = o.list("osmotic_surfaces");
+    osmotic_surfaces = opt.osmotic_surfaces;
     for (const std::string& s : osmotic_surfaces)
       if (std::find(surface_names.begin(), surface_names.end(), s) == surface_names.end())
         throw common::InputError(scene.file.string(), o.value("osmotic_surfaces").line,
                                  "osmotic surface '" + s + "' is not one of this scenario's `surfaces`");
   }
-  const double seating = moving ? o.si("seating_time_s") : 0.0;
+  const double seating = moving ? opt.seating_time_s : 0.0;
   // With imposed kinematics the pressure rises during the seating ramp (a
   // step load on the resting shells would start a dynamic inflation).
   if (moving) par.osmotic_ramp_s = seating;
-  const double seat_offset = o.si("seating_offset_mm");
+  const double seat_offset = opt.seating_offset_m;
   for (const std::string& name : surface_names) {
     const H5File& prepared = *prepared_file;
     if (std::find(names.begin(), names.end(), name) == names.end()) {
@@ -482,10 +578,10 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       r.input.normals = (r.input.normals * r.X_WB0.linear().transpose()).eval();
     }
     cartilage::SurfaceParameters p = par;
-    if (o.flag("foundation_from_thickness") && sc->wants("foundation_springs")) {
+    if (opt.foundation_from_thickness && sc->wants("foundation_springs")) {
       const Eigen::VectorXd h = prepared.read_vector("/surfaces/" + name + "/quads/thickness");
       p.foundation_stiffness_per_node_N_m3 = cartilage::matched_foundation_stiffness(
-          h, o.si("matched_youngs_modulus_mpa"), o.si("matched_poisson_ratio"),
+          h, opt.matched_youngs_modulus_Pa, opt.matched_poisson_ratio,
           options.prepared + ": dataset /surfaces/" + name + "/quads/thickness");
     }
     std::vector<std::string> effects = sc->effects;
@@ -511,17 +607,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   }
   cartilage::CoupledShellSystem system(model_ptrs, model_names);
   system.attach_ledger(&ledger);
-  cartilage::ContactOptions copt;
-  copt.stiffness_N_m3 = o.si("contact_stiffness_n_per_mm3");
-  copt.damping_N_s_m3 = o.si("contact_damping_n_s_per_mm3");
-  copt.max_depth_m = o.si("contact_max_depth_mm");
-  copt.smoothing_m = o.si("contact_smoothing_mm");
-  copt.edge_edge = o.flag("contact_edge_edge");
-  copt.rim_vertices = o.flag("contact_rim_vertices");
-  copt.rim_max_depth_m = o.si("contact_rim_max_depth_mm");
-  copt.rim = o.text("contact_rim") == "rim_contacts" ? cartilage::RimTreatment::kRimContacts
-                                                      : cartilage::RimTreatment::kFadeInside;
-  copt.faded_vertex_weights = o.text("contact_vertex_weights") == "faded";
+  const cartilage::ContactOptions& copt = opt.contact;
   if (copt.faded_vertex_weights && copt.rim_vertices)
     throw common::InputError(options.scene + ": error: scenario '" + sc->name +
                              "': contact_rim_vertices applies to contact_vertex_weights: tributary only (faded "
@@ -542,7 +628,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   out.set_attribute("/", "schema", "arthrosim surface output 2");
   out.set_attribute("/", "scenario", sc->name);
   out.set_attribute("/", "prepared_model", generic ? std::string() : options.prepared);
-  out.set_attribute("/", "mesh", generic ? o.path("mesh").string() : std::string());
+  out.set_attribute("/", "mesh", generic ? opt.mesh.string() : std::string());
   out.set_attribute("/", "mode", steady ? "steady_state" : (quasi_static ? "quasi_static" : "hht"));
   out.set_attribute("/", "status", "running");
   out.set_attribute("/", "seating_time_s", seating);
@@ -711,21 +797,15 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
 
   // ---- integrate ----------------------------------------------------------
   if (contact) iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
-  iopt.reuse_factorization = o.flag("newton_reuse_factorization");
   if (iopt.reuse_factorization && contact)
     throw common::InputError(scene.file.string(), o.value("newton_reuse_factorization").line,
                              "scenario '" + sc->name + "': newton_reuse_factorization cannot be combined with "
                              "mesh_contact (its Newton line search needs a fresh tangent)");
-  iopt.max_newton_iterations = static_cast<int>(o.si("max_newton_iterations"));
-  iopt.residual_rtol = o.si("newton_tolerance");
-  iopt.increment_rtol = o.si("newton_tolerance");
-  iopt.residual_atol_N = o.si("newton_residual_floor_n");
-  iopt.increment_atol_m = o.si("newton_increment_floor_mm");
   // Imposed kinematics: each step starts from the surfaces carried by their
   // bones (rigid predictor), so Newton only finds the deformation change.
   if (moving)
-    iopt.predictor = o.text("predictor") == "extrapolated" ? cartilage::IntegratorOptions::Predictor::kSystemExtrapolated
-                                                           : cartilage::IntegratorOptions::Predictor::kSystem;
+    iopt.predictor = opt.predictor == SurfaceScenarioOptions::Predictor::kExtrapolated ? numerics::IntegratorOptions::Predictor::kSystemExtrapolated
+                                                           : numerics::IntegratorOptions::Predictor::kSystem;
   Eigen::VectorXd q0(system.num_dofs());
   for (int k = 0; k < system.num_models(); ++k)
     q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();
@@ -746,7 +826,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     common::log_warn("surface " + sc->name + ": step rejected and halved (" + std::to_string(++rejections_logged) +
                      " so far): " + rejection);
   };
-  HhtIntegrator integrator(system, iopt);
+  numerics::HhtIntegrator integrator(system, iopt);
   integrator.initialize(0.0, q0);
   common::log_info("scenario " + sc->name + ": " +
                    (steady ? std::string("steady state (static equilibrium at t = ") + std::to_string(end_time) + " s)"
@@ -764,8 +844,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   if (!options.progress) popt.mode = common::ProgressOptions::Mode::kOff;
   common::Progress progress("surface " + sc->name, std::max<std::int64_t>(n_steps_expected, 1), popt);
   const double step = steady ? total_time : dt;
-  const double limit = o.si("penetration_limit");
-  const bool stop_on_penetration = o.text("penetration_action") == "stop";
+  const double limit = opt.penetration_limit;
+  const bool stop_on_penetration = opt.stop_on_penetration;
   double t = 0;
   int k_out = 1;
   // steady_state_change_mm: each step is taken by advance_to_steady_state
@@ -791,8 +871,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           integrator.advance_to(t_next);
         }
         const double wall = now_s() - w0;
-        const cartilage::IntegratorStatistics& s = integrator.statistics();
-        const cartilage::StepRecord& rec = s.log.back();
+        const numerics::IntegratorStatistics& s = integrator.statistics();
+        const numerics::StepRecord& rec = s.log.back();
         const double r0 = rec.residual_norms.front(), rl = rec.residual_norms.back();
         if (common::log_level() >= common::LogLevel::kDebug) {  // --verbose: the step's Newton history
           std::ostringstream m;
@@ -921,7 +1001,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   }
   if (osmotic_ramp > 0) out.set_attribute("/", "osmotic_ramp_s", osmotic_ramp);
   for (auto& a : contact_out) a.close();
-  const cartilage::IntegratorStatistics& s = integrator.statistics();
+  const numerics::IntegratorStatistics& s = integrator.statistics();
   const cartilage::CoupledSystemStatistics& cs = system.statistics();
   out.set_attribute("/solver", "steps", static_cast<std::int64_t>(s.steps));
   out.set_attribute("/solver", "newton_iterations", static_cast<std::int64_t>(s.newton_iterations));

@@ -5,10 +5,81 @@
 // effects (cartilage/surface_model.h), integrates it (HHT, quasi-static, or a
 // direct steady-state solve) and writes the output HDF5 + XDMF sidecar
 // (schema: docs/surface_output.md).
+#include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "cartilage/mesh_contact.h"
+#include "cartilage/surface_model.h"
+#include "common/options.h"
+#include "numerics/hht_integrator.h"
+
 namespace arthrosim::pipelines {
+
+struct StageDescriptor;
+/// The surface stage's entry in the stage table (pipelines/stages.h).
+StageDescriptor surface_stage_descriptor();
+
+/// One scenario of the scene's surface block: the keys every scenario shares
+/// with the block (declare_shared; a scenario may set each for itself) and
+/// those only a scenario takes (declare_instance). SI units.
+struct SurfaceScenarioOptions {
+  // ---- shared with the surface block ----
+  /// Cartilage surfaces of the prepared model simulated as shells.
+  std::vector<std::string> surfaces{"femur", "tibia_medial", "tibia_lateral"};
+  /// Simulated time [s]; absent: a scenario with imposed_kinematics runs for
+  /// the kinematics file's duration (any other needs it).
+  std::optional<double> end_time_s;
+  double output_interval_s = 5 * common::units::ms;  ///< time between written frames
+  /// Time step, HHT alpha, Newton tolerances, linear solver.
+  numerics::IntegratorOptions integrator;
+  /// Solve directly for the static equilibrium at end_time_s.
+  bool steady_state = false;
+  /// > 0: a time-stepping run ends once the largest weighted coordinate change
+  /// over one step is at most this [m].
+  double steady_state_change_m = 0;
+  /// Shell material, foundation, osmotic pressure (and its ramp).
+  cartilage::SurfaceParameters physics;
+  /// osmotic_pressure: the surfaces that carry it (empty: all simulated).
+  std::vector<std::string> osmotic_surfaces;
+  /// foundation_springs with k_i = K / h_i from the prepared thickness h_i.
+  bool foundation_from_thickness = false;
+  double matched_youngs_modulus_Pa = 10 * common::units::mpa;  ///< E of that layer
+  double matched_poisson_ratio = 0.45;                          ///< nu of that layer
+  enum class PeripheryNormal { kClamped, kFoundation };
+  PeripheryNormal periphery_normal = PeripheryNormal::kClamped;
+  double periphery_tie_N_m3 = 1000 * common::units::n_per_mm3;  ///< kFoundation's tie stiffness
+  /// Pairs in mesh contact, each "a:b" (force output on b).
+  std::vector<std::string> contact_pairs{"femur:tibia_medial", "femur:tibia_lateral"};
+  cartilage::ContactOptions contact;
+  double penetration_limit = 0.1;     ///< the seed's accuracy rule: penetration / deflection
+  bool stop_on_penetration = false;   ///< penetration_action: stop (else warn)
+  enum class Predictor { kRigid, kExtrapolated };
+  Predictor predictor = Predictor::kExtrapolated;  ///< imposed_kinematics: Newton start of a step
+  double seating_time_s = 0.02;                     ///< seating ramp before imposed kinematics
+  double seating_offset_m = 1 * common::units::mm;  ///< its initial separation
+
+  // ---- a scenario's own ----
+  std::string description;
+  /// Generic quad mesh (OBJ or legacy VTK, mm) simulated instead of the
+  /// prepared model's surfaces; empty = none.
+  std::filesystem::path mesh;
+  std::vector<double> fixed_box_m;      ///< [xmin, ymin, zmin, xmax, ymax, zmax]; empty = none
+  std::vector<double> load_box_m;       ///< same; empty = none
+  std::vector<double> point_load_N;     ///< [fx, fy, fz]; empty = none
+  std::optional<double> pressure_Pa;    ///< on the mid-surface of `mesh`
+  std::vector<double> displaced_box_m;  ///< same box form; empty = none
+  std::vector<double> displacement_m;   ///< [ux, uy, uz]; empty = none
+  std::vector<std::string> effects;     ///< the scenario's effects
+
+  void declare_shared(common::OptionVisitor& v);
+  void declare_instance(common::OptionVisitor& v);
+  void declare(common::OptionVisitor& v) {
+    declare_shared(v);
+    declare_instance(v);
+  }
+};
 
 struct SurfaceStageOptions {
   std::string prepared;    ///< prepared-model HDF5

@@ -29,6 +29,8 @@
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
 #include "pipelines/apps/name_value.h"
+#include "pipelines/comak_stage.h"
+#include "pipelines/stages.h"
 
 using namespace arthrosim;
 namespace msk = arthrosim::musculoskeletal;
@@ -73,7 +75,7 @@ int main(int argc, char** argv) {
   std::string model_path, trial_path, out, sto_prefix, scene_path, prepared_path;
   int first = 0, last = -1, stride = 1;
   msk::ComakOptions o;
-  double lowpass_hz = 6.0;
+  double lowpass_hz = msk::GaitTrialOptions().lowpass.cutoff_hz;  // the one default (signal.h)
   bool verbose = false, quiet = false, no_pressure = false;
   app.add_option("--model", model_path,
                  "model URDF (e.g. data/models/knee_parametric/knee.urdf) or a model folder")
@@ -153,19 +155,18 @@ int main(int argc, char** argv) {
     std::vector<std::string> effects = {"ligaments", "muscles", "tibiofemoral_contact",
                                         "patellofemoral_contact"};
     if (!scene_path.empty()) {
-      const common::Scene scene = common::load_scene(scene_path);
-      if (scene.comak) {
-        const common::OptionBlock& c = *scene.comak;
-        effects = c.list("effects");
-        if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.si("ipopt_tolerance");
-        if (!app.count("--max-iterations"))
-          o.max_iterations = static_cast<int>(c.integer("ipopt_max_iterations"));
-        if (!app.count("--activation-min")) o.activation_min = c.si("activation_min");
-        if (!app.count("--reserve-actuators")) o.reserve_actuators = c.flag("reserve_actuators");
-        if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.flag("ankle_equilibrium");
-        if (!app.count("--body-inertia")) o.body_inertia = c.flag("body_inertia");
-        if (!app.count("--lowpass-hz")) lowpass_hz = c.si("lowpass_cutoff_hz");
-        if (!single_start) o.second_start = c.flag("second_start");
+      const common::Scene scene = pipelines::load_scene(scene_path);
+      if (scene.has_block("comak")) {
+        const pipelines::ComakStageOptions c = common::read_options<pipelines::ComakStageOptions>(scene.block("comak"));
+        effects = c.effects;
+        if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.solver.ipopt_tolerance;
+        if (!app.count("--max-iterations")) o.max_iterations = c.solver.max_iterations;
+        if (!app.count("--activation-min")) o.activation_min = c.solver.activation_min;
+        if (!app.count("--reserve-actuators")) o.reserve_actuators = c.solver.reserve_actuators;
+        if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.solver.ankle_equilibrium;
+        if (!app.count("--body-inertia")) o.body_inertia = c.solver.body_inertia;
+        if (!app.count("--lowpass-hz")) lowpass_hz = c.trial.lowpass.cutoff_hz;
+        if (!single_start) o.second_start = c.solver.second_start;
       }
     }
     if (single_start) o.second_start = false;

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <iterator>
 #include <thread>
 
 #include "common/effects.h"
@@ -18,6 +19,7 @@
 #include "common/version.h"
 #include "pipelines/apps/name_value.h"
 #include "pipelines/runner.h"
+#include "pipelines/stages.h"
 #include "pipelines/study.h"
 
 namespace {
@@ -136,7 +138,11 @@ int main(int argc, char** argv) {
                   "surface.scenarios.gait.end_time_s=0.3 or prepare.edge_length_mm=2.5); repeatable")
       ->allow_extra_args(false);
 
-  CLI::App* schema = app.add_subcommand("schema", "print every scene key and effect");
+  CLI::App* schema = app.add_subcommand("schema", "print every scene key and effect (docs/scenes.md's reference)");
+  std::string write_docs;
+  schema->add_option("--write-docs", write_docs,
+                     "replace the generated reference between the markers in this file (docs/scenes.md) instead of "
+                     "printing it");
 
   CLI::App* study = app.add_subcommand("study", "studies of a scene (accuracy versus time)");
   study->require_subcommand(1);
@@ -188,14 +194,23 @@ int main(int argc, char** argv) {
   }
 
   if (schema->parsed()) {
-    std::cout << "# Scene keys (from option_schema() in common/scene.cc)\n"
-              << cm::schema_markdown() << "\n# Effects\n\n| effect | stage | meaning |\n"
-              << "|---|---|---|\n";
-    for (const cm::EffectInfo& e : cm::known_effects()) {
-      std::cout << "| `" << e.name << "` | " << cm::to_string(e.stage) << " | " << e.description
-                << " |\n";
+    if (write_docs.empty()) {
+      std::cout << pl::schema_reference();
+      return 0;
     }
-    return 0;
+    try {
+      std::ifstream in(write_docs, std::ios::binary);
+      if (!in) throw cm::InputError(write_docs, 0, "cannot read the file");
+      const std::string doc((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      const std::string updated = pl::with_schema_reference(doc, write_docs);
+      std::ofstream(write_docs, std::ios::binary) << updated;
+      std::cout << "arthrosim: " << (updated == doc ? "already up to date: " : "updated the reference in ")
+                << write_docs << "\n";
+      return 0;
+    } catch (const cm::InputError& e) {
+      std::cerr << "arthrosim schema: " << e.what() << "\n";
+      return 1;
+    }
   }
 
   try {
@@ -206,14 +221,14 @@ int main(int argc, char** argv) {
       std::vector<std::pair<std::string, std::string>> settings;
       for (const std::string& item : set_items) settings.push_back(pl::split_name_value(item, "--set", "KEY=VALUE"));
       // Checks the original scene and every key (the values: when the copy is loaded below).
-      const std::string text = cm::edit_scene_text(scene_file, settings);
+      const std::string text = cm::edit_scene_text(scene_file, pl::scene_schema(), settings);
       std::filesystem::create_directories(out_dir);
       file = (std::filesystem::path(out_dir) / "scene_set.yaml").string();
       std::ofstream(file, std::ios::binary) << text;
       std::cout << "arthrosim: scene " << scene_file << " with " << set_items.size()
                 << " setting(s) written to " << file << "\n";
     }
-    const cm::Scene scene = cm::load_scene(file);
+    const cm::Scene scene = pl::load_scene(file);
     options.out_dir = out_dir;
     options.stage_dir = pl::default_stage_dir();
     const pl::RunReport report = pl::run_scene(scene, options, std::cout);

@@ -40,7 +40,7 @@
 #include <memory>
 #include <string>
 
-#include "cartilage/linear_solver.h"
+#include "numerics/sparse_direct_solver.h"
 
 namespace {
 
@@ -85,7 +85,7 @@ SpMat symmetric_part(const SpMat& A) { return 0.5 * (A + SpMat(A.transpose())); 
 void Umfpack(benchmark::State& state) {
   const SpMat* A = saved_matrix_or_skip(state);
   if (!A) return;
-  arthrosim::cartilage::SparseDirectSolver lu(arthrosim::cartilage::LinearSolverKind::kUmfpack);
+  arthrosim::numerics::SparseDirectSolver lu(arthrosim::numerics::LinearSolverKind::kUmfpack);
   lu.analyze(*A);
   bool ok = true;
   for (auto _ : state) ok = lu.factorize(*A) && ok;
@@ -106,7 +106,7 @@ void CholmodSymmetricPart(benchmark::State& state) {
   SpMat S = symmetric_part(*A);
   const double sigma = state.range(0) < 0 ? 0.0 : std::pow(10.0, static_cast<double>(state.range(0)));
   for (int i = 0; i < S.rows(); ++i) S.coeffRef(i, i) += sigma;
-  arthrosim::cartilage::SparseDirectSolver llt(arthrosim::cartilage::LinearSolverKind::kCholmod);
+  arthrosim::numerics::SparseDirectSolver llt(arthrosim::numerics::LinearSolverKind::kCholmod);
   llt.analyze(S);
   bool ok = true;
   for (auto _ : state) ok = llt.factorize(S);

@@ -37,7 +37,7 @@
 #include <string>
 
 #include "../cartilage/shell_test_meshes.h"
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/shell_model.h"
 
 namespace arthrosim::cartilage {
@@ -69,7 +69,7 @@ struct OsmoticPatch {
 // time noisy, so both are printed.
 double cpu_seconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
-void report(benchmark::State& state, const char* name, const OsmoticPatch& p, const HhtIntegrator& s, double wall,
+void report(benchmark::State& state, const char* name, const OsmoticPatch& p, const numerics::HhtIntegrator& s, double wall,
             double cpu) {
   const auto& st = s.statistics();
   const double per_step = st.steps ? static_cast<double>(st.newton_iterations) / st.steps : 0;
@@ -95,12 +95,12 @@ void BM_OsmoticQuasiStatic(benchmark::State& state) {
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = cpu_seconds();
     OsmoticPatch p(false);
-    IntegratorOptions o;
+    numerics::IntegratorOptions o;
     o.quasi_static = true;
     o.dt_s = 1.0;
     o.max_newton_iterations = 40;
-    o.solver = cholmod ? LinearSolverChoice::kCholmod : LinearSolverChoice::kUmfpack;
-    HhtIntegrator s(*p.model, o);
+    o.solver = cholmod ? numerics::LinearSolverChoice::kCholmod : numerics::LinearSolverChoice::kUmfpack;
+    numerics::HhtIntegrator s(*p.model, o);
     s.initialize(0, p.model->reference_state());
     s.advance_to(1.0);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -114,11 +114,11 @@ void BM_OsmoticHht(benchmark::State& state) {
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = cpu_seconds();
     OsmoticPatch p(true);
-    IntegratorOptions o;  // alpha = -0.2, dt = 1e-4 s (seed)
-    o.solver = state.range(2) == 1 ? LinearSolverChoice::kCholmod : LinearSolverChoice::kUmfpack;
+    numerics::IntegratorOptions o;  // alpha = -0.2, dt = 1e-4 s (seed)
+    o.solver = state.range(2) == 1 ? numerics::LinearSolverChoice::kCholmod : numerics::LinearSolverChoice::kUmfpack;
     o.reuse_factorization = state.range(1) == 1;
     o.residual_rtol = std::pow(10.0, -static_cast<double>(state.range(3)));
-    HhtIntegrator s(*p.model, o);
+    numerics::HhtIntegrator s(*p.model, o);
     s.initialize(0, p.model->reference_state());
     Eigen::VectorXd prev = s.q();
     const Eigen::VectorXd& w = p.model->increment_weights();

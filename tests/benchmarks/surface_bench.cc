@@ -20,7 +20,7 @@
 //    list and the scene defaults, which are the seed's values) integrated by
 //    HHT (alpha -0.2) from rest until the largest weighted change of the
 //    coordinates over one step is below 1e-9 m (as
-//    HhtIntegrator::advance_to_steady_state; 1e-6 of the 1.2 mm deflection);
+//    numerics::HhtIntegrator::advance_to_steady_state; 1e-6 of the 1.2 mm deflection);
 //    dt in microseconds, solver 0 = UMFPACK (exact tangent) / 1 = CHOLMOD on
 //    (K + K^T)/2, reuse 1 = modified Newton (factorisation kept while the
 //    residual contracts), the osmotic pressure ramped over ramp_ms (0: full
@@ -55,13 +55,14 @@
 #include <fstream>
 #include <string>
 
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/surface_model.h"
 #include "common/metadata.h"
 #include "common/scene.h"
 #include "common/scene_edit.h"
 #include "pipelines/prepare.h"
 #include "pipelines/runner.h"
+#include "pipelines/stages.h"
 #include "pipelines/surface_stage.h"
 
 namespace arthrosim::pipelines {
@@ -99,7 +100,7 @@ std::string osmotic_scene(const std::string& linear_solver) {
   const std::string bundled = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/osmotic.yaml";
   if (linear_solver == "auto") return bundled;
   const std::string scene = (bench_dir() / ("osmotic_" + linear_solver + ".yaml")).string();
-  std::ofstream(scene) << common::edit_scene_text(bundled, {{"surface.scenarios.osmotic.linear_solver", linear_solver}});
+  std::ofstream(scene) << common::edit_scene_text(bundled, pipelines::scene_schema(), {{"surface.scenarios.osmotic.linear_solver", linear_solver}});
   return scene;
 }
 
@@ -223,12 +224,12 @@ void BM_OsmoticAnchorDynamic(benchmark::State& state) {
   const bool plausible_c = state.range(4) == 1;
   if (plausible_c) par_dyn.foundation_damping_N_s_m3 = 7e6;
   auto stat_model = cartilage::build_surface_model(in, par, effects, cartilage::BoneMotion::fixed(), nullptr);
-  cartilage::IntegratorOptions so;
+  numerics::IntegratorOptions so;
   so.quasi_static = true;
   so.dt_s = 1.0;
   so.max_newton_iterations = 30;
-  so.solver = cartilage::LinearSolverChoice::kCholmod;
-  cartilage::HhtIntegrator stat(*stat_model, so);
+  so.solver = numerics::LinearSolverChoice::kCholmod;
+  numerics::HhtIntegrator stat(*stat_model, so);
   stat.initialize(0, stat_model->reference_state());
   stat.advance_to(1.0);
   const double w_static = cartilage::nodal_deflection(*stat_model, stat.q()).maxCoeff();
@@ -236,17 +237,17 @@ void BM_OsmoticAnchorDynamic(benchmark::State& state) {
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = cpu_seconds();
     auto model = cartilage::build_surface_model(in, par_dyn, effects, cartilage::BoneMotion::fixed(), nullptr);
-    cartilage::IntegratorOptions o;  // alpha -0.2 (seed)
+    numerics::IntegratorOptions o;  // alpha -0.2 (seed)
     o.dt_s = dt;
     o.reuse_factorization = reuse;
-    o.solver = cholmod ? cartilage::LinearSolverChoice::kCholmod : cartilage::LinearSolverChoice::kUmfpack;
+    o.solver = cholmod ? numerics::LinearSolverChoice::kCholmod : numerics::LinearSolverChoice::kUmfpack;
     o.keep_step_log = false;
-    cartilage::HhtIntegrator hht(*model, o);
+    numerics::HhtIntegrator hht(*model, o);
     hht.initialize(0, model->reference_state());
     const double tol = 1e-9;
     double change = 0;
     bool steady = false;
-    // Steps as HhtIntegrator::advance_to_steady_state takes them, with a
+    // Steps as numerics::HhtIntegrator::advance_to_steady_state takes them, with a
     // progress line every `every` steps (environment SURFACE_BENCH_EVERY).
     const char* every_env = std::getenv("SURFACE_BENCH_EVERY");
     const long every = every_env ? std::atol(every_env) : 0;
@@ -300,7 +301,7 @@ GaitInputs make_gait_inputs(const std::string& tag, const std::string& prepared 
   GaitInputs g;
   const fs::path out = bench_dir() / tag;
   fs::create_directories(out);
-  for (const StageStep& s : plan_stages(common::load_scene(gait_scene()), out)) {
+  for (const StageStep& s : plan_stages(pipelines::load_scene(gait_scene()), out)) {
     if (s.name == "prepare" && !prepared.empty()) {
       g.prepared = prepared;
       continue;
@@ -404,7 +405,7 @@ void BM_OnlyRequestedEffects(benchmark::State& state) {
     std::ofstream(p) << text;
     return p;
   };
-  const common::Scene osmotic = common::load_scene(fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/osmotic.yaml");
+  const common::Scene osmotic = pipelines::load_scene(fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/osmotic.yaml");
   bool comak_planned = false;
   for (const StageStep& s : plan_stages(osmotic, bench_dir() / "osmotic_plan")) comak_planned |= s.name == "comak";
   for (auto _ : state) {

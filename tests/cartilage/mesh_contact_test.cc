@@ -13,7 +13,7 @@
 #include <cstdlib>
 
 #include "cartilage/coupled_system.h"
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/mesh_contact.h"
 #include "cartilage/shell_model.h"
 #include "common/effects.h"
@@ -102,6 +102,7 @@ TEST(MeshContact, NewtonTangentMatchesFiniteDifferences) {
     auto A = make_model(plate, 1e6, 0.3e-3), B = make_model(cap, 1e6, 0.3e-3);
     CoupledShellSystem sys({A.get(), B.get()}, {"plate", "cap"});
     ContactOptions o;
+    o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
     o.stiffness_N_m3 = 5e10;
     o.damping_N_s_m3 = damped ? 2e8 : 0.0;
     sys.add_contact("plate-cap", 0, 1, o);
@@ -143,6 +144,7 @@ TEST(MeshContact, DepthFadeTangentMatchesFiniteDifferences) {
     auto A = make_model(plate, 1e6, 0.3e-3), B = make_model(cap, 1e6, 0.3e-3);
     CoupledShellSystem sys({A.get(), B.get()}, {"plate", "cap"});
     ContactOptions o;
+    o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
     o.stiffness_N_m3 = 5e10;
     o.max_depth_m = faded ? 0.36e-3 : 1e-3;
     sys.add_contact("plate-cap", 0, 1, o);
@@ -179,6 +181,8 @@ TEST(MeshContact, RimFadeInsideIsContinuousAndNeverSideways) {
       testing::flipped(shifted(testing::plate_mesh(6, 6, 4e-3, 4e-3, 0.2), {-2e-3, -2e-3, 0}), -30e-6);
   for (RimTreatment rim : {RimTreatment::kFadeInside, RimTreatment::kRimContacts}) {
     ContactOptions o;
+    o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
+    o.rim_max_depth_m = 0;  // rim contacts cut off at max_depth_m
     o.stiffness_N_m3 = 5e10;
     o.rim = rim;
     const bool fade = rim == RimTreatment::kFadeInside;
@@ -269,6 +273,8 @@ TEST(MeshContact, BoundaryFadeTangentMatchesFiniteDifferences) {
   const common::QuadMesh plate = shifted(testing::plate_mesh(8, 8, 5e-3, 5e-3, 0.15), {-2.5e-3, -2.5e-3, 0});
   const common::QuadMesh cap = testing::flipped(testing::spherical_patch(5, 3e-3, 6e-3), -0.3e-3);
   ContactOptions o;
+  o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
+  o.rim_max_depth_m = 0;  // rim contacts cut off at max_depth_m
   o.stiffness_N_m3 = 5e10;
   o.rim = RimTreatment::kRimContacts;
   MeshContact mc("plate-cap", ContactSurface(plate), ContactSurface(cap), o);
@@ -325,6 +331,7 @@ TEST(MeshContact, EdgeEdgeCatchesCrossingRidges) {
   b.Q.resize(2, 4);
   b.Q << 0, 1, 2, 3, 3, 2, 4, 5;
   ContactOptions o;
+  o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
   o.stiffness_N_m3 = 1e10;
   o.max_depth_m = 1e-3;
   o.edge_edge = true;
@@ -373,14 +380,14 @@ TEST(MeshContact, UncoupledSystemIsItsModels) {
   Eigen::VectorXd q(sys.num_dofs());
   q << A->reference_state(), B->reference_state();
   for (int i = 0; i < q.size(); ++i) q(i) += 1e-5 * std::cos(1.3 * i);
-  EvalRequest r;
+  numerics::EvalRequest r;
   r.q = &q;
   Eigen::VectorXd F;
   Eigen::SparseMatrix<double> K;
   sys.evaluate(r, F, nullptr, &K);
   Eigen::VectorXd qa = sys.segment(0, q), qb = sys.segment(1, q), Fa, Fb;
   Eigen::SparseMatrix<double> Ka, Kb;
-  EvalRequest ra = r, rb = r;
+  numerics::EvalRequest ra = r, rb = r;
   ra.q = &qa;
   rb.q = &qb;
   A->evaluate(ra, Fa, nullptr, &Ka);
@@ -402,15 +409,15 @@ void fix_in_plane(ShellModel& m) {
 }
 
 /// Solves the quasi-static contact problem in `steps` load steps to t = 1.
-void solve_quasi_static(CoupledShellSystem& sys, int steps, Eigen::VectorXd& q, IntegratorStatistics* stats = nullptr) {
-  IntegratorOptions opt;
+void solve_quasi_static(CoupledShellSystem& sys, int steps, Eigen::VectorXd& q, numerics::IntegratorStatistics* stats = nullptr) {
+  numerics::IntegratorOptions opt;
   opt.quasi_static = true;
   opt.dt_s = 1.0 / steps;
   opt.max_newton_iterations = 25;
   opt.line_search_halvings = 8;
   opt.residual_rtol = 1e-9;
   opt.residual_atol_N = 1e-8;
-  HhtIntegrator hht(sys, opt);
+  numerics::HhtIntegrator hht(sys, opt);
   hht.initialize(0.0, q);
   try {
     hht.advance_to(1.0);
@@ -465,11 +472,12 @@ TEST(MeshContact, RigidSphereOnFoundationMatchesClosedForm) {
     S->add_constraint(std::move(c));
     CoupledShellSystem sys({P.get(), S.get()}, {"plate", "sphere"});
     ContactOptions o;
+    o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
     o.stiffness_N_m3 = kc;
     sys.add_contact("plate-sphere", 0, 1, o);
     Eigen::VectorXd q(sys.num_dofs());
     q << P->reference_state(), S->reference_state();
-    IntegratorStatistics st;
+    numerics::IntegratorStatistics st;
     solve_quasi_static(sys, 4, q, &st);
     const ContactPairReport rep = sys.contact_report(0, q);
     const double F = -rep.total_force_a.z();  // the sphere pushes the plate down
@@ -509,6 +517,7 @@ TEST(MeshContact, TwoShellsShareLoadAsSpringsInSeries) {
   fix_in_plane(*B);
   CoupledShellSystem sys({A.get(), B.get()}, {"lower", "upper"});
   ContactOptions o;
+  o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
   o.stiffness_N_m3 = kc;
   sys.add_contact("lower-upper", 0, 1, o);
   Eigen::VectorXd q(sys.num_dofs());
@@ -536,6 +545,7 @@ TEST(MeshContact, DeterministicAcrossThreadCounts) {
   const common::QuadMesh plate = shifted(testing::plate_mesh(30, 30, 12e-3, 12e-3, 0.2), {-6e-3, -6e-3, 0});
   const common::QuadMesh cap = testing::flipped(testing::spherical_patch(30, 10e-3, 10e-3), -0.2e-3);
   ContactOptions o;
+  o.rim_vertices = true;  // rim nodes may be penetrating vertices in this set-up
   MeshContact mc("c", ContactSurface(plate), ContactSurface(cap), o);
   const int saved = omp_get_max_threads();
   omp_set_num_threads(1);
@@ -554,7 +564,7 @@ TEST(MeshContact, DeterministicAcrossThreadCounts) {
 }
 
 // A small plate pushed 0.1 mm into a larger one: every one of its nodes
-// penetrates. With rim_vertices (the library default) its 16 rim nodes are
+// penetrates. With rim_vertices its 16 rim nodes are
 // penetrating vertices too; without, rim nodes of both plates only carry
 // their triangles: no active contact has a rim vertex, the small plate's 9
 // interior nodes still do, the large plate's vertices still meet the small
@@ -656,6 +666,7 @@ TEST(MeshContact, FadedVertexWeightsAreTheFadeIntegrals) {
 TEST(MeshContact, RejectsBadOptions) {
   const common::QuadMesh plate = testing::plate_mesh(2, 2, 1e-3, 1e-3);
   ContactOptions o;
+  o.rim_max_depth_m = 0;  // rim contacts cut off at max_depth_m
   o.stiffness_N_m3 = -1;
   EXPECT_THROW(MeshContact("c", ContactSurface(plate), ContactSurface(plate), o), common::InputError);
   o = ContactOptions();

@@ -89,7 +89,7 @@ TEST(ShellTerms, FollowerPressureTangentIsNonSymmetricAndConsistent) {
     // the projected area vector (closed-form: p * integral n dA).
     Eigen::VectorXd F;
     const Eigen::VectorXd q0 = m.reference_state();
-    EvalRequest r;
+    numerics::EvalRequest r;
     r.q = &q0;
     m.evaluate(r, F, nullptr, nullptr);
     Eigen::Vector3d total = Eigen::Vector3d::Zero();
@@ -139,7 +139,7 @@ TEST(ShellTerms, PeripheryTangentialTieTangentAndAction) {
     Eigen::VectorXd q = m.reference_state();
     q.segment<3>(6 * i) += 1e-6 * (along_normal ? n : tangent);
     Eigen::VectorXd F;
-    EvalRequest r;
+    numerics::EvalRequest r;
     r.q = &q;
     r.v = &v;
     m.evaluate(r, F, nullptr, nullptr);
@@ -270,7 +270,7 @@ TEST(ShellTerms, AssemblyIsDeterministicAcrossThreadCounts) {
     omp_set_num_threads(threads);
     Eigen::VectorXd F;
     Eigen::SparseMatrix<double> K;
-    EvalRequest r;
+    numerics::EvalRequest r;
     r.q = &q;
     m.evaluate(r, F, nullptr, &K);
     return std::make_pair(F, Eigen::VectorXd(Eigen::Map<Eigen::VectorXd>(K.valuePtr(), K.nonZeros())));
@@ -288,7 +288,7 @@ TEST(ShellTerms, NonFiniteInputNamesTermAndCoordinate) {
   Eigen::VectorXd q = m.reference_state();
   q(6 * 4 + 2) = std::numeric_limits<double>::quiet_NaN();
   Eigen::VectorXd F;
-  EvalRequest r;
+  numerics::EvalRequest r;
   r.q = &q;
   try {
     m.evaluate(r, F, nullptr, nullptr);

@@ -6,7 +6,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
@@ -117,7 +117,7 @@ TEST(SurfaceModel, OsmoticPressureRampsOverTheGivenTime) {
   auto plain = build_surface_model(s, SurfaceParameters{}, {"osmotic_pressure"}, BoneMotion::fixed(), nullptr);
   const Eigen::VectorXd q = ramped->reference_state();
   auto force = [&](ShellModel& m, double t) {
-    EvalRequest r;
+    numerics::EvalRequest r;
     r.t = t;
     r.q = &q;
     Eigen::VectorXd F;
@@ -190,11 +190,11 @@ TEST(SurfaceModel, DynamicOsmoticPathEndsAtTheStaticSteadyState) {
   };
   // Static equilibrium in one quasi-static load step (the steady_state solve).
   auto stat_model = build_surface_model(s, SurfaceParameters{}, effects, BoneMotion::fixed(), nullptr);
-  IntegratorOptions so;
+  numerics::IntegratorOptions so;
   so.quasi_static = true;
   so.dt_s = 1.0;
   so.max_newton_iterations = 30;
-  HhtIntegrator stat(*stat_model, so);
+  numerics::HhtIntegrator stat(*stat_model, so);
   stat.initialize(0, stat_model->reference_state());
   stat.advance_to(1.0);
   const Eigen::VectorXd& w = stat_model->increment_weights();
@@ -208,10 +208,10 @@ TEST(SurfaceModel, DynamicOsmoticPathEndsAtTheStaticSteadyState) {
   ASSERT_GE(w_stat.minCoeff(), -1e-12);
   for (double dt : {1e-4, 1e-3}) {
     auto dyn_model = build_surface_model(s, SurfaceParameters{}, effects, BoneMotion::fixed(), nullptr);
-    IntegratorOptions o;  // alpha -0.2 (seed)
+    numerics::IntegratorOptions o;  // alpha -0.2 (seed)
     o.dt_s = dt;
     o.reuse_factorization = true;
-    HhtIntegrator dyn(*dyn_model, o);
+    numerics::HhtIntegrator dyn(*dyn_model, o);
     dyn.initialize(0, dyn_model->reference_state());
     double change = 0;
     const bool steady = dyn.advance_to_steady_state(1e-6 * w_max, 2000 * dt, &change);

@@ -1,11 +1,11 @@
 #pragma once
-// Finite-difference check of a TimeIntegrable's Newton tangent, shared by the
+// Finite-difference check of a numerics::TimeIntegrable's Newton tangent, shared by the
 // shell-term and mesh-contact tests.
 #include <Eigen/Dense>
 #include <Eigen/SparseCore>
 #include <algorithm>
 
-#include "cartilage/time_integrable.h"
+#include "numerics/time_integrable.h"
 
 namespace arthrosim::cartilage::testing {
 
@@ -13,12 +13,12 @@ namespace arthrosim::cartilage::testing {
 /// time t, K_fd by central differences with step h_position on position
 /// coordinates (i % 6 < 3) and h_gradient on transverse gradients. If kmax
 /// is given it receives max |K|.
-inline double tangent_fd_error(TimeIntegrable& sys, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
+inline double tangent_fd_error(numerics::TimeIntegrable& sys, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
                                int wrt, double h_position, double h_gradient, double* kmax = nullptr) {
   const int n = sys.num_dofs();
   Eigen::SparseMatrix<double> K;
   Eigen::VectorXd F;
-  EvalRequest r;
+  numerics::EvalRequest r;
   r.t = t;
   r.q = &q;
   r.v = &v;
@@ -32,7 +32,7 @@ inline double tangent_fd_error(TimeIntegrable& sys, double t, const Eigen::Vecto
     Eigen::VectorXd qp = q, qm = q, vp = v, vm = v, Fp, Fm;
     (wrt == 0 ? qp : vp)(j) += h;
     (wrt == 0 ? qm : vm)(j) -= h;
-    EvalRequest a = r, b = r;
+    numerics::EvalRequest a = r, b = r;
     a.q = &qp;
     a.v = &vp;
     b.q = &qm;

@@ -1,426 +1,205 @@
-// Scene parsing: a full example, every kind of error with its line and column,
-// unit conversion at the edge, canonical option text, schema consistency and
-// the documentation's example.
+// The generic scene reader and self-declaring options (common/options.h,
+// common/scene.h) on a toy schema that knows no stage: declarations give the
+// schema and its defaults, the reader fills a struct bit for bit, instances
+// inherit and override block keys, and errors carry line, column and a hint.
 #include "common/scene.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
-#include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <numbers>
-#include <regex>
-#include <sstream>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
 
-#include "common/effects.h"
+#include "common/edit_distance.h"
 #include "common/error.h"
+#include "common/options.h"
 
 namespace arthrosim::common {
 namespace {
-namespace fs = std::filesystem;
 
-// A scratch folder laid out like the repository: scenes/, models/knee/,
-// trials/walk/.
-class SceneTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    root_ = fs::temp_directory_path() /
-            ("arthrosim_scene_test_" + std::to_string(getpid()) + "_" +
-             ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(root_);
-    fs::create_directories(root_ / "scenes");
-    fs::create_directories(root_ / "models" / "knee");
-    fs::create_directories(root_ / "trials" / "walk");
-    std::ofstream(root_ / "models" / "knee" / "femur.stl") << "solid femur\nendsolid femur\n";
-    std::ofstream(root_ / "trials" / "walk" / "trial.yaml") << "synthetic: true\n";
+enum class Mode { kFast, kExact };
+
+// A block of a made-up stage.
+struct ToyOptions {
+  double length_m = 0.001 * units::mm;  // not exactly 1e-6: written as 0.001 mm
+  std::optional<double> end_s;
+  int iterations = 5;
+  bool verbose = false;
+  Mode mode = Mode::kExact;
+  std::vector<std::string> parts{"a", "b"};
+  std::map<std::string, double> per_part_m;
+  std::vector<double> box_m;
+  std::vector<std::string> effects;
+  void declare_shared(OptionVisitor& v) {
+    v.number("length_mm", length_m, Unit::kMillimetre, {0, 10}, "a length");
+    v.number("end_s", end_s, Unit::kSecond, {0, 100}, "an optional time");
+    v.integer("iterations", iterations, {1, 10}, "a count");
+    v.flag("verbose", verbose, "a flag");
+    v.choice("mode", mode, {{"fast", Mode::kFast}, {"exact", Mode::kExact}}, "an enum");
+    v.text_list("parts", parts, "a|b|c", "words from a list");
+    v.named_numbers("per_part_mm", per_part_m, Unit::kMillimetre, {0.5, 5}, "a number per name");
   }
-  void TearDown() override { fs::remove_all(root_); }
-
-  fs::path write(const std::string& text, const std::string& name = "scene.yaml") {
-    const fs::path p = root_ / "scenes" / name;
-    std::ofstream(p) << text;
-    return p;
+  void declare_instance(OptionVisitor& v) {
+    v.number_list("box_mm", box_m, Unit::kMillimetre, {2, 2}, "two numbers");
+    v.effect_list("effects", effects, "toy", "effects of the toy stage").required();
   }
-  Scene load(const std::string& text) { return load_scene(write(text)); }
-
-  // Loads `text`, expects an InputError, and checks its line, column and that
-  // the message contains every fragment.
-  void expect_error(const std::string& text, int line, int column,
-                    const std::vector<std::string>& fragments) {
-    const fs::path p = write(text);
-    try {
-      load_scene(p);
-      ADD_FAILURE() << "no error for:\n" << text;
-    } catch (const InputError& e) {
-      const std::string what = e.what();
-      EXPECT_EQ(e.line(), line) << what;
-      EXPECT_EQ(e.column(), column) << what;
-      const std::string prefix =
-          p.string() + ":" + std::to_string(line) + ":" + std::to_string(column) + ": error: ";
-      EXPECT_EQ(what.rfind(prefix, 0), 0u) << what;
-      for (const std::string& f : fragments) {
-        EXPECT_NE(what.find(f), std::string::npos) << "'" << f << "' not in: " << what;
-      }
-    }
+  void declare(OptionVisitor& v) {
+    declare_shared(v);
+    declare_instance(v);
   }
-
-  fs::path root_;
 };
 
-constexpr const char* kFull = R"(# a complete scene
-description: full example
-model: ../models/knee
-trial: ../trials/walk
-outputs: [report, kinematics]
-prepare:
-  edge_length_mm: 2
-comak:
-  effects: [ligaments, muscles, tibiofemoral_contact]
-  ipopt_tolerance: 1e-6
-  ipopt_max_iterations: 200
-  reserve_actuators: yes
-surface:
-  time_step_s: 2e-4
-  youngs_modulus_mpa: 400
-  scenarios:
-    osmotic:
-      surfaces: [femur]
-      end_time_s: 0.5
-      effects: [foundation_springs, osmotic_pressure, periphery_fixed]
-    gait:
-      time_step_s: 5e-5
-      effects: [foundation_springs, imposed_kinematics, mesh_contact]
-post:
-  angle_threshold_deg: 15
-)";
+SceneSchema toy_schema() {
+  SceneSchema s;
+  OptionSpec outputs;
+  s.top = collect_keys("scene", [](OptionVisitor& v) {
+    static std::vector<std::string> outputs;
+    v.text_list("outputs", outputs, "x|y", "what to produce").required();
+  });
+  BlockSchema b;
+  b.name = "toy";
+  b.doc = "the toy stage";
+  ToyOptions shared, own;
+  b.keys = collect_keys("toy", [&](OptionVisitor& v) { shared.declare_shared(v); });
+  for (OptionSpec& k : b.keys) k.overridable = true;
+  b.instances_key = "runs";
+  b.instances_doc = "named runs";
+  b.instance_label = "run";
+  b.instance_keys = collect_keys("run", [&](OptionVisitor& v) { own.declare_instance(v); });
+  s.blocks.push_back(b);
+  s.effects = {{"spring", "toy", "a spring"}, {"damper", "toy", "a damper"}, {"muscle", "other", "elsewhere"}};
+  return s;
+}
 
-TEST_F(SceneTest, FullExampleParsesEveryBlock) {
-  const Scene s = load(kFull);
-  EXPECT_EQ(s.description, "full example");
-  EXPECT_EQ(s.model, fs::weakly_canonical(root_ / "models" / "knee"));
-  ASSERT_TRUE(s.trial.has_value());
-  EXPECT_EQ(*s.trial, fs::weakly_canonical(root_ / "trials" / "walk"));
-  ASSERT_EQ(s.outputs.size(), 2u);
-  EXPECT_EQ(s.outputs[0], Output::kReport);
-  EXPECT_EQ(s.outputs[1], Output::kKinematics);
-  EXPECT_TRUE(s.wants(Output::kReport));
-  EXPECT_FALSE(s.wants(Output::kPreparedModel));
+const SceneSchema& schema() {
+  static const SceneSchema s = toy_schema();
+  return s;
+}
 
-  EXPECT_EQ(s.prepare.as_written("edge_length_mm"), 2.0);
-  EXPECT_DOUBLE_EQ(s.prepare.si("edge_length_mm"), 2e-3);
-  EXPECT_TRUE(s.prepare.given("edge_length_mm"));
+Scene parse(const std::string& text) { return parse_scene(text, "/nowhere/toy.yaml", schema()); }
 
-  ASSERT_TRUE(s.comak.has_value());
-  EXPECT_EQ(s.musculoskeletal_effects(),
-            (std::vector<std::string>{"ligaments", "muscles", "tibiofemoral_contact"}));
-  EXPECT_EQ(s.comak->si("ipopt_tolerance"), 1e-6);
-  EXPECT_EQ(s.comak->integer("ipopt_max_iterations"), 200);
-  EXPECT_TRUE(s.comak->flag("reserve_actuators"));
-  // Defaults are filled in and marked as such.
-  EXPECT_EQ(s.comak->si("activation_min"), 0.01);
-  EXPECT_FALSE(s.comak->given("activation_min"));
-  EXPECT_EQ(s.comak->si("lowpass_cutoff_hz"), 6.0);
-
-  ASSERT_EQ(s.scenarios.size(), 2u);
-  const Scenario* osm = s.scenario("osmotic");
-  const Scenario* gait = s.scenario("gait");
-  ASSERT_NE(osm, nullptr);
-  ASSERT_NE(gait, nullptr);
-  EXPECT_EQ(s.scenario("nope"), nullptr);
-  EXPECT_EQ(&s.require_scenario("gait"), gait);
+void expect_error(const std::string& text, int line, int column, const std::string& fragment) {
   try {
-    s.require_scenario("gait_osmotic");
-    ADD_FAILURE() << "no error for a missing scenario";
+    parse(text);
+    ADD_FAILURE() << "no error for:\n" << text;
   } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()),
-              s.file.string() + ": error: expected a scenario named 'gait_osmotic' under "
-                                "surface.scenarios, found osmotic, gait");
+    EXPECT_EQ(e.line(), line) << e.what();
+    EXPECT_EQ(e.column(), column) << e.what();
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
   }
-  EXPECT_EQ(s.scenarios[0].name, "osmotic");  // file order kept
-  EXPECT_EQ(osm->line, 17);
-  EXPECT_EQ(osm->effects,
-            (std::vector<std::string>{"foundation_springs", "osmotic_pressure", "periphery_fixed"}));
-  EXPECT_TRUE(osm->wants("osmotic_pressure"));
-  EXPECT_FALSE(osm->wants("mesh_contact"));
-  EXPECT_EQ(osm->options.name(), "surface.osmotic");
-  EXPECT_EQ(osm->options.list("surfaces"), (std::vector<std::string>{"femur"}));
-  EXPECT_EQ(gait->options.list("surfaces"),
-            (std::vector<std::string>{"femur", "tibia_medial", "tibia_lateral"}));
-  // Inherited from the surface block, overridden per scenario, defaults.
-  EXPECT_EQ(osm->options.si("time_step_s"), 2e-4);
-  EXPECT_EQ(gait->options.si("time_step_s"), 5e-5);
-  EXPECT_EQ(osm->options.si("end_time_s"), 0.5);
-  EXPECT_FALSE(gait->options.has("end_time_s"));
-  EXPECT_EQ(gait->options.si("hht_alpha"), -0.2);
-  EXPECT_EQ(gait->options.si("youngs_modulus_mpa"), 400e6);
-  EXPECT_EQ(s.surface->si("time_step_s"), 2e-4);
-
-  EXPECT_DOUBLE_EQ(s.post.si("angle_threshold_deg"), 15.0 * std::numbers::pi / 180.0);
-  EXPECT_EQ(s.post.as_written("angle_threshold_deg"), 15.0);
-  EXPECT_FALSE(s.post.has("splitline_map"));
 }
 
-TEST_F(SceneTest, UnitsAreConvertedToSiAtTheEdge) {
-  const Scene s = load(R"(model: ../models/knee
-outputs: [surface]
-prepare: {edge_length_mm: 1.5}
-surface:
-  shell_thickness_mm: 2
-  output_interval_ms: 10
-  osmotic_pressure_mpa: 0.25
-  foundation_stiffness_n_per_mm3: 0.7
-  foundation_damping_n_s_per_mm3: 7e6
-  density_kg_per_m3: 1100
-  scenarios:
-    a: {effects: [inertia], end_time_s: 3}
-post: {angle_threshold_deg: 90}
+TEST(Options, DeclarationsGiveTheSchemaWithDefaultsAsWritten) {
+  const BlockSchema& b = *schema().block("toy");
+  ASSERT_EQ(b.keys.size(), 7u);
+  EXPECT_EQ(b.keys[0].key, "length_mm");
+  EXPECT_EQ(b.keys[0].default_value, "0.001");
+  EXPECT_EQ(b.keys[0].unit, Unit::kMillimetre);
+  EXPECT_EQ(b.keys[0].min, 0);
+  EXPECT_EQ(b.keys[0].max, 10);
+  EXPECT_EQ(b.keys[1].default_value, "");  // optional: no default
+  EXPECT_EQ(b.keys[2].default_value, "5");
+  EXPECT_EQ(b.keys[3].default_value, "false");
+  EXPECT_EQ(b.keys[4].default_value, "exact");
+  EXPECT_EQ(b.keys[4].choices, "fast|exact");
+  EXPECT_EQ(b.keys[5].default_value, "[a, b]");
+  EXPECT_EQ(b.keys[6].default_value, "[]");
+  EXPECT_TRUE(b.instance_keys[1].required);
+  EXPECT_EQ(b.instance_keys[1].effect_stage, "toy");
+  // A key declared twice is a programming error.
+  EXPECT_THROW(collect_keys("x",
+                            [](OptionVisitor& v) {
+                              bool f = false;
+                              v.flag("k", f, "");
+                              v.flag("k", f, "");
+                            }),
+               std::logic_error);
+}
+
+TEST(Options, WrittenValueRoundTripsThroughTheReaderExactly) {
+  // The reader computes strtod(text) * factor; the printed default must give
+  // back the very same double.
+  for (double written : {0.001, 3.0, 0.7, 1e-11, 20.0, 0.2, 2.5}) {
+    for (Unit u : {Unit::kMillimetre, Unit::kNewtonPerCubicMillimetre, Unit::kMegapascal, Unit::kDegree}) {
+      const double si = written * unit_to_si(u);
+      const std::string text = written_value(si, u);
+      EXPECT_EQ(std::strtod(text.c_str(), nullptr) * unit_to_si(u), si) << written << " " << text;
+    }
+  }
+  EXPECT_EQ(written_value(3 * units::mm, Unit::kMillimetre), "3");
+}
+
+TEST(Scene, ReaderFillsTheStructBitForBitAndInstancesInherit) {
+  const Scene s = parse(R"(outputs: [x]
+toy:
+  iterations: 7
+  per_part_mm: [a=1.5, c=2]
+  runs:
+    one: {effects: [spring], box_mm: [1, 2]}
+    two:
+      iterations: 9
+      mode: fast
+      effects: [spring, damper]
 )");
-  const OptionBlock& o = s.scenarios.at(0).options;
-  // Exact factors: mm -> m 1e-3, ms -> s 1e-3, MPa -> Pa 1e6,
-  // N/mm^3 -> N/m^3 1e9 (1 mm^3 = 1e-9 m^3), deg -> rad pi/180.
-  EXPECT_DOUBLE_EQ(s.prepare.si("edge_length_mm"), 1.5e-3);
-  EXPECT_DOUBLE_EQ(o.si("shell_thickness_mm"), 2e-3);
-  EXPECT_DOUBLE_EQ(o.si("output_interval_ms"), 1e-2);
-  EXPECT_DOUBLE_EQ(o.si("osmotic_pressure_mpa"), 0.25e6);
-  EXPECT_DOUBLE_EQ(o.si("foundation_stiffness_n_per_mm3"), 0.7e9);
-  EXPECT_DOUBLE_EQ(o.si("foundation_damping_n_s_per_mm3"), 7e15);
-  EXPECT_DOUBLE_EQ(o.si("density_kg_per_m3"), 1100.0);
-  EXPECT_DOUBLE_EQ(o.si("end_time_s"), 3.0);
-  EXPECT_DOUBLE_EQ(s.post.si("angle_threshold_deg"), std::numbers::pi / 2);
-  EXPECT_EQ(o.as_written("osmotic_pressure_mpa"), 0.25);
-  // The seed's defaults, in SI.
-  const Scene d = load("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
-                       "    a: {effects: [inertia], end_time_s: 1}\n");
-  const OptionBlock& od = d.scenarios.at(0).options;
-  EXPECT_DOUBLE_EQ(od.si("youngs_modulus_mpa"), 400e6);
-  EXPECT_DOUBLE_EQ(od.si("shell_thickness_mm"), 1e-3);
-  EXPECT_DOUBLE_EQ(od.si("osmotic_pressure_mpa"), 0.2e6);
-  EXPECT_DOUBLE_EQ(od.si("time_step_s"), 1e-4);
-  EXPECT_DOUBLE_EQ(d.prepare.si("edge_length_mm"), 3e-3);
+  ASSERT_EQ(s.instances("toy").size(), 2u);
+  const BlockInstance& one = s.instances("toy")[0];
+  const BlockInstance& two = s.instances("toy")[1];
+  EXPECT_EQ(one.line, 6);
+  EXPECT_EQ(one.column, 5);
+  const ToyOptions a = read_options<ToyOptions>(one.options);
+  const ToyOptions b = read_options<ToyOptions>(two.options);
+  const ToyOptions defaults;
+  EXPECT_EQ(a.length_m, defaults.length_m);  // the default, through the reader: same bits
+  EXPECT_FALSE(a.end_s.has_value());
+  EXPECT_EQ(a.iterations, 7);  // from the block
+  EXPECT_EQ(b.iterations, 9);  // the instance's own
+  EXPECT_EQ(a.mode, Mode::kExact);
+  EXPECT_EQ(b.mode, Mode::kFast);
+  EXPECT_EQ(a.per_part_m, (std::map<std::string, double>{{"a", 1.5e-3}, {"c", 2e-3}}));
+  EXPECT_EQ(a.box_m, (std::vector<double>{1e-3, 2e-3}));
+  EXPECT_TRUE(b.box_m.empty());
+  EXPECT_EQ(b.effects, (std::vector<std::string>{"spring", "damper"}));
+  EXPECT_TRUE(two.wants("damper"));
+  EXPECT_EQ(one.options.value("per_part_mm").canonical, "[a=1.5, c=2]");
+  EXPECT_EQ(two.options.name(), "toy.two");
+  EXPECT_TRUE(s.has_block("toy"));
+  // A block that is not written has its defaults.
+  const Scene empty = parse("outputs: [y]\n");
+  EXPECT_FALSE(empty.has_block("toy"));
+  EXPECT_EQ(read_options<ToyOptions>(empty.block("toy")).iterations, 5);
+  EXPECT_TRUE(empty.instances("toy").empty());
 }
 
-TEST_F(SceneTest, GettersRejectProgrammingErrors) {
-  const Scene s = load("model: ../models/knee\noutputs: [prepared_model]\n");
-  EXPECT_THROW(s.prepare.si("edge_length"), std::logic_error);       // not a key
-  EXPECT_THROW(s.prepare.integer("edge_length_mm"), std::logic_error);  // wrong type
-  EXPECT_THROW(s.post.path("splitline_map"), std::logic_error);       // no value
-  EXPECT_FALSE(s.comak.has_value());
-  EXPECT_TRUE(s.musculoskeletal_effects().empty());
+TEST(Scene, ErrorsNameLineColumnAndTheNearestKey) {
+  expect_error("outputs: [x]\ntoy:\n  iteratons: 3\n  runs: {r: {effects: [spring]}}\n", 3, 3,
+               "unknown key 'iteratons' in 'toy' (did you mean 'iterations'?)");
+  expect_error("outputs: [x]\ntoy:\n  runs: {r: {effects: [sprung]}}\n", 3, 24,
+               "unknown effect 'sprung' (did you mean 'spring'?); the toy stage knows: spring, damper");
+  expect_error("outputs: [x]\ntoy:\n  runs: {r: {effects: [muscle]}}\n", 3, 24,
+               "effect 'muscle' belongs to the other stage, not the toy stage");
+  expect_error("outputs: [x]\ntoy:\n  runs: {r: {effects: [spring], box_mm: [1]}}\n", 3, 41,
+               "'box_mm': expected 2 numbers, found 1");
+  expect_error("outputs: [x]\ntoy:\n  per_part_mm: [a=9]\n  runs: {r: {effects: [spring]}}\n", 3, 17,
+               "expected a value in [0.5, 5] mm, found 9");
+  expect_error("outputs: [x]\ntoy:\n  per_part_mm: [a]\n  runs: {r: {effects: [spring]}}\n", 3, 17,
+               "expected items 'name=value', found 'a'");
+  expect_error("outputs: [x]\ntoy:\n  mode: exakt\n  runs: {r: {effects: [spring]}}\n", 3, 9,
+               "expected one of fast, exact, found 'exakt' (did you mean 'exact'?)");
+  expect_error("outputs: [x]\ntoy:\n  runs: {r: {}}\n", 3, 13, "missing required key 'effects' in 'toy.runs.r'");
+  expect_error("outputs: [x]\ntoy: {iterations: 2}\n", 2, 6, "missing required key 'runs' in 'toy'");
+  expect_error("outputs: [z]\n", 1, 11, "'outputs': unknown item 'z' (did you mean 'x'?); expected any of x, y");
 }
 
-TEST_F(SceneTest, CanonicalTextIgnoresSpelling) {
-  const Scene a = load("model: ../models/knee\noutputs: [prepared_model]\n"
-                       "prepare: {edge_length_mm: 3}\n");
-  const Scene b = load("model: ../models/knee\noutputs: [prepared_model]\n"
-                       "prepare:\n  edge_length_mm: 3.000\n");
-  const Scene c = load("model: ../models/knee\noutputs: [prepared_model]\n");  // default 3
-  const Scene d = load("model: ../models/knee\noutputs: [prepared_model]\n"
-                       "prepare: {edge_length_mm: 2.5}\n");
-  EXPECT_EQ(a.prepare.canonical_text(),
-            "prepare.edge_length_mm = 3\nprepare.max_cast_distance_mm = 10\n"
-            "prepare.mesh_unit = mm\nprepare.remesh_iterations = 5\nprepare.surface_edge_length_mm = []\n");
-  EXPECT_EQ(a.prepare.canonical_text(), b.prepare.canonical_text());
-  EXPECT_EQ(a.prepare.canonical_text(), c.prepare.canonical_text());
-  EXPECT_EQ(d.prepare.value("edge_length_mm").canonical, "2.5");
-  const Scene e = load("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
-                       "    x: {effects: [inertia, mesh_contact], end_time_s: 0.0001}\n");
-  const std::string t = e.scenarios[0].options.canonical_text();
-  EXPECT_NE(t.find("surface.x.effects = [inertia, mesh_contact]\n"), std::string::npos) << t;
-  EXPECT_NE(t.find("surface.x.end_time_s = 1e-04\n"), std::string::npos) << t;
-  EXPECT_NE(t.find("surface.x.time_step_s = 1e-04\n"), std::string::npos) << t;
-}
-
-TEST_F(SceneTest, UnknownTopLevelKey) {
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nouputs: [x]\n", 3, 1,
-               {"unknown key 'ouputs'", "did you mean 'outputs'"});
-}
-
-TEST_F(SceneTest, UnknownKeyInStageBlock) {
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nprepare:\n"
-               "  edge_lenght_mm: 2\n",
-               4, 3, {"unknown key 'edge_lenght_mm' in 'prepare'", "did you mean 'edge_length_mm'"});
-}
-
-TEST_F(SceneTest, UnknownKeyInScenario) {
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n    a:\n"
-               "      end_time_s: 1\n      effects: [inertia]\n      time_stepp_s: 1\n",
-               8, 7, {"unknown key 'time_stepp_s' in 'surface.scenarios.a'", "'time_step_s'"});
-}
-
-TEST_F(SceneTest, UnknownEffect) {
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n    a:\n"
-               "      end_time_s: 1\n      effects: [inertia, foundation_spring]\n",
-               7, 26, {"unknown effect 'foundation_spring'", "did you mean 'foundation_springs'",
-                       "the surface stage knows:"});
-}
-
-TEST_F(SceneTest, EffectOfTheWrongStage) {
-  expect_error("model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\n"
-               "comak:\n  effects:\n    - ligaments\n    - mesh_contact\n",
-               7, 7, {"effect 'mesh_contact' belongs to the surface stage, not the "
-                      "musculoskeletal stage"});
-}
-
-TEST_F(SceneTest, WrongTypes) {
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nprepare: {edge_length_mm: abc}\n",
-               3, 27, {"'edge_length_mm': expected a number, found 'abc'"});
-  expect_error("model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\ncomak:\n"
-               "  effects: [muscles]\n  ipopt_max_iterations: 2.5\n",
-               6, 25, {"expected a whole number, found '2.5'"});
-  expect_error("model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\ncomak:\n"
-               "  effects: [muscles]\n  reserve_actuators: maybe\n",
-               6, 22, {"expected true or false, found 'maybe'"});
-  expect_error("model: ../models/knee\noutputs: prepared_model\n", 2, 10,
-               {"'outputs': expected a list like [a, b], found 'prepared_model'"});
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nprepare:\n  edge_length_mm: [1, 2]\n",
-               4, 19, {"expected a number, found a list"});
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nprepare: 3\n", 3, 10,
-               {"expected a block of keys for 'prepare', found '3'"});
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nprepare: {edge_length_mm: 1e999}\n",
-               3, 27, {"expected a finite number, found '1e999'"});
-}
-
-TEST_F(SceneTest, OutOfRange) {
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  hht_alpha: -0.5\n"
-               "  scenarios: {a: {effects: [inertia], end_time_s: 1}}\n",
-               4, 14, {"'hht_alpha': expected a value in [-0.333", "found -0.5"});
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nprepare: {edge_length_mm: 0}\n",
-               3, 27, {"expected a value in [0.2, 20] mm, found 0"});
-}
-
-TEST_F(SceneTest, MissingRequiredKeys) {
-  expect_error("outputs: [prepared_model]\n", 1, 1, {"missing required key 'model'"});
-  expect_error("model: ../models/knee\n", 1, 1, {"missing required key 'outputs'"});
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n    a:\n"
-               "      end_time_s: 1\n",
-               6, 7, {"missing required key 'effects' in 'surface.scenarios.a'"});
-  expect_error("model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\ncomak:\n"
-               "  ipopt_tolerance: 1e-6\n",
-               5, 3, {"missing required key 'effects' in 'comak'"});
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
-               "    a: {effects: [inertia]}\n",
-               5, 5, {"scenario 'a' does not use imposed_kinematics, so it needs 'end_time_s'"});
-}
-
-TEST_F(SceneTest, OutputsNeedTheirBlocks) {
-  expect_error("model: ../models/knee\noutputs: [prepared_model, report]\n", 2, 10,
-               {"output 'report' needs a 'surface' block with at least one scenario"});
-  expect_error("model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\n", 3, 10,
-               {"output 'kinematics' is requested", "add a 'comak' block"});
-  expect_error("model: ../models/knee\noutputs: [surface]\ncomak: {effects: [muscles]}\n"
-               "surface:\n  scenarios:\n    gait:\n      effects: [imposed_kinematics]\n",
-               6, 1, {"scenario 'gait' uses imposed_kinematics", "add 'trial: PATH'"});
-  expect_error("model: ../models/knee\noutputs: [prepared_model, bogus]\n", 2, 27,
-               {"unknown output 'bogus'", "known outputs: prepared_model, kinematics, surface, "
-                                          "report"});
-}
-
-TEST_F(SceneTest, PathsAndDuplicates) {
-  expect_error("model: ../models/kne\noutputs: [prepared_model]\n", 1, 8,
-               {"'model': expected an existing file or folder, found '../models/kne'",
-                (root_ / "models" / "kne").string()});
-  expect_error("model: ../models/knee\noutputs: [prepared_model]\nmodel: ../models/knee\n", 3, 1,
-               {"key 'model' given twice", "first on line 1"});
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
-               "    a: {effects: [inertia, inertia], end_time_s: 1}\n",
-               5, 28, {"'inertia' listed twice"});
-  expect_error("model: ../models/knee\noutputs: [surface]\nsurface:\n  scenarios:\n"
-               "    Gait-1: {effects: [inertia], end_time_s: 1}\n",
-               5, 5, {"expected a scenario name of lowercase letters", "found 'Gait-1'"});
-}
-
-TEST_F(SceneTest, YamlSyntaxErrorHasALine) {
-  // yaml-cpp reports where it gave up: the start of the next block.
-  expect_error("model: ../models/knee\noutputs: [prepared_model\nprepare: {}\n", 3, 8,
-               {"not valid YAML"});
-}
-
-TEST_F(SceneTest, RepositoryRelativePaths) {
-  // Not next to the scene, but in the repository (marked by .git) holding it.
-  fs::create_directories(root_ / ".git");
-  fs::create_directories(root_ / "scenes" / "nested");
-  const fs::path p = write("model: models/knee\noutputs: [prepared_model]\n", "nested/s.yaml");
-  const Scene s = load_scene(p);
-  EXPECT_EQ(s.model, fs::weakly_canonical(root_ / "models" / "knee"));
-}
-
-TEST(SceneSchema, UnitSuffixesMatchUnitsAndDefaultsAreValid) {
-  const std::vector<std::string> suffixes = {"_mm", "_deg", "_s", "_ms", "_mpa", "_hz",
-                                             "_kg_per_m3", "_n_per_mm3", "_n_s_per_mm3"};
-  for (const OptionSpec& o : option_schema()) {
-    const std::string key(o.key);
-    const std::string suffix(unit_suffix(o.unit));
-    if (o.unit != Unit::kNone) {
-      EXPECT_TRUE(o.type == OptionType::kNumber || o.type == OptionType::kNumberList) << key;
-      ASSERT_GE(key.size(), suffix.size());
-      EXPECT_EQ(key.substr(key.size() - suffix.size()), suffix) << key;
-    } else if (o.type == OptionType::kNumber) {
-      // A unitless number must not look like it has a unit.
-      for (const std::string& s : suffixes) {
-        EXPECT_FALSE(key.size() > s.size() && key.substr(key.size() - s.size()) == s) << key;
-      }
-    }
-    EXPECT_FALSE(o.doc.empty()) << key;
-    EXPECT_EQ(find_option(o.block, o.key), &o);
-    if (o.type == OptionType::kNumber || o.type == OptionType::kInteger) {
-      EXPECT_LE(o.min, o.max) << key;
-    }
-  }
-}
-
-TEST_F(SceneTest, EveryDefaultParses) {
-  // A scene using every block with nothing but required keys fills every
-  // default through the same parser as user text (types and ranges checked).
-  const Scene s = load("model: ../models/knee\ntrial: ../trials/walk\noutputs: [report]\n"
-                       "comak: {effects: [muscles]}\nsurface:\n  scenarios:\n"
-                       "    a: {effects: [imposed_kinematics]}\n");
-  for (const OptionSpec& o : option_schema()) {
-    if (o.default_value.empty()) continue;
-    const OptionBlock* b = o.block == "prepare"   ? &s.prepare
-                           : o.block == "comak"   ? &*s.comak
-                           : o.block == "surface" ? &s.scenarios[0].options
-                           : o.block == "post"    ? &s.post
-                                                  : nullptr;
-    ASSERT_NE(b, nullptr) << o.key;
-    EXPECT_TRUE(b->has(o.key)) << o.key;
-    EXPECT_FALSE(b->given(o.key)) << o.key;
-  }
-}
-
-// docs/scenes.md documents every key and its complete example is a valid scene.
-TEST_F(SceneTest, DocumentationCoversTheSchemaAndItsExampleParses) {
-  std::ifstream in(fs::path(ARTHROSIM_SOURCE_DIR) / "docs" / "scenes.md");
-  ASSERT_TRUE(in) << "docs/scenes.md missing";
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string doc = ss.str();
-  for (const OptionSpec& o : option_schema()) {
-    EXPECT_NE(doc.find("`" + std::string(o.key) + "`"), std::string::npos)
-        << "docs/scenes.md does not mention " << o.block << "." << o.key;
-  }
-  for (const EffectInfo& e : known_effects()) {
-    EXPECT_NE(doc.find("`" + std::string(e.name) + "`"), std::string::npos) << e.name;
-  }
-  // The reference section is the schema's own table, verbatim (regenerate it
-  // with `arthrosim schema` after changing option_schema()).
-  EXPECT_NE(doc.find(schema_markdown()), std::string::npos)
-      << "docs/scenes.md reference is out of date; paste `build/bin/arthrosim schema` into it";
-  const std::string open = "<!-- complete example -->\n```yaml\n";
-  const std::size_t a = doc.find(open);
-  ASSERT_NE(a, std::string::npos);
-  const std::size_t b = doc.find("```", a + open.size());
-  ASSERT_NE(b, std::string::npos);
-  const std::string example = doc.substr(a + open.size(), b - a - open.size());
-  // The example refers to ../models/knee_parametric/medium and ../trials/synthetic_gait.
-  fs::create_directories(root_ / "models" / "knee_parametric" / "medium");
-  fs::create_directories(root_ / "trials" / "synthetic_gait");
-  const Scene s = load(example);
-  EXPECT_TRUE(s.wants(Output::kReport));
-  EXPECT_EQ(s.scenarios.size(), 3u);
-  ASSERT_NE(s.scenario("gait"), nullptr);
-  EXPECT_FALSE(s.scenario("gait")->wants("osmotic_pressure"));
-  EXPECT_FALSE(s.scenario("osmotic")->wants("mesh_contact"));
+TEST(EditDistance, CountsEditsAndSuggestsOnlyCloseWords) {
+  EXPECT_EQ(edit_distance("kitten", "sitting"), 3u);
+  EXPECT_EQ(edit_distance("", "abc"), 3u);
+  EXPECT_EQ(edit_distance("same", "same"), 0u);
+  EXPECT_EQ(closest_match("foundation_spring", std::vector<std::string>{"inertia", "foundation_springs"}),
+            "foundation_springs");
+  EXPECT_EQ(closest_match("xyz", std::vector<std::string>{"inertia"}), "");
+  EXPECT_EQ(did_you_mean("inertai", {"inertia"}), " (did you mean 'inertia'?)");
 }
 
 }  // namespace

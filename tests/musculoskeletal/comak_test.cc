@@ -11,6 +11,7 @@
 
 #include "common/effects.h"
 #include "common/error.h"
+#include "common/options.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
 #include "common/scene.h"
@@ -454,31 +455,26 @@ TEST(Comak, FailedFramesAreMarked) {
   EXPECT_EQ(f.attribute_int("/", "frames_failed"), 2);
 }
 
-// The scene schema's comak defaults (common/scene.cc) are the solver's own
-// (ComakOptions, GaitTrialOptions): a scene that leaves a key out runs the
-// stage exactly as arthrosim-comak without flags does.
-TEST(Comak, SceneDefaultsAreTheSolverDefaults) {
-  auto number = [](const char* key) {
-    const auto* spec = arthrosim::common::find_option("comak", key);
-    EXPECT_NE(spec, nullptr) << key;
-    return spec ? std::stod(std::string(spec->default_value)) : std::nan("");
+// The comak block's keys are declared by ComakOptions itself (declare(),
+// comak_options.cc), so a key's default is the solver's own: a scene that
+// leaves a key out runs the stage exactly as arthrosim-comak without flags.
+TEST(Comak, SceneKeysAreDeclaredByTheSolverOptions) {
+  const std::vector<common::OptionSpec> keys = common::declared_keys<msk::ComakOptions>("comak");
+  auto spec = [&](const char* key) -> const common::OptionSpec* {
+    for (const common::OptionSpec& k : keys)
+      if (k.key == key) return &k;
+    ADD_FAILURE() << "no key " << key;
+    return nullptr;
   };
   const msk::ComakOptions o;
-  EXPECT_EQ(number("ipopt_tolerance"), o.ipopt_tolerance);
-  EXPECT_EQ(number("ipopt_max_iterations"), o.max_iterations);
-  EXPECT_EQ(number("activation_min"), o.activation_min);
-  EXPECT_EQ(number("lowpass_cutoff_hz"), msk::GaitTrialOptions{}.lowpass.cutoff_hz);
-  const auto* reserve = arthrosim::common::find_option("comak", "reserve_actuators");
-  ASSERT_NE(reserve, nullptr);
-  EXPECT_EQ(reserve->default_value == "true", o.reserve_actuators);
-  const auto* ankle = arthrosim::common::find_option("comak", "ankle_equilibrium");
-  ASSERT_NE(ankle, nullptr);
-  EXPECT_EQ(ankle->default_value == "true", o.ankle_equilibrium);
-  const auto* inertia = arthrosim::common::find_option("comak", "body_inertia");
-  ASSERT_NE(inertia, nullptr);
-  EXPECT_EQ(inertia->default_value == "true", o.body_inertia);
+  EXPECT_EQ(std::stod(spec("ipopt_tolerance")->default_value), o.ipopt_tolerance);
+  EXPECT_EQ(std::stoi(spec("ipopt_max_iterations")->default_value), o.max_iterations);
+  EXPECT_EQ(std::stod(spec("activation_min")->default_value), o.activation_min);
+  EXPECT_EQ(spec("reserve_actuators")->default_value == "true", o.reserve_actuators);
+  EXPECT_EQ(spec("ankle_equilibrium")->default_value == "true", o.ankle_equilibrium);
+  EXPECT_EQ(spec("body_inertia")->default_value == "true", o.body_inertia);
+  EXPECT_EQ(spec("second_start")->default_value == "true", o.second_start);
 }
-
 
 // The second start (ComakOptions::second_start, on by default): a converged
 // frame is solved again from the passive settle of the neutral pose (where a

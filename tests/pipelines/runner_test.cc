@@ -3,6 +3,7 @@
 // selection from outputs, reuse and its reasons, reruns on changed options,
 // inputs, code and outputs, failure propagation, missing programs, dry runs.
 #include "pipelines/runner.h"
+#include "pipelines/stages.h"
 
 #include <gtest/gtest.h>
 #include <fcntl.h>
@@ -111,7 +112,7 @@ class RunnerTest : public ::testing::Test {
   Scene scene(const std::string& text) {
     const fs::path p = root_ / "scenes" / "s.yaml";
     std::ofstream(p) << text;
-    return common::load_scene(p);
+    return load_scene(p);
   }
 
   RunReport run(const Scene& s, std::string* printed = nullptr) {
@@ -677,56 +678,57 @@ TEST(BundledScenes, ParseAndPlanOnlyWhatTheyNeed) {
   const fs::path dir = fs::path(ARTHROSIM_SOURCE_DIR) / "data" / "scenes";
   const fs::path out = "/nonexistent/out";
   using V = std::vector<std::string>;
-  const Scene demo = common::load_scene(dir / "demo.yaml");
+  const Scene demo = load_scene(dir / "demo.yaml");
   // The demo runs every stage and the seed's three surface scenarios.
   EXPECT_EQ(RunnerTest::names(plan_stages(demo, out)),
             (V{"prepare", "comak", "surface.osmotic", "surface.gait", "surface.gait_osmotic", "post"}));
-  EXPECT_EQ(demo.scenarios.size(), 3u);
-  EXPECT_FALSE(demo.require_scenario("osmotic").wants("mesh_contact"));
+  EXPECT_EQ(demo.instances("surface").size(), 3u);
+  EXPECT_FALSE(demo.require_instance("surface", "osmotic").wants("mesh_contact"));
 
-  const Scene osmotic = common::load_scene(dir / "osmotic.yaml");
+  const Scene osmotic = load_scene(dir / "osmotic.yaml");
   EXPECT_EQ(RunnerTest::names(plan_stages(osmotic, out)), (V{"prepare", "surface.osmotic"}));
-  EXPECT_FALSE(osmotic.require_scenario("osmotic").wants("mesh_contact"));
-  EXPECT_TRUE(osmotic.require_scenario("osmotic").wants("osmotic_pressure"));
+  EXPECT_FALSE(osmotic.require_instance("surface", "osmotic").wants("mesh_contact"));
+  EXPECT_TRUE(osmotic.require_instance("surface", "osmotic").wants("osmotic_pressure"));
   // The same scenario run dynamically to the steady state (opt-in keys of the
   // surface stage): same plan, model, prepared resolution and effects.
-  const Scene dynamic = common::load_scene(dir / "osmotic_dynamic.yaml");
+  const Scene dynamic = load_scene(dir / "osmotic_dynamic.yaml");
   EXPECT_EQ(RunnerTest::names(plan_stages(dynamic, out)), (V{"prepare", "surface.osmotic"}));
-  EXPECT_EQ(dynamic.model, osmotic.model);
-  EXPECT_EQ(dynamic.prepare.canonical_text(), osmotic.prepare.canonical_text());
-  EXPECT_EQ(dynamic.require_scenario("osmotic").effects, osmotic.require_scenario("osmotic").effects);
-  EXPECT_FALSE(dynamic.require_scenario("osmotic").options.flag("steady_state"));
-  EXPECT_GT(dynamic.require_scenario("osmotic").options.si("steady_state_change_mm"), 0.0);
+  EXPECT_EQ(scene_inputs(dynamic).model, scene_inputs(osmotic).model);
+  EXPECT_EQ(dynamic.block("prepare").canonical_text(), osmotic.block("prepare").canonical_text());
+  EXPECT_EQ(dynamic.require_instance("surface", "osmotic").effects, osmotic.require_instance("surface", "osmotic").effects);
+  EXPECT_FALSE(dynamic.require_instance("surface", "osmotic").options.flag("steady_state"));
+  EXPECT_GT(dynamic.require_instance("surface", "osmotic").options.si("steady_state_change_mm"), 0.0);
 
-  const Scene gait = common::load_scene(dir / "gait.yaml");
+  const Scene gait = load_scene(dir / "gait.yaml");
   EXPECT_EQ(RunnerTest::names(plan_stages(gait, out)), (V{"prepare", "comak", "surface.gait"}));
-  EXPECT_FALSE(gait.require_scenario("gait").wants("osmotic_pressure"));
-  EXPECT_TRUE(gait.require_scenario("gait").wants("mesh_contact"));
+  EXPECT_FALSE(gait.require_instance("surface", "gait").wants("osmotic_pressure"));
+  EXPECT_TRUE(gait.require_instance("surface", "gait").wants("mesh_contact"));
 
-  const Scene both = common::load_scene(dir / "gait_osmotic.yaml");
+  const Scene both = load_scene(dir / "gait_osmotic.yaml");
   EXPECT_EQ(RunnerTest::names(plan_stages(both, out)),
             (V{"prepare", "comak", "surface.gait_osmotic"}));
-  EXPECT_TRUE(both.require_scenario("gait_osmotic").wants("osmotic_pressure"));
-  EXPECT_TRUE(both.require_scenario("gait_osmotic").wants("mesh_contact"));
+  EXPECT_TRUE(both.require_instance("surface", "gait_osmotic").wants("osmotic_pressure"));
+  EXPECT_TRUE(both.require_instance("surface", "gait_osmotic").wants("mesh_contact"));
 
   // The demo's walking scenarios are the bundled walking scenes': every
   // option (the whole cycle: no end_time_s in either), effect and the
   // prepared resolution the same, apart from the description (the demo file
   // repeats the settings).
-  EXPECT_EQ(demo.prepare.canonical_text(), gait.prepare.canonical_text());
-  EXPECT_EQ(demo.model, gait.model);
+  EXPECT_EQ(demo.block("prepare").canonical_text(), gait.block("prepare").canonical_text());
+  EXPECT_EQ(scene_inputs(demo).model, scene_inputs(gait).model);
   for (const Scene* whole : {&gait, &both}) {
-    const std::string name = whole->scenarios.front().name;
-    const common::Scenario& walk = demo.require_scenario(name);
-    EXPECT_EQ(walk.effects, whole->scenarios.front().effects) << name;
-    auto options = [](const common::Scenario& sc) {
+    const common::BlockInstance& whole_walk = whole->instances("surface").front();
+    const std::string name = whole_walk.name;
+    const common::BlockInstance& walk = demo.require_instance("surface", name);
+    EXPECT_EQ(walk.effects, whole_walk.effects) << name;
+    auto options = [](const common::BlockInstance& sc) {
       std::vector<std::pair<std::string, std::string>> kept;
       for (const auto& kv : sc.options.canonical())
         if (kv.first.find("description") == std::string::npos)
           kept.push_back(kv);
       return kept;
     };
-    EXPECT_EQ(options(walk), options(whole->scenarios.front())) << name;
+    EXPECT_EQ(options(walk), options(whole_walk)) << name;
   }
 }
 

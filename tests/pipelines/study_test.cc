@@ -7,6 +7,7 @@
 // errors vanish at the reference, the rule picks the expected resolution,
 // unchanged stages are reused, the JSON/CSV/HTML are written and parse, and
 // bad keys/values stop with clear messages and exit status 1.
+#include "pipelines/stages.h"
 #include "pipelines/study.h"
 
 #include <gtest/gtest.h>
@@ -500,18 +501,23 @@ TEST_F(StudyCli, BadValuesAndUselessAxesAreRefusedBeforeAnythingRuns) {
 TEST(StudySceneEdit, CopyNamesTheSameFilesAndCarriesTheSetting) {
   const fs::path scene = write_cantilever_study_scene(kDir / "edit");
   const std::string text = common::edit_scene_text(
-      scene, {{"surface.scenarios.cantilever.mesh", "plate4.obj"}, {"prepare.edge_length_mm", "2.5"}});
+      scene, scene_schema(), {{"surface.scenarios.cantilever.mesh", "plate4.obj"}, {"prepare.edge_length_mm", "2.5"}});
   fs::create_directories(kDir / "edit" / "elsewhere" / "deeper");
-  const common::Scene copy = common::parse_scene(text, kDir / "edit" / "elsewhere" / "deeper" / "copy.yaml");
-  const common::Scene original = common::load_scene(scene);
-  EXPECT_EQ(copy.model, original.model);
-  EXPECT_EQ(copy.scenarios.at(0).options.path("mesh"), fs::weakly_canonical(kDir / "edit" / "plate4.obj"));
-  EXPECT_EQ(copy.prepare.as_written("edge_length_mm"), 2.5);  // a block the original did not have
-  EXPECT_EQ(copy.scenarios.at(0).options.as_written("youngs_modulus_mpa"), 400.0);  // untouched
-  EXPECT_EQ(copy.scenarios.at(0).options.canonical_text(),
-            common::parse_scene(common::edit_scene_text(scene, {{"surface.scenarios.cantilever.mesh",
-                                                                  (kDir / "edit" / "plate4.obj").string()}}),
-                                kDir / "copy2.yaml").scenarios.at(0).options.canonical_text());
+  const common::Scene copy = parse_scene(text, kDir / "edit" / "elsewhere" / "deeper" / "copy.yaml");
+  const common::Scene original = load_scene(scene);
+  const common::OptionBlock& cantilever = copy.instances("surface").at(0).options;
+  EXPECT_EQ(scene_inputs(copy).model, scene_inputs(original).model);
+  EXPECT_EQ(cantilever.path("mesh"), fs::weakly_canonical(kDir / "edit" / "plate4.obj"));
+  EXPECT_EQ(copy.block("prepare").as_written("edge_length_mm"), 2.5);  // a block the original did not have
+  EXPECT_EQ(cantilever.as_written("youngs_modulus_mpa"), 400.0);  // untouched
+  EXPECT_EQ(cantilever.canonical_text(),
+            parse_scene(common::edit_scene_text(scene, scene_schema(),
+                                                {{"surface.scenarios.cantilever.mesh",
+                                                  (kDir / "edit" / "plate4.obj").string()}}),
+                        kDir / "copy2.yaml")
+                .instances("surface")
+                .at(0)
+                .options.canonical_text());
 }
 
 }  // namespace

@@ -241,7 +241,7 @@ TEST(SurfaceStage, OsmoticPressureOnTheListedSurfacesOnly) {
 // scenario. Tolerance: when the stop fires the step change is at most
 // tol = 1e-6 mm; if the transient then decays by a factor rho per step, the
 // distance still to go is at most change rho / (1 - rho) per coordinate
-// (HhtIntegrator::advance_to_steady_state); rho is measured from the run's
+// (numerics::HhtIntegrator::advance_to_steady_state); rho is measured from the run's
 // last recorded changes (/solver/change_m) and the deflection (a projection
 // of the position change, so bounded by sqrt(3) x the largest coordinate
 // change) gets that bound x 2 for the rho estimate, plus 1e-12 m for the two
@@ -546,7 +546,7 @@ std::string write_plate_obj(const std::string& name, int nx, double L_mm, double
   return p;
 }
 
-// Diagnostic hook of SparseDirectSolver (tests/benchmarks/factorization_bench.cc):
+// Diagnostic hook of numerics::SparseDirectSolver (tests/benchmarks/factorization_bench.cc):
 // ARTHROSIM_SAVE_TANGENT=N:FILE saves the N-th factorised matrix in Matrix
 // Market form. On the bundled cantilever (17 x 2 nodes, 6 coordinates each,
 // 4 factorisations) the first one is the Newton matrix at the reference

@@ -12,7 +12,7 @@
 #include <functional>
 #include <vector>
 
-#include "cartilage/hht_integrator.h"
+#include "numerics/hht_integrator.h"
 #include "cartilage/shell_model.h"
 #include "cartilage/surface_model.h"
 
@@ -51,8 +51,8 @@ std::vector<int> nodes_where(const common::QuadMesh& m, const std::function<bool
   return out;
 }
 
-IntegratorOptions static_options() {
-  IntegratorOptions o;
+numerics::IntegratorOptions static_options() {
+  numerics::IntegratorOptions o;
   o.quasi_static = true;
   o.dt_s = 1.0;
   return o;
@@ -82,11 +82,11 @@ TEST(SurfaceStability, TenTimesDefaultTimeStepStaysStableAndReachesPOverK) {
   model.add_pressure("pressure", 1.0, [=](double s) { return -p * std::min(s / ramp, 1.0); });
   model.fix_nodes("clamp", nodes_where(mesh, [](const Eigen::Vector3d& X) { return X.x() < 1e-12; }),
                   {true, true, true, true, true, true});
-  IntegratorOptions o;
+  numerics::IntegratorOptions o;
   o.alpha = -0.2;
-  o.dt_s = 1e-3;  // 10 x the default IntegratorOptions{}.dt_s
-  ASSERT_EQ(o.dt_s, 10 * IntegratorOptions{}.dt_s);
-  HhtIntegrator hht(model, o);
+  o.dt_s = 1e-3;  // 10 x the default numerics::IntegratorOptions{}.dt_s
+  ASSERT_EQ(o.dt_s, 10 * numerics::IntegratorOptions{}.dt_s);
+  numerics::HhtIntegrator hht(model, o);
   hht.initialize(0, model.reference_state());
   double max_w = 0, max_ke = 0;
   for (int n = 1; n <= 50; ++n) {
@@ -98,7 +98,7 @@ TEST(SurfaceStability, TenTimesDefaultTimeStepStaysStableAndReachesPOverK) {
     max_ke = std::max(max_ke, 0.5 * hht.v().dot(model.mass_matrix() * hht.v()));
   }
   const auto& st = hht.statistics();
-  EXPECT_EQ(st.status, IntegratorStatus::kRunning);
+  EXPECT_EQ(st.status, numerics::IntegratorStatus::kRunning);
   EXPECT_NEAR(hht.time(), t_end, 1e-12);
   // Potential energy scale of the static state: p^2 A / (2 k).
   const double U_static = p * p * L * W / (2 * k);
@@ -139,14 +139,14 @@ TEST(SurfaceStability, TenTimesDefaultTimeStepStaysStableAndReachesPOverK) {
 // be stiffer by orders of magnitude ((a/t)^2 = 1e6). The discretisation error
 // of bilinear ANS elements is O(h^2) (measured: 1.9 % at 8 x 8, 0.85 % at
 // 16 x 16); tolerance 3 % at 16 x 16, and the error must drop with h.
-double clamped_plate_centre(int n, double a, double t, double q, IntegratorStatistics* stats) {
+double clamped_plate_centre(int n, double a, double t, double q, numerics::IntegratorStatistics* stats) {
   const common::QuadMesh mesh = grid(n, n, a / n, a / n);
   ShellModel model(mesh, directors(mesh.num_nodes(), Eigen::Vector3d::UnitZ()),
                    Eigen::VectorXd::Constant(mesh.num_nodes(), t), ShellMaterial{});
   model.add_internal_forces();
   model.add_pressure("pressure", 0.0, [q](double s) { return s * q; });
   model.fix_nodes("clamp", model.boundary_nodes(), {true, true, true, true, true, true});
-  HhtIntegrator solver(model, static_options());
+  numerics::HhtIntegrator solver(model, static_options());
   solver.initialize(0, model.reference_state());
   solver.advance_to(1.0);
   *stats = solver.statistics();
@@ -161,15 +161,15 @@ TEST(SurfaceStability, VeryThinClampedPlateMatchesKirchhoff) {
   const double c = 0.00126532;
   const double q = 1e-4 * a * D / (c * a * a * a * a);
   const double w_ref = c * q * a * a * a * a / D;
-  IntegratorStatistics s8, s16;
+  numerics::IntegratorStatistics s8, s16;
   const double w8 = clamped_plate_centre(8, a, t, q, &s8);
   const double w16 = clamped_plate_centre(16, a, t, q, &s16);
   std::printf("thin clamped plate t/a=1e-3: w/w_Kirchhoff = %.5f (8x8), %.5f (16x16); Newton %ld/%ld, "
               "round-off acceptances %ld/%ld\n",
               w8 / w_ref, w16 / w_ref, s8.newton_iterations, s16.newton_iterations, s8.roundoff_acceptances,
               s16.roundoff_acceptances);
-  EXPECT_EQ(s8.status, IntegratorStatus::kRunning);
-  EXPECT_EQ(s16.status, IntegratorStatus::kRunning);
+  EXPECT_EQ(s8.status, numerics::IntegratorStatus::kRunning);
+  EXPECT_EQ(s16.status, numerics::IntegratorStatus::kRunning);
   EXPECT_TRUE(std::isfinite(w16));
   EXPECT_NEAR(w16 / w_ref, 1.0, 0.03);
   EXPECT_LT(std::abs(w16 / w_ref - 1), std::abs(w8 / w_ref - 1));
@@ -215,13 +215,13 @@ TEST(SurfaceStability, DistortedElementsPassPatchTestAndFoundationCase) {
       q6.head<3>() = X + s * (F * X - X);
     };
     model.add_constraint(c);
-    IntegratorOptions o = static_options();
+    numerics::IntegratorOptions o = static_options();
     o.residual_rtol = 1e-13;
-    HhtIntegrator solver(model, o);
+    numerics::HhtIntegrator solver(model, o);
     solver.initialize(0, model.reference_state());
     ASSERT_NO_THROW(solver.advance_to(1.0));
     ASSERT_TRUE(solver.q().allFinite());
-    EXPECT_EQ(solver.statistics().status, IntegratorStatus::kRunning);
+    EXPECT_EQ(solver.statistics().status, numerics::IntegratorStatus::kRunning);
     double err = 0, scale = 0;
     for (int i = 0; i < model.num_nodes(); ++i) {
       const Eigen::Vector3d X = model.reference_position(i);
@@ -241,11 +241,11 @@ TEST(SurfaceStability, DistortedElementsPassPatchTestAndFoundationCase) {
     model.add_foundation_springs(k);
     model.add_pressure("pressure", 1.0, [p](double s) { return -s * p; });
     model.fix_nodes("in_plane", model.boundary_nodes(), {true, true, false, false, false, false});
-    HhtIntegrator solver(model, static_options());
+    numerics::HhtIntegrator solver(model, static_options());
     solver.initialize(0, model.reference_state());
     ASSERT_NO_THROW(solver.advance_to(1.0));
     ASSERT_TRUE(solver.q().allFinite());
-    EXPECT_EQ(solver.statistics().status, IntegratorStatus::kRunning);
+    EXPECT_EQ(solver.statistics().status, numerics::IntegratorStatus::kRunning);
     const Eigen::VectorXd w = nodal_deflection(model, solver.q());
     const double worst = (w / (-p / k) - Eigen::VectorXd::Ones(w.size())).cwiseAbs().maxCoeff();
     std::printf("distorted (AR 10, skew 60 deg) on foundation: max |w/(p/k) - 1| = %.3e\n", worst);
@@ -271,10 +271,10 @@ TEST(SurfaceStability, ZeroDampingConservesEnergyOverManySteps) {
   model.add_inertia();
   model.fix_nodes("clamp", nodes_where(mesh, [](const Eigen::Vector3d& X) { return X.x() < 1e-12; }),
                   {true, true, true, true, true, true});
-  IntegratorOptions o;
+  numerics::IntegratorOptions o;
   o.alpha = 0.0;
   o.residual_rtol = 1e-10;
-  HhtIntegrator hht(model, o);
+  numerics::HhtIntegrator hht(model, o);
   Eigen::VectorXd v0 = Eigen::VectorXd::Zero(model.num_dofs());
   for (int i = 0; i < model.num_nodes(); ++i) v0(6 * i + 2) = 0.1 * std::pow(mesh.V(i, 0) / L, 2);
   hht.initialize(0, model.reference_state(), v0);
@@ -294,7 +294,7 @@ TEST(SurfaceStability, ZeroDampingConservesEnergyOverManySteps) {
   const auto& st = hht.statistics();
   std::printf("alpha=0 cantilever: %ld steps, %ld rejected, max |E/E0 - 1| = %.3e, max tip |w| = %.3e m\n",
               st.steps, st.rejected_steps, worst, max_tip);
-  EXPECT_EQ(st.status, IntegratorStatus::kRunning);
+  EXPECT_EQ(st.status, numerics::IntegratorStatus::kRunning);
   EXPECT_GE(st.steps, 2000);
   EXPECT_GT(max_tip, 0.0);
   EXPECT_LT(worst, 1e-5);
@@ -311,7 +311,7 @@ TEST(SurfaceStability, ZeroDampingConservesEnergyOverManySteps) {
 struct PoseResult {
   Eigen::MatrixXd u_B;  // displacement in the body frame, N x 3
   Eigen::VectorXd w, e1, e2;
-  IntegratorStatus status;
+  numerics::IntegratorStatus status;
 };
 
 TEST(SurfaceStability, LargeRigidRotationDoesNotChangeResults) {
@@ -329,9 +329,9 @@ TEST(SurfaceStability, LargeRigidRotationDoesNotChangeResults) {
     model.add_foundation_springs(7e8);
     model.add_pressure("pressure", 1.0, [](double s) { return -2e5 * s; });
     model.fix_nodes("clamp", clamp, {true, true, true, true, true, true});
-    IntegratorOptions o = static_options();
+    numerics::IntegratorOptions o = static_options();
     o.dt_s = 0.25;
-    HhtIntegrator solver(model, o);
+    numerics::HhtIntegrator solver(model, o);
     solver.initialize(0, model.reference_state());
     solver.advance_to(1.0);
     PoseResult r;
@@ -352,8 +352,8 @@ TEST(SurfaceStability, LargeRigidRotationDoesNotChangeResults) {
   X.linear() = Eigen::AngleAxisd(170.0 * M_PI / 180.0, Eigen::Vector3d(0.4, -0.7, 0.6).normalized()).toRotationMatrix();
   X.translation() = Eigen::Vector3d(0.9, -0.6, 1.0);
   const PoseResult r1 = solve(X);
-  EXPECT_EQ(r0.status, IntegratorStatus::kRunning);
-  EXPECT_EQ(r1.status, IntegratorStatus::kRunning);
+  EXPECT_EQ(r0.status, numerics::IntegratorStatus::kRunning);
+  EXPECT_EQ(r1.status, numerics::IntegratorStatus::kRunning);
   const double u_scale = r0.u_B.cwiseAbs().maxCoeff();
   const double e_scale = std::max(r0.e1.cwiseAbs().maxCoeff(), r0.e2.cwiseAbs().maxCoeff());
   const double du = (r0.u_B - r1.u_B).cwiseAbs().maxCoeff();

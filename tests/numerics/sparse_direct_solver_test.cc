@@ -9,9 +9,9 @@
 #include <cstdio>
 #include <vector>
 
-#include "cartilage/linear_solver.h"
+#include "numerics/sparse_direct_solver.h"
 
-namespace arthrosim::cartilage {
+namespace arthrosim::numerics {
 namespace {
 
 // Convection-diffusion on an n x n grid (5-point stencil, first-order upwind
@@ -64,16 +64,51 @@ TEST(SparseDirectSolver, CholmodAndUmfpackSolveTheirSystems) {
   EXPECT_NE(chol_n.message().find("not positive definite"), std::string::npos);
 }
 
+// A saddle-point matrix [K B^T; B 0] (symmetric, indefinite: the shape of a
+// mixed displacement-pressure system), K the SPD grid Laplacian and B a
+// full-rank constraint block: UMFPACK factorises it once and solves several
+// right-hand sides, each to the residual of a backward-stable solve; CHOLMOD's
+// LL^T refuses it.
+TEST(SparseDirectSolver, UmfpackSolvesASymmetricIndefiniteSaddlePointSystemForManyRightHandSides) {
+  const Eigen::SparseMatrix<double> K = grid_operator(20, 0.0);
+  const int n = static_cast<int>(K.rows()), m = 30;
+  std::vector<Eigen::Triplet<double>> t;
+  for (int k = 0; k < K.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(K, k); it; ++it) t.emplace_back(it.row(), it.col(), it.value());
+  for (int j = 0; j < m; ++j)
+    for (int c = 0; c < 3; ++c) {
+      const int col = (13 * j + 7 * c) % n;
+      const double b = 1.0 + 0.1 * c;
+      t.emplace_back(n + j, col, b);
+      t.emplace_back(col, n + j, b);
+    }
+  Eigen::SparseMatrix<double> S(n + m, n + m);
+  S.setFromTriplets(t.begin(), t.end());
+  S.makeCompressed();
+  SparseDirectSolver lu(LinearSolverKind::kUmfpack);
+  ASSERT_TRUE(lu.factorize(S)) << lu.message();
+  Eigen::MatrixXd B(n + m, 3);
+  for (int j = 0; j < 3; ++j) B.col(j) = Eigen::VectorXd::LinSpaced(n + m, -1.0 - j, 2.0 + j);
+  const Eigen::MatrixXd X = lu.solve_columns(B);
+  for (int j = 0; j < 3; ++j) {
+    // Same bound as above: condition number of order 1e3 here.
+    EXPECT_LT(relative_residual(S, X.col(j), B.col(j)), 1e-10) << "column " << j;
+    EXPECT_EQ(X.col(j), lu.solve(Eigen::VectorXd(B.col(j))));  // same solve, bit for bit
+  }
+  EXPECT_EQ(lu.num_analyses(), 1);
+  SparseDirectSolver chol(LinearSolverKind::kCholmod);
+  EXPECT_FALSE(chol.factorize(S));
+}
+
 // A 90,000-unknown non-symmetric operator: UMFPACK's numeric factors are
 // tens of MB, the size of the walks' (42k shell unknowns with 6 per node).
 // The first factorisation takes its memory from the kernel (page faults for
-// every page it touches); the next ones must find it in the process. Before
-// SparseDirectSolver kept freed memory (glibc's default: large blocks from
-// mmap, the top of the heap trimmed), every factorisation faulted about as
-// many pages as the first one: on the walk's tangent 5.8 M faults in 176
-// factorisations. Bound: a repeat may fault at most 1/10 of the first's
-// pages. Measured 2026-12-02: first factorisation 16,139-16,969 faults,
-// repeats 0; with the setting removed, repeats 16,930 (the test then fails).
+// every page it touches); the next ones must find it in the process. Without
+// keeping freed memory (glibc's default: large blocks from mmap, the top of
+// the heap trimmed), every factorisation would fault about as
+// many pages as the first one. Bound: a repeat may fault at most 1/10 of the
+// first's pages (with the setting removed, repeats fault as many pages as the
+// first and the test fails).
 TEST(SparseDirectSolver, RepeatedFactorisationsReuseTheirMemory) {
   const Eigen::SparseMatrix<double> A = grid_operator(300, 0.5);
   SparseDirectSolver lu(LinearSolverKind::kUmfpack);
@@ -97,4 +132,4 @@ TEST(SparseDirectSolver, RepeatedFactorisationsReuseTheirMemory) {
 }
 
 }  // namespace
-}  // namespace arthrosim::cartilage
+}  // namespace arthrosim::numerics

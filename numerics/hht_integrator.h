@@ -1,6 +1,7 @@
 #pragma once
-// Hilber-Hughes-Taylor (HHT-alpha) time integration with Newton iterations,
-// and a quasi-static mode, for any TimeIntegrable (e.g. ShellModel).
+// Hilber-Hughes-Taylor (HHT-alpha) time integration with Newton iterations
+// (newton.h), and a quasi-static mode, for any TimeIntegrable (e.g. the
+// cartilage stage's shell models); no assumption about the coordinates.
 //
 // HHT (Hilber, Hughes & Taylor 1977), alpha in [-1/3, 0],
 // gamma = (1 - 2 alpha)/2, beta = (1 - alpha)^2/4:
@@ -16,8 +17,8 @@
 //   residual:  ||G||_2 <= max(residual_rtol * ||G^(0)||_2, residual_atol_N)
 //              (G^(0): residual of the step's first iterate, in N);
 //   increment: max_i w_i |dq_i| <= increment_rtol * max_i w_i |q_i - q_n,i| + increment_atol_m
-//              (w_i = 1 for positions, h/2 for transverse gradients, so both
-//              are lengths in m).
+//              (w = TimeIntegrable::increment_weights, e.g. 1 for positions,
+//              h/2 for a shell's transverse gradients, so both are lengths in m).
 // Round-off stagnation (documented exception): when the increment has dropped
 // below roundoff_increment_rel * (largest position coordinate) -- a few
 // thousand ulps -- and the residual has fallen by roundoff_residual_drop from
@@ -43,18 +44,11 @@
 #include <string>
 #include <vector>
 
-#include "cartilage/linear_solver.h"
-#include "cartilage/time_integrable.h"
+#include "common/options.h"
+#include "numerics/newton.h"
+#include "numerics/time_integrable.h"
 
-namespace arthrosim::cartilage {
-
-enum class LinearSolverChoice {
-  kAuto,     ///< CHOLMOD when every term is symmetric, else UMFPACK
-  kCholmod,  ///< force CHOLMOD; a non-symmetric tangent is replaced by its
-             ///< symmetric part (K + K^T)/2 (more Newton iterations); switches
-             ///< to UMFPACK, counted, on a matrix that is not SPD
-  kUmfpack,  ///< force UMFPACK
-};
+namespace arthrosim::numerics {
 
 struct IntegratorOptions {
   bool quasi_static = false;       ///< no inertia, F(q, 0, t) = 0 per step
@@ -64,7 +58,7 @@ struct IntegratorOptions {
   double residual_rtol = 1e-8;     ///< relative residual tolerance
   double residual_atol_N = 1e-10;  ///< absolute residual tolerance [N]
   double increment_rtol = 1e-8;    ///< relative increment tolerance
-  double increment_atol_m = 1e-14; ///< absolute increment tolerance [m]
+  double increment_atol_m = 1e-11 * common::units::mm;  ///< absolute increment tolerance [m]
   double roundoff_increment_rel = 1e-11;  ///< see "round-off stagnation"
   double roundoff_residual_drop = 1e-3;   ///< required ||G|| / ||G^(0)||
   bool extrapolate_predictor = true;      ///< quasi-static secant predictor
@@ -82,10 +76,10 @@ struct IntegratorOptions {
   /// (full Newton, quadratic convergence).
   bool reuse_factorization = false;
   double refactor_ratio = 0.25;
-  /// Backtracking line search on the residual norm (Newton globalisation for
-  /// penalty contact, whose active set changes between iterates): up to this
-  /// many halvings of the Newton step; 0 = full steps (pure Newton). Not
-  /// combined with reuse_factorization.
+  /// Backtracking line search on the residual norm (Newton globalisation,
+  /// e.g. for penalty contact, whose active set changes between iterates): up
+  /// to this many halvings of the Newton step; 0 = full steps (pure Newton).
+  /// Not combined with reuse_factorization.
   int line_search_halvings = 0;
   int max_halvings = 10;           ///< consecutive halvings before giving up
   /// A failed step no longer than this fraction of dt_s stops the run, in (0, 1).
@@ -97,6 +91,15 @@ struct IntegratorOptions {
   /// (also kept in statistics().rejections), so a caller can report it while
   /// a single advance_to() is still creeping on with short steps.
   std::function<void(const std::string& rejection)> on_rejection;
+
+  /// Scene keys of a stage that integrates with these options
+  /// (common/options.h): time_step_s, hht_alpha, max_newton_iterations,
+  /// newton_tolerance (residual_rtol; increment_rtol takes the same value,
+  /// see same_tolerances()), newton_residual_floor_n, newton_increment_floor_mm,
+  /// linear_solver, newton_reuse_factorization.
+  void declare(common::OptionVisitor& v);
+  /// increment_rtol = residual_rtol (one scene key sets both).
+  void same_tolerances() { increment_rtol = residual_rtol; }
 };
 
 enum class IntegratorStatus { kNotStarted, kRunning, kFailed };
@@ -156,16 +159,12 @@ class HhtIntegrator {
   const IntegratorOptions& options() const { return opts_; }
 
  private:
+  class StepSystem;
   /// One attempt from (t_, q_, v_, a_) over h; true on convergence (state
   /// advanced). On failure the state is untouched and `reason` says why.
   bool attempt(double h, std::string& reason, double& last_residual);
-  bool factorize(Eigen::SparseMatrix<double>& K, std::string& reason);
-  void constrain_matrix(Eigen::SparseMatrix<double>& K) const;
-  /// (Re)computes the pattern-dependent indices; a changed pattern also
-  /// discards the symbolic analysis.
-  void sync_pattern();
-  /// transpose_index_ for the current pattern (CHOLMOD on (K + K^T)/2).
-  void build_transpose_index();
+  /// Newton's counters and timings into stats_.
+  void copy_newton_statistics();
 
   TimeIntegrable& sys_;
   IntegratorOptions opts_;
@@ -174,14 +173,11 @@ class HhtIntegrator {
   int successes_since_halving_ = 0;
   Eigen::VectorXd q_, v_, a_, F_;  // F_: F at the current accepted state
   Eigen::VectorXd dq_prev_;          // last accepted step's change (predictor)
-  double h_prev_ = 0, q_scale_ = 0;
-  bool factor_valid_ = false, refactor_next_ = false;
-  double factor_h_ = 0;
-  Eigen::SparseMatrix<double> K_;
-  std::vector<int> zero_index_, diag_index_, transpose_index_;
-  long pattern_revision_ = 0;
-  std::unique_ptr<SparseDirectSolver> solver_;
+  double h_prev_ = 0;
+  double initial_assembly_s_ = 0;    // initialize()'s evaluation
+  std::unique_ptr<StepSystem> step_;    // the step equation as a Newton system
+  std::unique_ptr<NewtonSolver> newton_;
   IntegratorStatistics stats_;
 };
 
-}  // namespace arthrosim::cartilage
+}  // namespace arthrosim::numerics

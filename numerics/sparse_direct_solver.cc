@@ -1,4 +1,4 @@
-#include "cartilage/linear_solver.h"
+#include "numerics/sparse_direct_solver.h"
 
 #include <Eigen/CholmodSupport>
 #include <Eigen/UmfPackSupport>
@@ -15,18 +15,14 @@
 #include "common/error.h"
 #include "common/log.h"
 
-namespace arthrosim::cartilage {
+namespace arthrosim::numerics {
 
 namespace {
-// The dense kernels under UMFPACK and CHOLMOD come from whichever BLAS the
-// system provides (Debian: OpenBLAS through the libblas.so.3 alternative).
-// OpenBLAS's threaded kernels round differently from its serial ones: the
-// same UMFPACK solve of a walking-scenario tangent differs in its last bits
-// between 1 and 2 threads, so results would depend on the machine's core
-// count and on OMP_NUM_THREADS (the scene runner gives concurrent stages one
-// thread each). UMFPACK's factorisation gained nothing from the second thread
-// (0.330 vs 0.337 s on that 42k-unknown tangent), so the BLAS is pinned to one
-// thread when the symbol exists; any other BLAS is left as it is.
+// OpenBLAS's threaded kernels round differently from its serial ones (the
+// same UMFPACK solve differs in its last bits between 1 and 2 threads), and
+// the factorisation gains nothing measurable from a second thread, so the
+// BLAS is pinned to one thread when the symbol exists; any other BLAS is left
+// as it is.
 void pin_blas_to_one_thread() {
   static std::once_flag once;
   std::call_once(once, [] {
@@ -38,16 +34,12 @@ void pin_blas_to_one_thread() {
 // Every UMFPACK factorisation frees the previous numeric factors and
 // allocates new ones (tens of MB for a walking tangent). glibc serves blocks
 // that large with mmap and returns freed memory at the top of the heap to the
-// kernel, so each factorisation touched its factors in fresh zero-filled
-// pages: 5.8 M minor page faults and 12.8 s of system time in a 0.2-s walking
-// span (176 factorisations). Keeping freed memory in the process (blocks up
-// to 1 GiB from the heap, no trimming) brought the factorisation from 0.326
-// to 0.252 s and that span from 100.8 to 84.4 s wall, bit-identical results
-// (measured 2026-12-02 on the demo's gait scenario, docs/contact.md "Cost of
-// a Newton iteration"). The price is peak memory: freed blocks stay in the
-// heap, so peak RSS rose from 572 to 642 MB on that span (the 1.5-mm osmotic
-// run of docs/studies.md: 1,250 MB now, 1,029 MB in an older run). Process-wide, set
-// once, like the BLAS threads above; only glibc has mallopt.
+// kernel, so each factorisation would touch its factors in fresh zero-filled
+// pages (millions of minor page faults per walk). Keeping freed memory in the
+// process (blocks up to 1 GiB from the heap, no trimming) makes repeated
+// factorisations faster with bit-identical results, at the price of a higher
+// peak resident size (docs/contact.md, "Cost of a Newton iteration").
+// Process-wide, set once, like the BLAS threads above; only glibc has mallopt.
 void retain_freed_memory() {
 #ifdef __GLIBC__
   static std::once_flag once;
@@ -57,10 +49,7 @@ void retain_freed_memory() {
   });
 #endif
 }
-// Diagnostic: ARTHROSIM_SAVE_TANGENT=N:FILE saves the N-th matrix this
-// process factorises (counted over every solver, from 1) to FILE in Matrix
-// Market form, e.g. a walking tangent for tests/benchmarks/factorization_bench.cc
-// (docs/contact.md, "Cost of a Newton iteration").
+// Diagnostic: ARTHROSIM_SAVE_TANGENT=N:FILE (see the header).
 void save_matrix_if_asked(const Eigen::SparseMatrix<double>& A) {
   static const char* spec = std::getenv("ARTHROSIM_SAVE_TANGENT");
   if (!spec) return;
@@ -104,11 +93,8 @@ SparseDirectSolver::SparseDirectSolver(LinearSolverKind kind) : impl_(std::make_
   pin_blas_to_one_thread();
   retain_freed_memory();
   // No iterative refinement in UMFPACK's solve: every caller is a Newton
-  // iteration, which corrects the solve's error in its next residual
-  // anyway, and on the coupled contact system (42k unknowns) the default two
-  // refinement steps made each solve 5.7 x slower (0.132 vs 0.023 s) for a
-  // relative residual of 3.3e-12 instead of 4.8e-12 (measured 2026-12-02 on a
-  // tangent of the demo's walk; docs/contact.md, "Cost of a Newton iteration").
+  // iteration, which corrects the solve's error in its next residual, and
+  // the default two refinement steps cost several solves each.
   impl_->umfpack.umfpackControl()(UMFPACK_IRSTEP) = 0;
 }
 SparseDirectSolver::~SparseDirectSolver() = default;
@@ -148,4 +134,10 @@ Eigen::VectorXd SparseDirectSolver::solve(const Eigen::VectorXd& b) const {
   return impl_->umfpack.solve(b);
 }
 
-}  // namespace arthrosim::cartilage
+Eigen::MatrixXd SparseDirectSolver::solve_columns(const Eigen::MatrixXd& B) const {
+  Eigen::MatrixXd X(B.rows(), B.cols());
+  for (Eigen::Index j = 0; j < B.cols(); ++j) X.col(j) = solve(Eigen::VectorXd(B.col(j)));
+  return X;
+}
+
+}  // namespace arthrosim::numerics

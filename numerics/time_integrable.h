@@ -1,8 +1,12 @@
 #pragma once
 // The interface the time integrator (hht_integrator.h) needs from a
-// discretised model: generalised forces, inertia, tangents in a fixed sparse
-// pattern, constrained (eliminated) coordinates. ShellModel implements it; a
-// test implements it for a single-DOF oscillator.
+// discretised model: generalised forces, inertia, tangents in a sparse
+// pattern, constrained (eliminated) coordinates. It assumes nothing about how
+// coordinates are grouped (dofs per node, fields): a coordinate is an index
+// 0..num_dofs()-1, and describe_dof() names it for messages.
+// Implemented by cartilage::ShellModel and cartilage::CoupledShellSystem (6
+// coordinates per shell node), and in tests/numerics by a one-coordinate
+// oscillator.
 //
 // Equations. F(q, v, t) collects every non-inertial term (internal forces,
 // dampers, minus external loads); M a the inertial one. The integrator asks
@@ -14,7 +18,7 @@
 #include <string>
 #include <vector>
 
-namespace arthrosim::cartilage {
+namespace arthrosim::numerics {
 
 struct EvalRequest {
   double t = 0;                          ///< time [s]
@@ -31,7 +35,7 @@ class TimeIntegrable {
   virtual int num_dofs() const = 0;
   /// True when an inertia term exists (dynamic problem).
   virtual bool has_inertia() const = 0;
-  /// True when every term's tangent is symmetric (CHOLMOD may be used).
+  /// True when every tangent is symmetric (CHOLMOD may then be used).
   virtual bool tangent_symmetric() const = 0;
   /// F (size n) and, when Ma != nullptr, M a; when K != nullptr, the tangent
   /// values in tangent_pattern()'s layout. Throws NumericalError naming the
@@ -50,8 +54,10 @@ class TimeIntegrable {
   virtual void apply_constraints(double t, Eigen::VectorXd& q) const = 0;
   /// Solves M a = rhs on the unconstrained coordinates (a = 0 on the others).
   virtual void solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) = 0;
-  /// Per-coordinate weight turning an increment into a length [m] for the
-  /// convergence test (1 for positions, h/2 for transverse gradients).
+  /// Per-coordinate weight turning an increment into the unit of the
+  /// increment test (IntegratorOptions::increment_atol_m), e.g. 1 for
+  /// positions in m, h/2 for a shell's transverse gradients, a length scale
+  /// for a pressure coordinate.
   virtual const Eigen::VectorXd& increment_weights() const = 0;
   /// Predicts q at t1 from the converged q0 at t0 (the Newton start of a
   /// step, IntegratorOptions::predictor = kSystem). Default: q1 = q0.
@@ -69,4 +75,4 @@ class TimeIntegrable {
   virtual std::string describe_dof(int i) const = 0;
 };
 
-}  // namespace arthrosim::cartilage
+}  // namespace arthrosim::numerics

@@ -2,7 +2,7 @@
 // period elongation and numerical damping match the spectral analysis of the
 // HHT recurrence (Hilber, Hughes & Taylor 1977; Hughes, The Finite Element
 // Method, 1987, ch. 9), alpha = 0 conserves energy, and step halving /
-// failure reporting work. Plus a one-element shell model run dynamically.
+// failure reporting work.
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
@@ -10,11 +10,10 @@
 #include <complex>
 #include <cstdio>
 
-#include "cartilage/hht_integrator.h"
-#include "cartilage/shell_model.h"
+#include "numerics/hht_integrator.h"
 #include "common/error.h"
 
-namespace arthrosim::cartilage {
+namespace arthrosim::numerics {
 namespace {
 
 /// m u'' + k u + c_cubic u^3 = 0 (c_cubic = 0: linear oscillator).
@@ -397,45 +396,5 @@ TEST(Hht, AdvanceToSteadyStateStopsAtTheStatedChangePerStep) {
   EXPECT_THROW(short_run.advance_to_steady_state(0.0, 10.0), common::InputError);
 }
 
-// A one-element shell (all four nodes' positions free, transverse gradients
-// free, one edge clamped) released from a prescribed initial velocity: with
-// alpha = 0 and no external work, the total energy (kinetic + strain) is
-// conserved to Newton tolerance, checking mass matrix, inertia term and
-// internal forces together in the dynamic path.
-TEST(Hht, ShellElementEnergyConservedWithAlphaZero) {
-  common::QuadMesh mesh;
-  mesh.V.resize(4, 3);
-  mesh.V << 0, 0, 0, 0.01, 0, 0, 0.01, 0.01, 0, 0, 0.01, 0;
-  mesh.Q.resize(1, 4);
-  mesh.Q << 0, 1, 2, 3;
-  common::Points3 D(4, 3);
-  D.rowwise() = Eigen::RowVector3d(0, 0, 1);
-  ShellMaterial mat;  // seed defaults: 1 mm, 400 MPa, 0.3, 1000 kg/m^3
-  ShellModel model(mesh, D, Eigen::VectorXd::Constant(4, 1e-3), mat);
-  model.add_internal_forces();
-  model.add_inertia();
-  model.fix_nodes("clamp", {0, 3}, {true, true, true, true, true, true});
-  IntegratorOptions o;
-  o.alpha = 0.0;
-  o.dt_s = 2e-6;
-  o.residual_rtol = 1e-12;
-  HhtIntegrator hht(model, o);
-  Eigen::VectorXd v0 = Eigen::VectorXd::Zero(24);
-  v0(6 * 1 + 2) = v0(6 * 2 + 2) = 0.5;  // tip moving at 0.5 m/s out of plane
-  hht.initialize(0, model.reference_state(), v0);
-  auto energy = [&]() {
-    const Vector24 q = model.gather(0, hht.q()), v = model.gather(0, hht.v());
-    return 0.5 * v.dot(model.element(0).mass() * v) + model.element(0).strain_energy(q);
-  };
-  const double E0 = energy();
-  hht.advance_to(2e-4);
-  std::printf("shell element alpha=0: energy ratio %.10f after %ld steps\n", energy() / E0, hht.statistics().steps);
-  // Trapezoidal rule: exact energy conservation for linear systems; the
-  // element is nonlinear with small (1e-3) strains, where the midpoint
-  // energy error is O(h^2 * strain^2) ~ 1e-8; 1e-6 leaves margin.
-  EXPECT_NEAR(energy() / E0, 1.0, 1e-6);
-  EXPECT_EQ(model.built_terms(), (std::vector<std::string>{"internal_forces", "inertia", "clamp"}));
-}
-
 }  // namespace
-}  // namespace arthrosim::cartilage
+}  // namespace arthrosim::numerics

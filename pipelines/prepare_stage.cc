@@ -1,0 +1,35 @@
+// The prepare stage's scene block and descriptor (the stage's algorithms are
+// in prepare.cc).
+#include "common/mesh_io.h"
+#include "pipelines/prepare.h"
+#include "pipelines/stages.h"
+
+namespace arthrosim::pipelines {
+
+void PrepareOptions::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.number("edge_length_mm", edge_length, Unit::kMillimetre, {0.2, 20},
+           "target edge length of the remeshed cartilage surfaces");
+  v.named_numbers("surface_edge_length_mm", surface_edge_length, Unit::kMillimetre, {0.2, 20},
+                  "per-surface target edge lengths in place of edge_length_mm, items 'name=mm' (e.g. [femur=3.7])");
+  v.choice("mesh_unit", unit,
+           {{"mm", common::LengthUnit::kMillimetre},
+            {"cm", common::LengthUnit::kCentimetre},
+            {"m", common::LengthUnit::kMetre}},
+           "length unit of the model's mesh files (STL carries none)");
+  v.number("max_cast_distance_mm", max_cast_distance, Unit::kMillimetre, {1, 50},
+           "longest ray cast from cartilage to bone when measuring thickness");
+  v.integer("remesh_iterations", remesh_iterations, {1, 20}, "isotropic remeshing iterations");
+}
+
+StageDescriptor prepare_stage_descriptor() {
+  StageDescriptor d;
+  d.name = "prepare";
+  d.executable = "arthrosim-prepare";
+  d.summary = "validated, remeshed cartilage and bone surfaces, thickness, quad articular meshes";
+  d.block = block_schema<PrepareOptions>("prepare", "options of the prepare stage");
+  d.outputs = {"prepared_model"};
+  return d;
+}
+
+}  // namespace arthrosim::pipelines
