@@ -294,6 +294,8 @@ struct PairOut {
 // accumulated relative shear displacement l = tau (w_o + w_t) over the rest
 // length d; for a homogeneous strain eps, g = eps n, and
 // (3/K) sum_j sym(g_j (x) n_j) = eps (the averaged strain, simulation.h).
+// Each automaton takes its own share 2 w_i / (w_i + w_j) of it (A8's split
+// by compliance: 1 between equal tissues, ~0 for bone next to soft tissue).
 SW_INLINE void pair_strain(PairOut& out, double r, double nx, double ny, double nz, double tX, double tY, double tZ,
                            double wsum, double inv_d) {
   const double en = (r * inv_d - 1.0);
@@ -563,12 +565,14 @@ SW_CLONES void Simulation::pair_forces() {
     A9[i] += out.s12;
     A10[i] += out.s23;
     A11[i] += out.s13;
-    E0[i] += out.e11;
-    E1[i] += out.e22;
-    E2[i] += out.e33;
-    E3[i] += out.e12;
-    E4[i] += out.e23;
-    E5[i] += out.e13;
+    // The automaton's own share of the pair's strain (A8's split by compliance).
+    const double share = 2.0 * w[i] / (w[i] + w[j]);
+    E0[i] += share * out.e11;
+    E1[i] += share * out.e22;
+    E2[i] += share * out.e33;
+    E3[i] += share * out.e12;
+    E4[i] += share * out.e23;
+    E5[i] += share * out.e13;
   };
   const int nrows = static_cast<int>(rows_.size());
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)
@@ -691,12 +695,14 @@ SW_CLONES void Simulation::integrate() {
     A9[i] += out.s12;
     A10[i] += out.s23;
     A11[i] += out.s13;
-    E0[i] += out.e11;
-    E1[i] += out.e22;
-    E2[i] += out.e33;
-    E3[i] += out.e12;
-    E4[i] += out.e23;
-    E5[i] += out.e13;
+    // The automaton's own share of the pair's strain (A8's split by compliance).
+    const double share = 2.0 * w[i] / (w[i] + w[j]);
+    E0[i] += share * out.e11;
+    E1[i] += share * out.e22;
+    E2[i] += share * out.e33;
+    E3[i] += share * out.e12;
+    E4[i] += share * out.e23;
+    E5[i] += share * out.e13;
   };
   const int nrows = static_cast<int>(rows_.size());
 #pragma omp parallel for schedule(static) if (n >= kParallelMin)

@@ -164,9 +164,11 @@ class Simulation {
   double von_mises(int i) const;
   /// Distortional strain: the equivalent (von Mises) strain sqrt(2/3 e:e) of
   /// the deviatoric part e of the automaton's averaged strain tensor
-  /// eps = (3/N) sum_j sym(g_j (x) n_j), g_j = e_n n + l/d the pairs' strain
-  /// vectors (normal strain (r - d)/d, relative shear displacement l = tau
-  /// (w_i + w_j)); exact for a homogeneous strain, where it equals
+  /// eps = (3/N) sum_j s_ij sym(g_j (x) n_j), g_j = e_n n + l/d the pairs'
+  /// strain vectors (normal strain (r - d)/d, relative shear displacement l =
+  /// tau (w_i + w_j)), s_ij = 2 w_i / (w_i + w_j) the automaton's share of
+  /// the pair's deformation (A8's split by compliance; 1 within a tissue);
+  /// exact for a homogeneous strain, where it equals
   /// sigma_eq / (3G) of A6. (In a steep pressure gradient of a nearly
   /// incompressible undrained tissue A4's averaged stress carries a spurious
   /// deviatoric part of order d |grad P|, which sigma_eq / (3G) would divide
