@@ -17,6 +17,7 @@ std::int64_t nodes_per_cell(XdmfCellType type) {
     case XdmfCellType::kTriangle: return 3;
     case XdmfCellType::kQuadrilateral: return 4;
     case XdmfCellType::kHexahedron: return 8;
+    case XdmfCellType::kPolyvertex: return 1;
   }
   return 0;
 }
@@ -25,6 +26,7 @@ const char* cell_name(XdmfCellType type) {
     case XdmfCellType::kTriangle: return "triangles";
     case XdmfCellType::kQuadrilateral: return "quads";
     case XdmfCellType::kHexahedron: return "hexahedra";
+    case XdmfCellType::kPolyvertex: return "points";
   }
   return "";
 }
@@ -33,6 +35,7 @@ const char* topology_type(XdmfCellType type) {
     case XdmfCellType::kTriangle: return "Triangle";
     case XdmfCellType::kQuadrilateral: return "Quadrilateral";
     case XdmfCellType::kHexahedron: return "Hexahedron";
+    case XdmfCellType::kPolyvertex: return "Polyvertex";
   }
   return "";
 }
