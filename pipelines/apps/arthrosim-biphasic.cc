@@ -87,8 +87,8 @@ int main(int argc, char** argv) {
       "  paraview biphasic.xdmf                      # fluid pressure, stresses, flux per step\n"
       "  arthrosim-biphasic --canonical two_layers --out two_layers/biphasic.h5\n"
       "      # two flat layers pressed together (docs/biphasic.md, \"Canonical case\")\n"
-      "The whole gait cycle: prepared.h5 and kinematics.h5 of any `arthrosim run` (e.g. data/scenes/demo.yaml --out\n"
-      "out/demo`, then arthrosim-biphasic with the defaults (about 1.5 min on 2 cores, docs/biphasic.md).\n");
+      "  arthrosim run data/scenes/biphasic_gait.yaml --out out/biphasic_gait [--dry-run]\n"
+      "      # the whole gait cycle: prepare, COMAK, then this stage with the scene's biphasic block\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-biphasic");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));

@@ -25,3 +25,9 @@ add_test(NAME sample.arthrosim-biphasic.compare
           --compare-to ${CMAKE_BINARY_DIR}/sample_runs/biphasic_five_frames.h5 --compare-only)
 set_tests_properties(sample.arthrosim-biphasic.compare PROPERTIES LABELS sample TIMEOUT 60
   FIXTURES_REQUIRED biphasic_five_frames PASS_REGULAR_EXPRESSION "compare worst relative difference 0")
+# The whole gait cycle through the runner (prepare, COMAK, this stage: about
+# 6 min on a loaded 2-core machine) is checked as a plan.
+add_test(NAME sample.arthrosim-biphasic.gait_plan
+  COMMAND arthrosim run ${CMAKE_SOURCE_DIR}/data/scenes/biphasic_gait.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/biphasic_gait_plan --dry-run)
+set_tests_properties(sample.arthrosim-biphasic.gait_plan PROPERTIES LABELS sample TIMEOUT 60
+  PASS_REGULAR_EXPRESSION "biphasic would run")
