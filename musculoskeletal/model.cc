@@ -24,6 +24,16 @@ int Model::muscle_index(const std::string& n) const {
   return -1;
 }
 
+int Model::role_coordinate(const std::string& role) const {
+  if (auto it = coordinate_roles.find(role); it != coordinate_roles.end()) return it->second;
+  return tree.coordinate_index(role);
+}
+
+int Model::role_body(const std::string& role) const {
+  if (auto it = body_roles.find(role); it != body_roles.end()) return it->second;
+  return tree.body_index(role);
+}
+
 int Model::contact_index(const std::string& n) const {
   for (size_t i = 0; i < contacts.size(); ++i)
     if (contacts[i].name() == n) return static_cast<int>(i);
@@ -45,7 +55,7 @@ ModelData make_data(const Model& model) {
   d.muscle_force_length = Eigen::VectorXd::Ones(model.muscles.size());
   d.contacts.resize(model.contacts.size());
   const int n = model.num_coordinates();
-  d.Q_ligaments = d.Q_muscles = d.Q_contact = d.Q = Eigen::VectorXd::Zero(n);
+  d.Q_ligaments = d.Q_muscles = d.Q_contact = d.Q_springs = d.Q = Eigen::VectorXd::Zero(n);
   d.dQ_dq = Eigen::MatrixXd::Zero(n, n);
   return d;
 }
@@ -83,7 +93,16 @@ void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
   d.Q_ligaments.setZero(n);
   d.Q_muscles.setZero(n);
   d.Q_contact.setZero(n);
+  d.Q_springs.setZero(n);
 
+  if (opt.coordinate_springs) {
+    // Each acts on its own coordinate only (so every Jacobian column gets
+    // its -stiffness from the difference quotient, and masks need not know them).
+    for (const CoordinateSpring& s : model.coordinate_springs)
+      d.Q_springs[s.coordinate] += -s.stiffness * (q[s.coordinate] - s.rest_length) -
+                                   s.viscosity * (qdot.size() ? qdot[s.coordinate] : 0.0);
+    check_finite(d.Q_springs, "coordinate spring generalized forces");
+  }
   if (opt.ligaments) {
     int flat = 0;
     for (size_t li = 0; li < model.ligaments.size(); ++li) {
@@ -137,7 +156,7 @@ void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
     }
     check_finite(d.Q_contact, "contact generalized forces");
   }
-  d.Q = d.Q_ligaments + d.Q_muscles + d.Q_contact;
+  d.Q = d.Q_ligaments + d.Q_muscles + d.Q_contact + d.Q_springs;
 }
 
 // moved[b]: body b moves when coordinate c changes (b lies below c's joint).

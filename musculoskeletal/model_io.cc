@@ -530,8 +530,9 @@ void read_surface(Context& c, const XMLElement* e) {
   } else {
     s.thickness = read_thickness_csv(c.rd, e, c.rd.existing_file(e, "thickness_csv"), s.mesh);
   }
-  // Mesh coordinates given in the reference (model) frame move to the body frame.
-  const Pose X = to_body(c, e, s.body);
+  // Mesh coordinates given in the reference (model) frame move to the body
+  // frame; xyz/rpy place the mesh file's frame in that frame (default identity).
+  const Pose X = to_body(c, e, s.body) * c.rd.pose(e);
   for (int i = 0; i < s.mesh.num_vertices(); ++i)
     s.mesh.V.row(i) = (X * Vec3(s.mesh.V.row(i).transpose())).transpose();
   s.name = n;
@@ -582,6 +583,7 @@ void read_ligament(Context& c, const XMLElement* e) {
        b = b->NextSiblingElement("bundle"), ++k) {
     const std::string where = "ligament '" + lig.name + "' bundle " + std::to_string(k);
     LigamentBundle lb;
+    if (c.rd.has(b, "name")) lb.name = c.rd.attr(b, "name");
     BlankevoortParameters& p = lb.parameters;
     // Bundle attributes override the group's.
     auto value = [&](const char* name, double def) {
@@ -633,6 +635,9 @@ void read_muscle(Context& c, const XMLElement* e) {
     if (!(m.optimal_fiber_length > 0) || !(m.tendon_slack_length > 0))
       c.rd.fail(e, "muscle '" + m.name + "' expected optimal_fiber_length > 0 m and tendon_slack_length > 0 m");
   }
+  m.pennation_angle = c.rd.number_or(e, "pennation_angle", 0.0);
+  if (!(m.pennation_angle >= 0 && m.pennation_angle < M_PI / 2))
+    c.rd.fail(e, "muscle '" + m.name + "' expected 0 <= pennation_angle < pi/2 rad");
   m.path = read_path(c, e, "muscle '" + m.name + "'");
   c.model.muscles.push_back(std::move(m));
 }
@@ -667,6 +672,8 @@ Model parse_model(const std::string& xml, const std::string& file_name,
   forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), ref);
   Context c{rd, model, ref, {}, {}, {}};
   std::set<int> prescribed;
+  bool have_subject = false;
+  model.default_q = Eigen::VectorXd::Zero(model.num_coordinates());
   for (const XMLElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
     const std::string name = e->Name();
     if (name.rfind(kNs, 0) != 0) continue;
@@ -691,12 +698,50 @@ Model parse_model(const std::string& xml, const std::string& file_name,
       read_ligament(c, e);
     } else if (is_ext(e, "muscle")) {
       read_muscle(c, e);
+    } else if (is_ext(e, "default")) {
+      const std::string j = rd.attr(e, "joint");
+      const int ci = model.tree.coordinate_index(j);
+      if (ci < 0) rd.fail(e, "default: expected a revolute or prismatic joint, found '" + j + "'");
+      model.default_q[ci] = rd.number(e, "value");
+    } else if (is_ext(e, "role")) {
+      const std::string role = rd.attr(e, "name");
+      const bool joint = rd.has(e, "joint"), link = rd.has(e, "link");
+      if (joint == link) rd.fail(e, "role '" + role + "': expected exactly one of joint or link");
+      if (joint) {
+        const std::string j = rd.attr(e, "joint");
+        const int ci = model.tree.coordinate_index(j);
+        if (ci < 0) rd.fail(e, "role '" + role + "': expected a revolute or prismatic joint, found '" + j + "'");
+        if (!model.coordinate_roles.emplace(role, ci).second) rd.fail(e, "duplicate role '" + role + "'");
+      } else {
+        const int b = body_of(c, e, "link");
+        if (!model.body_roles.emplace(role, b).second) rd.fail(e, "duplicate role '" + role + "'");
+      }
+    } else if (is_ext(e, "coordinate_spring")) {
+      CoordinateSpring sp;
+      sp.name = rd.has(e, "name") ? rd.attr(e, "name") : rd.attr(e, "joint");
+      const std::string j = rd.attr(e, "joint");
+      sp.coordinate = model.tree.coordinate_index(j);
+      if (sp.coordinate < 0) rd.fail(e, "coordinate_spring: expected a revolute or prismatic joint, found '" + j + "'");
+      sp.stiffness = rd.number_or(e, "stiffness", 0.0);
+      sp.rest_length = rd.number_or(e, "rest_length", 0.0);
+      sp.viscosity = rd.number_or(e, "viscosity", 0.0);
+      if (!(sp.stiffness >= 0) || !(sp.viscosity >= 0))
+        rd.fail(e, "coordinate_spring '" + sp.name + "': expected stiffness >= 0 and viscosity >= 0");
+      model.coordinate_springs.push_back(sp);
+    } else if (is_ext(e, "subject")) {
+      if (have_subject) rd.fail(e, "expected one <arthrosim:subject>, found a second");
+      have_subject = true;
+      model.subject_mass_kg = rd.number(e, "mass_kg");
+      if (!(model.subject_mass_kg > 0)) rd.fail(e, "subject: expected mass_kg > 0");
     } else {
       rd.fail(e, "unknown element <" + name +
-                     "> (expected arthrosim:prescribed, wrap_cylinder, wrap_ellipsoid, wrap_sphere, "
-                     "wrap_torus, surface, contact, ligament or muscle)");
+                     "> (expected arthrosim:prescribed, default, role, wrap_cylinder, wrap_ellipsoid, "
+                     "wrap_sphere, wrap_torus, surface, contact, ligament, muscle, coordinate_spring or "
+                     "subject)");
     }
   }
+  if (!have_subject)
+    for (const Body& b : model.tree.bodies) model.subject_mass_kg += b.mass;
   for (int i = 0; i < model.num_coordinates(); ++i)
     (prescribed.count(i) ? model.prescribed_coordinates : model.free_coordinates).push_back(i);
   return model;
@@ -768,12 +813,15 @@ PreparedSurfacesReport replace_contact_surfaces(
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
   common::H5File f(prepared_path, common::H5File::Mode::kRead);
   const std::vector<std::string> names = f.read_strings("/surfaces/names");
-  // Prepared surfaces by the file name of their source mesh.
-  std::map<std::string, std::string> by_file;
+  // Prepared surfaces by the file name of their source mesh; several for one
+  // file when prepare split it into compartments (a tibial cartilage mesh
+  // holding both plateaus): the model's surface is then their union.
+  std::map<std::string, std::vector<std::string>> by_file;
   for (const auto& n : names)
     by_file[std::filesystem::path(f.attribute_string("/surfaces/" + n, "source_file"))
                 .filename()
-                .string()] = n;
+                .string()]
+        .push_back(n);
   auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
@@ -784,37 +832,49 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
                        "contact pair '" + pair + "': expected a prepared surface made from '" +
                            file + "' (surface '" + s.name + "'), found surfaces from: " + list);
     }
-    const std::string g = "/surfaces/" + it->second + "/triangles/";
     common::TriangleMesh mesh;
-    mesh.V = f.read_matrix(g + "vertices", 3);
-    mesh.F = f.read_matrix_int(g + "faces", 3);
-    const Eigen::VectorXd tv = f.read_vector(g + "thickness");
-    if (tv.size() != mesh.num_vertices() || mesh.num_triangles() == 0)
-      throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
-                                             std::to_string(tv.size()) + " values for " +
-                                             std::to_string(mesh.num_vertices()) + " vertices");
-    // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
-    for (int t = 0; t < mesh.num_triangles(); ++t)
-      for (int k = 0; k < 3; ++k)
-        if (mesh.F(t, k) < 0 || mesh.F(t, k) >= mesh.num_vertices())
-          throw InputError(prepared_path, 0, g + "faces: expected vertex indices in [0, " +
-                                                 std::to_string(mesh.num_vertices()) + "), found " +
-                                                 std::to_string(mesh.F(t, k)) + " in triangle " + std::to_string(t));
-    if (!mesh.V.allFinite())
-      throw InputError(prepared_path, 0, g + "vertices: expected finite coordinates, found NaN or Inf");
-    if (!tv.allFinite() || (tv.array() < 0).any())
-      throw InputError(prepared_path, 0, g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
+    Eigen::VectorXd tv;
+    std::string groups;
+    for (const std::string& part : it->second) {
+      const std::string g = "/surfaces/" + part + "/triangles/";
+      const Eigen::MatrixXd V = f.read_matrix(g + "vertices", 3);
+      const Eigen::MatrixXi F = f.read_matrix_int(g + "faces", 3);
+      const Eigen::VectorXd t = f.read_vector(g + "thickness");
+      if (t.size() != V.rows() || F.rows() == 0)
+        throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
+                                               std::to_string(t.size()) + " values for " +
+                                               std::to_string(V.rows()) + " vertices");
+      // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
+      for (int r = 0; r < F.rows(); ++r)
+        for (int k = 0; k < 3; ++k)
+          if (F(r, k) < 0 || F(r, k) >= V.rows())
+            throw InputError(prepared_path, 0, g + "faces: expected vertex indices in [0, " +
+                                                   std::to_string(V.rows()) + "), found " +
+                                                   std::to_string(F(r, k)) + " in triangle " + std::to_string(r));
+      if (!V.allFinite())
+        throw InputError(prepared_path, 0, g + "vertices: expected finite coordinates, found NaN or Inf");
+      if (!t.allFinite() || (t.array() < 0).any())
+        throw InputError(prepared_path, 0, g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
+      const int n0 = mesh.num_vertices(), t0 = mesh.num_triangles();
+      mesh.V.conservativeResize(n0 + V.rows(), 3);
+      mesh.V.bottomRows(V.rows()) = V;
+      mesh.F.conservativeResize(t0 + F.rows(), 3);
+      mesh.F.bottomRows(F.rows()) = F.array() + n0;
+      tv.conservativeResize(n0 + t.size());
+      tv.tail(t.size()) = t;
+      groups += (groups.empty() ? "" : "+") + g;
+    }
     // Same place as the model's own mesh (in the file frame): the centroids
     // of the two surfaces must agree to within 2 mm, else the prepared file
     // belongs to another geometry.
     const double offset = centroid_offset(s, mesh);
     if (!(offset <= 2e-3)) {
       std::ostringstream m;
-      m << g << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
+      m << groups << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";
       throw InputError(prepared_path, 0, m.str());
     }
-    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + g);
+    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + groups);
   };
   return replace_contact_surfaces(model, make);
 }

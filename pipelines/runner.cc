@@ -322,7 +322,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
       surface_moves = surface_moves || s.wants("imposed_kinematics");
     }
   }
-  const bool want_comak = wants_output(scene, "kinematics") || surface_moves;
+  const bool want_biphasic = wants_output(scene, "biphasic");
+  const bool want_comak = wants_output(scene, "kinematics") || surface_moves || want_biphasic;
   const bool want_prepare = wants_output(scene, "prepared_model") || want_comak || want_surface;
   const fs::path scene_file = scene.file;
   const SceneInputs in = scene_inputs(scene);
@@ -350,6 +351,8 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
                    "--unit", prepare.value("mesh_unit").canonical,
                    "--max-cast-distance-mm", prepare.value("max_cast_distance_mm").canonical,
                    "--remesh-iterations", prepare.value("remesh_iterations").canonical,
+                   "--min-thickness-mm", prepare.value("min_thickness_mm").canonical,
+                   "--max-triangles", prepare.value("max_triangles").canonical,
                    "--out", (out_dir / kPrepared).string()};
     const common::OptionValue& per_surface = prepare.value("surface_edge_length_mm");
     for (std::size_t i = 0; i < per_surface.list.size(); ++i)
@@ -363,11 +366,17 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
     s.name = "comak";
     s.executable = "arthrosim-comak";
     const common::OptionBlock& comak = scene.block("comak");
-    s.needed_for = first_reason("kinematics", "bone motion for imposed_kinematics");
+    s.needed_for = first_reason("kinematics", surface_moves ? "bone motion for imposed_kinematics"
+                                                            : "bone poses and contact forces for the biphasic stage");
     s.inputs.emplace_back("model", in.model);
     s.inputs.emplace_back("trial", in.trial);
     s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
     s.options = comak.canonical();
+    // The trial window (top-level trial.start_s / trial.end_s) decides which
+    // frames the stage solves.
+    for (const auto& kv : scene.top.canonical())
+      if (kv.first.rfind("scene.trial.", 0) == 0) s.options.push_back(kv);
+    std::sort(s.options.begin(), s.options.end());
     s.effects = comak.list("effects");
     add_path_inputs(comak, s);
     s.outputs = {out_dir / kKinematics};
@@ -396,6 +405,22 @@ std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) 
                                              "--out", (out_dir / surface_file(sc.name)).string()});
       plan.push_back(std::move(s));
     }
+  }
+  if (want_biphasic) {
+    StageStep s;
+    s.name = "biphasic";
+    s.executable = "arthrosim-biphasic";
+    s.needed_for = "output biphasic";
+    const common::OptionBlock& biphasic = scene.block("biphasic");
+    s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
+    s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
+    s.options = biphasic.canonical();
+    s.effects = biphasic.list("effects");
+    add_path_inputs(biphasic, s);
+    s.outputs = {out_dir / "biphasic.h5", out_dir / "biphasic.xdmf"};
+    s.arguments = {"--prepared", (out_dir / kPrepared).string(), "--kinematics", (out_dir / kKinematics).string(),
+                   "--scene",    scene_file.string(),            "--out",        (out_dir / "biphasic.h5").string()};
+    plan.push_back(std::move(s));
   }
   if (want_report) {
     StageStep s;

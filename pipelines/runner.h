@@ -14,9 +14,10 @@
 //   post             every surface_<name>.h5 [+ kinematics.h5
 //                    when comak is part of the run]          -> report.html, summary.json
 // Outputs -> stages: prepared_model -> prepare; kinematics -> comak;
-// surface -> every scenario; report -> post (and therefore every scenario).
+// surface -> every scenario; biphasic -> biphasic (and therefore comak);
+// report -> post (and therefore every scenario).
 //
-// Effects: a comak or surface stage whose output's effect ledger holds a term
+// Effects: a comak, surface or biphasic stage whose output's effect ledger holds a term
 // the scene did not ask for fails (and is not stamped), so "only the effects a
 // scene calls for" is checked on every run, not only in tests.
 //

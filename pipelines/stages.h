@@ -9,6 +9,7 @@
 // one line in stages.cc's table.
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -45,6 +46,9 @@ struct SceneInputs {
   std::string description;
   std::filesystem::path model;  ///< resolved, absolute
   std::filesystem::path trial;  ///< resolved, absolute; empty = none
+  /// The trial's window that the musculoskeletal stage solves (SI seconds);
+  /// absent: the trial's first / last time.
+  std::optional<double> trial_start_s, trial_end_s;
   std::vector<std::string> outputs;
   void declare(common::OptionVisitor& v);
 };

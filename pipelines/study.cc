@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include "biphasic/output_file.h"
 #include "common/error.h"
 #include "common/hashing.h"
 #include "common/hdf5.h"
@@ -512,6 +513,22 @@ double scenario_mean_angle(const JsonValue& scenario) {
 }
 
 }  // namespace
+
+std::vector<Metric> biphasic_metrics(const fs::path& file, const fs::path& ref_file) {
+  std::vector<Metric> out;
+  for (const biphasic::OutputDifference& d : biphasic::compare_outputs(file.string(), ref_file.string())) {
+    Metric m;
+    m.name = d.metric + "[" + d.layer + "]";
+    m.description = "max over the common steps of |x - x_ref| / max |x_ref|, x the " + d.metric + " series of layer " +
+                    d.layer;
+    m.error = d.relative;
+    m.output = d.metric == "fluid_load_support" ? d.peak : d.metric == "contact_area" ? d.peak * 1e6 : d.peak * 1e-6;
+    m.output_unit = d.metric == "fluid_load_support" ? "" : d.metric == "contact_area" ? "mm^2" : "MPa";
+    m.note = std::to_string(d.common_times) + " common steps; output: the series' peak";
+    out.push_back(m);
+  }
+  return out;
+}
 
 std::vector<Metric> post_metrics(const fs::path& file, const fs::path& ref_file) {
   const JsonValue a = read_json(file);
@@ -1161,6 +1178,8 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
         } else if (rec.stage.rfind("surface.", 0) == 0) {
           const std::string f = "surface_" + rec.stage.substr(8) + ".h5";
           if (have && have_ref) rec.metrics = surface_metrics(r.dir / f, ref.dir / f);
+        } else if (rec.stage == "biphasic") {
+          if (have && have_ref) rec.metrics = biphasic_metrics(r.dir / "biphasic.h5", ref.dir / "biphasic.h5");
         } else if (rec.stage == "post") {
           if (have && have_ref) rec.metrics = post_metrics(r.dir / "summary.json", ref.dir / "summary.json");
         }

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -22,6 +23,7 @@
 #include "common/metadata.h"
 #include "common/progress.h"
 #include "common/scene.h"
+#include "common/storage.h"
 #include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
@@ -90,11 +92,20 @@ int main(int argc, char** argv) {
   app.add_option("--first-frame", first, "first trial frame (0-based)")->capture_default_str();
   app.add_option("--last-frame", last, "last trial frame (-1 = the last)")->capture_default_str();
   app.add_option("--stride", stride, "use every stride-th frame")->capture_default_str();
+  double start_time = std::numeric_limits<double>::quiet_NaN(), end_time = start_time;
+  app.add_option("--start-time", start_time,
+                 "first time of the trial to solve [s] (the frames from the first at or after it; "
+                 "the whole trial is still filtered and differentiated)");
+  app.add_option("--end-time", end_time, "last time of the trial to solve [s] (frames at or before it)");
   app.add_option("--tolerance", o.force_tolerance,
                  "equilibrium tolerance of the force rows [N]; moment rows x length scale 0.03 m")
       ->capture_default_str();
   app.add_option("--ipopt-tolerance", o.ipopt_tolerance, "Ipopt 'tol' (scaled NLP)")->capture_default_str();
   app.add_option("--max-iterations", o.max_iterations, "Ipopt iteration limit per attempt")
+      ->capture_default_str();
+  app.add_option("--acceptable-iterations", o.acceptable_iterations,
+                 "consecutive iterates at Ipopt's acceptable level that end a solve as 'acceptable' "
+                 "(a larger value keeps iterating towards --ipopt-tolerance)")
       ->capture_default_str();
   app.add_option("--activation-min", o.activation_min, "lower bound of the activations, 0..1")
       ->capture_default_str();
@@ -103,9 +114,13 @@ int main(int argc, char** argv) {
                  "objective weight w_i of a muscle, name=value (> 0; default 1), repeatable");
   app.add_flag("--reserve-actuators", o.reserve_actuators,
                "reserve actuators on the 11 secondary coordinates (heavy weight, reported)");
-  app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
-               "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
-               "anterior stand-in to the model (docs/comak.md)");
+  CLI::Option* ankle_flag = app.add_flag("--ankle-equilibrium,!--no-ankle-equilibrium", o.ankle_equilibrium,
+               "also balance the ankle moment of the foot (one more row): adds a soleus and a tibialis "
+               "anterior stand-in to the generated knee; a model with its own leg uses its own ankle "
+               "muscles (docs/comak.md)");
+  CLI::Option* hip_flag = app.add_flag("--hip-equilibrium,!--no-hip-equilibrium", o.hip_equilibrium,
+               "also balance the leg about the hip's three axes (3 rows; a model with its own leg and the "
+               "hip muscles: arthrosim import-osim --muscles leg; docs/comak.md)");
   app.add_flag("--body-inertia", o.body_inertia,
                "weight and d'Alembert forces of the tibia and patella bodies from their URDF "
                "inertials, moving with the model (the shank's terms leave the external load; "
@@ -114,6 +129,10 @@ int main(int argc, char** argv) {
                "muscle force a F_max f_L(l~) (Thelen 2003 active force-length; every muscle of the "
                "model must give optimal_fiber_length and tendon_slack_length, docs/model_format.md)");
   bool single_start = false;
+  bool no_damping = false;
+  app.add_flag("--no-coordinate-damping", no_damping,
+               "leave the model's coordinate dampers (SpringGeneralizedForce viscosity on the secondary "
+               "coordinates' frame-to-frame speed) out: each frame static (docs/comak.md)");
   app.add_flag("--single-start", single_start,
                "solve each frame from the previous frame's solution only (no second start from the "
                "passive settle; about half the time, may keep a worse local optimum)");
@@ -146,7 +165,11 @@ int main(int argc, char** argv) {
       "      # ankle moment balanced too (gastrocnemii, soleus, tibialis anterior)\n"
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --no-move-limits \\\n"
       "      --trial data/trials/synthetic_gait --out comak_plain.h5 -v\n"
-      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n");
+      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n"
+      "  arthrosim-comak --model data/models/lenhart2015 --scene data/scenes/lenhart2015_gait.yaml \\\n"
+      "      --trial data/trials/lenhart2015_overground17 --out lenhart2015.h5 -v\n"
+      "      # the real subject (OpenSim-JAM's lenhart2015, walking window 1.21-2.32 s from the scene);\n"
+      "      # then scripts/compare_opensim_jam.py lenhart2015.h5 --plot lenhart2015.png\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-comak");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -156,20 +179,29 @@ int main(int argc, char** argv) {
                                         "patellofemoral_contact"};
     if (!scene_path.empty()) {
       const common::Scene scene = pipelines::load_scene(scene_path);
+      // The trial window of the scene (explicit flags win).
+      const pipelines::SceneInputs in = pipelines::scene_inputs(scene);
+      if (in.trial_start_s && !app.count("--start-time") && !app.count("--first-frame"))
+        start_time = *in.trial_start_s;
+      if (in.trial_end_s && !app.count("--end-time") && !app.count("--last-frame")) end_time = *in.trial_end_s;
       if (scene.has_block("comak")) {
         const pipelines::ComakStageOptions c = common::read_options<pipelines::ComakStageOptions>(scene.block("comak"));
         effects = c.effects;
         if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.solver.ipopt_tolerance;
+        if (!app.count("--acceptable-iterations")) o.acceptable_iterations = c.solver.acceptable_iterations;
         if (!app.count("--max-iterations")) o.max_iterations = c.solver.max_iterations;
         if (!app.count("--activation-min")) o.activation_min = c.solver.activation_min;
         if (!app.count("--reserve-actuators")) o.reserve_actuators = c.solver.reserve_actuators;
-        if (!app.count("--ankle-equilibrium")) o.ankle_equilibrium = c.solver.ankle_equilibrium;
+        if (!ankle_flag->count()) o.ankle_equilibrium = c.solver.ankle_equilibrium;
         if (!app.count("--body-inertia")) o.body_inertia = c.solver.body_inertia;
+        if (!hip_flag->count()) o.hip_equilibrium = c.solver.hip_equilibrium;
+        if (!no_damping) o.coordinate_damping = c.solver.coordinate_damping;
         if (!app.count("--lowpass-hz")) lowpass_hz = c.trial.lowpass.cutoff_hz;
         if (!single_start) o.second_start = c.solver.second_start;
       }
     }
     if (single_start) o.second_start = false;
+    if (no_damping) o.coordinate_damping = false;
     if (no_move_limits) o.move_limits_first = false;
     for (const std::string& wa : weight_args) {
       const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
@@ -187,7 +219,10 @@ int main(int argc, char** argv) {
     o.forces.contact = wants("tibiofemoral_contact");
     model_path = resolve_model(model_path);
     msk::Model model = msk::load_model(model_path);
-    if (o.ankle_equilibrium) {
+    // A model with its own leg to the ground (an imported OpenSim model)
+    // takes the trial's coordinates by name and its forces on its bodies.
+    const bool model_dynamics = model.role_body("ground") >= 0;
+    if (o.ankle_equilibrium && !model_dynamics) {
       // Uniarticular ankle muscles so that the ankle row can be balanced in
       // both directions (musculoskeletal/ankle_muscles.h).
       msk::add_ankle_muscles(model);
@@ -206,13 +241,44 @@ int main(int argc, char** argv) {
     // A non-finite trial value: run the frames before it, then stop naming
     // the frame, file, line and column (exit 1; the file keeps those frames).
     to.truncate_at_non_finite = true;
-    const msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+    if (model_dynamics) {
+      // Angles are the model's revolute coordinates (translations by its prismatic ones).
+      to.is_rotational = [&model](const std::string& label) {
+        const int c = model.tree.coordinate_index(label);
+        if (c < 0) return common::default_is_rotational(label);
+        for (const msk::Joint& j : model.tree.joints)
+          if (j.coordinate == c) return j.type == msk::JointType::kRevolute;
+        return false;
+      };
+    }
+    msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+    if (!(trial.body_mass_kg > 0)) {
+      trial.body_mass_kg = model.subject_mass_kg;
+      common::log_info("subject mass from the model: " + std::to_string(model.subject_mass_kg) + " kg");
+    }
+    if (!std::isnan(start_time) || !std::isnan(end_time)) {
+      // The time window: frames of the trial's grid inside [start, end].
+      const auto [f0, f1] = msk::frames_in_window(trial, start_time, end_time);
+      if ((app.count("--start-time") || app.count("--end-time")) &&
+          (app.count("--first-frame") || app.count("--last-frame")))
+        throw common::InputError("arthrosim-comak: give --start-time/--end-time or --first-frame/--last-frame, "
+                                 "not both");
+      first = f0;
+      last = f1;
+    }
     if (trial.side != msk::Side::kRight)
       throw common::InputError(trial_path + ": error: the bundled knee models are right knees; "
                                "this trial is of the left leg");
-    const msk::LegModel leg = msk::leg_model_for_trial(trial);
-    const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
-    const auto frames = msk::comak_frame_inputs(loads, first, last, stride, &leg);
+    std::vector<msk::ComakFrameInput> frames;
+    if (model_dynamics) {
+      std::vector<std::string> ignored;
+      frames = msk::comak_model_frame_inputs(model, trial, first, last, stride, &ignored);
+      for (const auto& i : ignored) common::log_info("external force not applied: " + i);
+    } else {
+      const msk::LegModel leg = msk::leg_model_for_trial(trial);
+      const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
+      frames = msk::comak_frame_inputs(loads, first, last, stride, &leg);
+    }
     msk::ComakProblem problem(model, o);
 
     std::ostringstream opts;
@@ -222,8 +288,10 @@ int main(int argc, char** argv) {
          << "\nforce_tolerance_n: " << o.force_tolerance << "\nlength_scale_m: " << o.length_scale
          << "\nipopt_tolerance: " << o.ipopt_tolerance << "\nmax_iterations: " << o.max_iterations
          << "\nactivation_min: " << o.activation_min
+         << "\nacceptable_iterations: " << o.acceptable_iterations
          << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
          << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
+         << "\nhip_equilibrium: " << (o.hip_equilibrium ? "true" : "false")
          << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
          << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
          << "\nsecond_start: " << (o.second_start ? "true" : "false")
@@ -231,6 +299,8 @@ int main(int argc, char** argv) {
          << "\nmove_limits_first: " << (o.move_limits_first ? "true" : "false")
          << "\nmove_limit_m: " << o.move_limit_m << "\nmove_limit_rad: " << o.move_limit_rad
          << "\nsecond_start_move_limit_scale: " << o.second_start_move_limit_scale
+         << "\ncoordinate_damping: " << (o.coordinate_damping ? "true" : "false")
+         << "\nloads: " << (model_dynamics ? "model dynamics (the model's own leg)" : "generic leg chain (knee_loads.h)")
          << "\nlowpass_cutoff_hz: " << lowpass_hz
          << "\nhessian: limited-memory\n";
     for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
@@ -243,7 +313,7 @@ int main(int argc, char** argv) {
     common::EffectLedger ledger("comak");
     if (o.forces.ligaments) ledger.record("ligaments", model.num_bundles());
     ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
-    const int tibia = model.tree.body_index("tibia"), patella = model.tree.body_index("patella");
+    const int tibia = model.role_body("tibia"), patella = model.role_body("patella");
     for (const auto& c : model.contacts) {
       if (!o.forces.contact) break;
       if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());

@@ -228,8 +228,8 @@ TEST_F(RunnerTest, StagesFollowFromOutputs) {
   const StageStep prep = plan_stages(scene(three_scenarios("[prepared_model]", "2.5")), out)[0];
   const std::vector<std::string> prep_args = {
       "--model", (root_ / "models" / "knee").string(), "--edge-length-mm", "2.5", "--unit", "mm",
-      "--max-cast-distance-mm", "10", "--remesh-iterations", "5", "--out",
-      (out / "prepared.h5").string()};
+      "--max-cast-distance-mm", "10", "--remesh-iterations", "5", "--min-thickness-mm", "0.2",
+      "--max-triangles", "1e+06", "--out", (out / "prepared.h5").string()};
   EXPECT_EQ(prep.arguments, prep_args);
 }
 
