@@ -60,6 +60,31 @@ YAML::Node child_map(YAML::Node parent, const std::string& key) {
   return parent[key];
 }
 
+// A setting's value is one scalar on one line: it is written into the copy
+// as a YAML scalar and echoed in its header comment, so a line break would
+// inject YAML there, and a list or map is not an option value.
+void require_single_scalar(const Scene& scene, const std::string& key, const std::string& value) {
+  auto refuse = [&](const std::string& found) {
+    throw InputError(scene.file.string(), 0,
+                     "the value of '" + key + "' must be a single scalar on one line (a number, flag, text or path); found " +
+                         found);
+  };
+  for (const char c : value) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '\n' || c == '\r') refuse("a line break");
+    if ((u < 0x20 && c != '\t') || u == 0x7f) refuse("the control character " + std::to_string(u));
+  }
+  if (value.find_first_not_of(" \t") == std::string::npos) refuse("an empty value");
+  YAML::Node node;
+  try {
+    node = YAML::Load(value);
+  } catch (const YAML::Exception& e) {
+    refuse("'" + value + "', which is not a YAML scalar (" + e.msg + ")");
+  }
+  if (node.IsSequence()) refuse("the list '" + value + "'");
+  if (node.IsMap()) refuse("the map '" + value + "'");
+}
+
 }  // namespace
 
 std::vector<SceneKey> settable_scene_keys(const Scene& scene) {
@@ -150,6 +175,7 @@ std::string edit_scene_text(const fs::path& file, const SceneSchema& schema,
   std::string header = "# written by arthrosim from " + scene.file.string() + "\n";
   for (const auto& [key, value] : settings) {
     const OptionSpec& spec = find_settable_key(scene, key);
+    require_single_scalar(scene, key, value);
     const std::string v = spec.type == OptionType::kPath ? absolute_path(value, dir) : value;
     header += "#   " + key + " = " + value + "\n";
     if (spec.block == "scene") {  // a top-level key, whose name may hold a dot (trial.start_s)

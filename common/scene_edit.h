@@ -43,8 +43,10 @@ const OptionSpec& find_settable_key(const Scene& scene, const std::string& dotte
 /// setting is resolved like one written in the scene (against the scene's
 /// folder, then its repository). Comments of the original are not kept; the
 /// text starts with a comment naming the original and the settings. Throws
-/// InputError for an unreadable or invalid original scene or an unknown key;
-/// the value itself is checked when the returned text is parsed (parse_scene).
+/// InputError for an unreadable or invalid original scene, an unknown key or
+/// a value that is not a single scalar on one line (a line break or control
+/// character, an empty value, a YAML list or map); the value's type and range
+/// are checked when the returned text is parsed (parse_scene).
 std::string edit_scene_text(const std::filesystem::path& file, const SceneSchema& schema,
                             const std::vector<std::pair<std::string, std::string>>& settings);
 

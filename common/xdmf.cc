@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "common/output_file.h"
 
 namespace arthrosim::common {
 namespace {
@@ -291,7 +292,10 @@ std::string xdmf_text(const H5File& h5, const std::string& h5_reference, const X
 void write_xdmf(const std::string& xdmf_path, const H5File& h5, const XdmfSeries& series) {
   // Reference the HDF5 file relative to the XDMF file's folder.
   const fs::path xdmf_dir = fs::weakly_canonical(fs::absolute(xdmf_path)).parent_path();
-  const fs::path h5_abs = fs::weakly_canonical(fs::absolute(h5.path()));
+  // A file written under its partial name (common/output_file.h) is
+  // referenced by the name it gets when it is complete.
+  const std::string h5_path = complete_name(h5.path());
+  const fs::path h5_abs = fs::weakly_canonical(fs::absolute(h5_path));
   fs::path rel = h5_abs.lexically_relative(xdmf_dir);
   if (rel.empty()) rel = h5_abs;
   const std::string text = xdmf_text(h5, rel.generic_string(), series);

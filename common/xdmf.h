@@ -62,7 +62,8 @@ struct XdmfSeries {
 
 /// Writes `xdmf_path` describing `series`, whose datasets live in `h5`.
 /// The HDF5 file is referenced by a path relative to the XDMF file's folder
-/// (so the pair can be moved together). Throws InputError on a missing or
+/// (so the pair can be moved together); an HDF5 file named "<name>.partial"
+/// (being written, common/output_file.h) is referenced as "<name>". Throws InputError on a missing or
 /// mis-shaped dataset, std::runtime_error if the file cannot be written.
 void write_xdmf(const std::string& xdmf_path, const H5File& h5, const XdmfSeries& series);
 

@@ -7,6 +7,7 @@
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
+#include "common/output_file.h"
 #include "common/storage.h"
 #include "common/xdmf.h"
 
@@ -91,6 +92,8 @@ KinematicsFileWriter::KinematicsFileWriter(const std::string& path, const ComakP
   common::write_metadata(f, metadata);
   f.set_attribute("/", "format", "arthrosim kinematics file");
   f.set_attribute("/", "format_version", 1);
+  // Consumers compare it with `frames` (common/file_check.h).
+  f.set_attribute("/", "frames_expected", info.expected_frames);
   f.set_attribute("/", "body_mass_kg", info.body_mass_kg);
   f.set_attribute("/", "synthetic_trial", info.synthetic ? 1 : 0);
   f.set_attribute("/", "model", info.model_path);
@@ -239,7 +242,9 @@ void KinematicsFileWriter::finish(const ComakRunSummary& s, const common::Effect
       surf.fields.push_back({"pressure", g + "/pressure", common::XdmfCenter::kCell, true});
       series.surfaces.push_back(surf);
     }
-    common::write_xdmf(std::filesystem::path(w.path).replace_extension(".xdmf").string(), f, series);
+    // Next to the name the file has when complete (common/output_file.h).
+    common::write_xdmf(std::filesystem::path(common::complete_name(w.path)).replace_extension(".xdmf").string(), f,
+                       series);
   }
   f.flush();
   if (sto_prefix.empty() || w.times.empty()) return;

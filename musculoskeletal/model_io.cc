@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "common/file_check.h"
 #include "common/hdf5.h"
 #include "common/mesh_io.h"
 
@@ -812,6 +813,7 @@ PreparedSurfacesReport replace_contact_surfaces(
 
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
   common::H5File f(prepared_path, common::H5File::Mode::kRead);
+  common::require_file_format(f, prepared_path, common::StageFile::kPreparedModel);
   const std::vector<std::string> names = f.read_strings("/surfaces/names");
   // Prepared surfaces by the file name of their source mesh; several for one
   // file when prepare split it into compartments (a tibial cartilage mesh

@@ -10,6 +10,8 @@
 #include <numbers>
 
 #include "common/error.h"
+#include "common/file_check.h"
+#include "common/output_file.h"
 #include "common/effects.h"
 #include "common/hdf5.h"
 #include "common/log.h"
@@ -177,6 +179,8 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   if (!in.kinematics.empty()) {
     const auto t0 = Clock::now();
     common::H5File k(in.kinematics, common::H5File::Mode::kRead);
+    if (auto p = common::require_usable_file(k, in.kinematics, common::StageFile::kKinematics, in.allow_partial); !p.empty())
+      summary.partial_inputs.push_back(p);
     auto s = contact_series(k, "/contact/tibiofemoral", "stage 1 ");
     if (s.empty()) summary.missing.push_back("kinematics file " + in.kinematics + " has no /contact/tibiofemoral series over /time");
     force.insert(force.end(), s.begin(), s.end());
@@ -187,6 +191,8 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   bool any_stage2 = false;
   for (const auto& [scenario, file] : in.surfaces) {
     common::H5File f(file, common::H5File::Mode::kRead);
+    if (auto p = common::require_usable_file(f, file, common::StageFile::kSurfaceOutput, in.allow_partial); !p.empty())
+      summary.partial_inputs.push_back(p);
     auto s = contact_series(f, "/contact/tibiofemoral", "stage 2 " + scenario + " ");
     any_stage2 = any_stage2 || !s.empty();
     force.insert(force.end(), s.begin(), s.end());
@@ -443,6 +449,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   }
   json.end_array();
   json.value("angle_threshold_deg", opt.comparison.threshold_rad * 180.0 / std::numbers::pi);
+  json.array("partial_inputs", summary.partial_inputs);
   json.array("missing", summary.missing);
   timing.emplace_back("post total (before writing)", seconds_since(t_start));
   json.begin_array("timing_post");
@@ -464,6 +471,8 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
        "vertical-align:top}figcaption{max-width:460px;font-size:0.9em}table{border-collapse:collapse;margin:0.5em 0}"
        "td,th{border:1px solid #bbb;padding:2px 6px;font-size:0.9em}.missing{color:#a00}</style></head>\n<body>\n";
   h += "<h1>arthrosim post report</h1>\n<p>Scene: " + report::escape(in.scene_file.empty() ? "(none)" : in.scene_file) + "</p>\n";
+  for (const auto& p : summary.partial_inputs)
+    h += "<p class=\"missing\"><strong>" + report::escape(p) + "</strong></p>\n";
   if (map.synthetic) h += "<p><strong>The split-line map is SYNTHETIC (a documented test map, not measured data).</strong></p>\n";
   h += "<h2>Missing inputs</h2>\n";
   if (summary.missing.empty()) {
@@ -519,10 +528,13 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   summary.report_path = (fs::path(out_dir) / "report.html").string();
   summary.summary_path = (fs::path(out_dir) / "summary.json").string();
   for (const auto& [path, text] : {std::pair{summary.report_path, h}, std::pair{summary.summary_path, json.str() + "\n"}}) {
-    std::ofstream out(path, std::ios::binary);
+    common::AtomicOutput atomic(path);  // <path>.partial, renamed when written (common/output_file.h)
+    std::ofstream out(atomic.temp(), std::ios::binary);
     if (!out) throw InputError(path, 0, "cannot write the output file");
     out << text;
+    out.close();
     if (!out) throw InputError(path, 0, "write failed");
+    atomic.commit();
   }
   summary.figures = ids;
   return summary;

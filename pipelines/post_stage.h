@@ -42,6 +42,9 @@ struct PostInputs {
   std::vector<std::pair<std::string, std::string>> surfaces;  ///< (scenario, file)
   std::string kinematics;  ///< empty = none
   std::string scene_file;  ///< for the report header
+  /// Go on with incomplete inputs (common/file_check.h); the report and
+  /// summary.json then say so at the top (PostSummary::partial_inputs).
+  bool allow_partial = false;
 };
 
 struct ScenarioOutcome {
@@ -53,6 +56,7 @@ struct ScenarioOutcome {
 };
 
 struct PostSummary {
+  std::vector<std::string> partial_inputs;  ///< "PARTIAL INPUT: ..." lines (allow_partial)
   std::vector<std::string> missing;
   std::vector<ScenarioOutcome> scenarios;
   std::vector<std::string> figures;  ///< ids of the figures in report.html

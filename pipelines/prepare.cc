@@ -16,6 +16,7 @@
 #include "common/mesh_quality.h"
 #include "common/mesh_validation.h"
 #include "common/metadata.h"
+#include "common/output_file.h"
 #include "common/remesh.h"
 #include "common/spatial.h"
 #include "common/xdmf.h"
@@ -696,7 +697,7 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
   }
   h5.write("/surfaces/names", names);
   h5.flush();
-  common::write_xdmf(xdmf_path_for(h5_path), h5, series);
+  common::write_xdmf(xdmf_path_for(common::complete_name(h5_path)), h5, series);  // also for <out>.partial
 }
 
 }  // namespace arthrosim::pipelines

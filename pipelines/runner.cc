@@ -24,6 +24,7 @@
 #include "common/effects.h"
 #include "common/hashing.h"
 #include "common/hdf5.h"
+#include "common/process.h"
 #include "pipelines/stages.h"
 
 namespace arthrosim::pipelines {
@@ -236,9 +237,12 @@ pid_t launch(const fs::path& exe, const std::vector<std::string>& args, const fs
   for (std::string& a : argv_store) argv.push_back(a.data());
   argv.push_back(nullptr);
   const std::string threads = std::to_string(omp_threads);
+  const pid_t parent = getpid();
   const pid_t pid = fork();
   if (pid != 0) return pid;
-  // Child: only async-signal-safe calls until execv.
+  // Child: only async-signal-safe calls until execv. Own process group,
+  // SIGTERM when the runner dies (common/process.h).
+  common::child_after_fork(parent);
   if (!log_file.empty()) {
     const int fd = ::open(log_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     if (fd < 0) _exit(127);
@@ -284,31 +288,10 @@ std::string tail_lines(const fs::path& file, std::size_t n, const std::string& p
   return out;
 }
 
-// An exclusive lock on DIR/.arthrosim.lock for the duration of a run, so two
-// runs cannot interleave stages and stamps in one output folder. flock locks
-// are released by the kernel when the process ends, however it ends.
-class OutputFolderLock {
- public:
-  explicit OutputFolderLock(const fs::path& dir) {
-    const fs::path file = dir / ".arthrosim.lock";
-    fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-    if (fd_ < 0) {
-      throw common::InputError(file.string(), 0,
-                               std::string("cannot create the lock file: ") + std::strerror(errno));
-    }
-    locked_ = ::flock(fd_, LOCK_EX | LOCK_NB) == 0;
-  }
-  ~OutputFolderLock() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  OutputFolderLock(const OutputFolderLock&) = delete;
-  OutputFolderLock& operator=(const OutputFolderLock&) = delete;
-  bool locked() const { return locked_; }
-
- private:
-  int fd_ = -1;
-  bool locked_ = false;
-};
+// The lock on DIR/.arthrosim.lock for the duration of a run (two runs cannot
+// interleave stages and stamps in one folder), held by the stages too, and
+// recording its holder: common/process.h.
+using OutputFolderLock = common::FolderLock;
 
 }  // namespace
 
@@ -506,14 +489,17 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
   std::optional<OutputFolderLock> lock;
   if (!options.dry_run) {
     fs::create_directories(out_dir);
-    lock.emplace(out_dir);
+    lock.emplace(out_dir, "arthrosim run " + scene.file.string());
     if (!lock->locked()) {
       report.status = RunStatus::kFolderBusy;
-      report.message = "another arthrosim run is using " + out_dir.string() +
-                       " (it holds .arthrosim.lock); wait for it or choose another --out";
+      report.message = "another arthrosim run is using " + out_dir.string() + " (it holds .arthrosim.lock" +
+                       (lock->holder().empty() ? "" : ": " + lock->holder()) + "); wait for it or choose another --out";
       log << "arthrosim: error: " << report.message << "\n";
       return report;
     }
+    if (!lock->stale().empty())
+      log << "arthrosim: note: the previous run in " << out_dir.string() << " did not end cleanly (killed or crashed; "
+          << lock->stale() << "); its unfinished stages run again, partial files (*.partial) are replaced\n";
   }
   const std::size_t n = plan.size();
   // deps[i]: the earlier stages that write one of stage i's inputs.
@@ -713,6 +699,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
         }
       }
     }
+    if (common::termination_signal() != 0) stop = true;  // forwarded to the running stages
     for (std::size_t i = 0; i < n && running.size() < jobs && !stop; ++i) {
       if (!is_ready(i)) continue;
       const StageStep& step = plan[i];
@@ -741,7 +728,9 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       // A failed or interrupted run must never look up to date.
       std::error_code ec;
       fs::remove(stamp_path(out_dir, step.name), ec);
+      common::forward_termination_signals();
       const pid_t pid = launch(options.stage_dir / step.executable, step.arguments, log_file, threads);
+      if (pid > 0) common::register_child(pid);
       phase[i] = Phase::kRunning;
       if (pid < 0) {
         phase[i] = Phase::kFinished;
@@ -765,6 +754,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       if (got == 0 || (got < 0 && errno == EINTR)) continue;
       if (got < 0) status = 127 << 8;  // not our child any more: report as failed to start
       const Running done = running[r];
+      common::unregister_child(done.pid);
       running.erase(running.begin() + static_cast<std::ptrdiff_t>(r));
       finish(done, status, usage);
       exited = true;

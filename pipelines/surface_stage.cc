@@ -16,10 +16,12 @@
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
+#include "common/file_check.h"
 #include "common/finite.h"
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/metadata.h"
+#include "common/output_file.h"
 #include "common/progress.h"
 #include "common/scene.h"
 #include "common/xdmf.h"
@@ -375,11 +377,14 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   const bool moving = sc->wants("imposed_kinematics");
   std::unique_ptr<H5File> kin;
   std::vector<double> kin_times;
+  std::string partial_input;  // "" or the PARTIAL INPUT line (--allow-partial)
   if (moving) {
     if (options.kinematics.empty())
       throw common::InputError(scene.file.string(), sc->line,
                                "scenario '" + sc->name + "' lists imposed_kinematics: give --kinematics");
     kin = std::make_unique<H5File>(options.kinematics, H5File::Mode::kRead);
+    partial_input = common::require_usable_file(*kin, options.kinematics, common::StageFile::kKinematics,
+                                                options.allow_partial);
     const Eigen::VectorXd t = kin->read_vector("/time");
     kin_times.assign(t.data(), t.data() + t.size());
     if (kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
@@ -517,6 +522,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   std::vector<std::string> names;
   if (!generic) {
     prepared_file = std::make_unique<H5File>(options.prepared, H5File::Mode::kRead);
+    common::require_file_format(*prepared_file, options.prepared, common::StageFile::kPreparedModel);
     names = prepared_file->read_strings("/surfaces/names");
   }
   const std::vector<std::string> surface_names = generic ? std::vector<std::string>{} : opt.surfaces;
@@ -618,7 +624,10 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   common::log_info(ledger.to_text());
 
   // ---- output file: static part -------------------------------------------
-  H5File out(options.out, H5File::Mode::kTruncate);
+  // Written as <out>.partial and renamed over <out> once completed: a
+  // previous complete output stays until then (common/output_file.h).
+  common::AtomicOutput atomic(options.out);
+  H5File out(atomic.temp().string(), H5File::Mode::kTruncate);
   {
     std::vector<const char*> argv;
     for (const auto& a : options.argv) argv.push_back(a.c_str());
@@ -631,6 +640,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   out.set_attribute("/", "mesh", generic ? opt.mesh.string() : std::string());
   out.set_attribute("/", "mode", steady ? "steady_state" : (quasi_static ? "quasi_static" : "hht"));
   out.set_attribute("/", "status", "running");
+  if (!partial_input.empty()) out.set_attribute("/", "partial_input", partial_input);
   out.set_attribute("/", "seating_time_s", seating);
   common::write_effect_ledger(out, ledger);
   const auto n_frames_expected = static_cast<std::int64_t>(std::floor(total_time / interval + 1e-9)) + 1 +
@@ -1069,6 +1079,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   out.set_attribute("/", "status", "completed");
   out.flush();
   write_sidecar();
+  atomic.commit();
   res.status = SurfaceStageStatus::kCompleted;
   return res;
 }

@@ -88,6 +88,9 @@ struct SurfaceStageOptions {
   std::string scenario;    ///< scenario name ("" = the scene's only scenario)
   std::string out;         ///< output HDF5; the XDMF sidecar gets the same stem
   bool progress = true;    ///< progress lines on stderr
+  /// Go on with an incomplete kinematics file (common/file_check.h); the
+  /// output then records it in its root attribute partial_input.
+  bool allow_partial = false;
   std::vector<std::string> argv;  ///< command line, for the run metadata
 };
 

@@ -2,7 +2,7 @@
 # Sanitizer suite and bounded fuzzing (docs/testing.md). Run by scripts/test.sh
 # after the CTest suite; on its own:
 #
-#   scripts/sanitize.sh                      # build, sanitizer suite, fuzz 20 s per target
+#   scripts/sanitize.sh                      # build, sanitizer suite, fuzz 10 s per target
 #   scripts/sanitize.sh --fuzz-seconds 300   # fuzz longer
 #   scripts/sanitize.sh --no-fuzz            # sanitizer suite only
 #   scripts/sanitize.sh --no-suite --only mesh_ply --fuzz-seconds 600
@@ -24,7 +24,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
 build=${ARTHROSIM_SANITIZE_BUILD:-build-sanitize}
-fuzz_seconds=20
+fuzz_seconds=10
 run_suite=1
 run_fuzz=1
 only=""

@@ -11,6 +11,7 @@
 #include "biphasic/output_file.h"
 #include "common/error.h"
 #include "common/log.h"
+#include "common/output_file.h"
 #include "pipelines/biphasic_stage.h"
 #include "pipelines/stages.h"
 
@@ -131,6 +132,8 @@ int main(int argc, char** argv) {
       o.layers = {"femur", "tibia_medial"};
       std::printf("canonical case: %s, %s\n", files.first.c_str(), files.second.c_str());
     }
+    common::refuse_output_over_inputs("arthrosim-biphasic", "--out", o.out,
+                                      {{o.prepared, "--prepared"}, {o.kinematics, "--kinematics"}, {scene, "--scene"}});
     const pipelines::BiphasicStageResult r = pipelines::run_biphasic_stage(o);
     std::printf("%d frames (%d left out: stage 1 failed), %d steps of %.4g ms, %d (pair, frame) skipped without overlap\n",
                 r.frames, r.frames_failed, r.steps, o.time_step_s * 1e3, r.skipped_pair_frames);

@@ -21,6 +21,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "common/metadata.h"
+#include "common/output_file.h"
 #include "common/progress.h"
 #include "common/scene.h"
 #include "common/storage.h"
@@ -217,6 +218,7 @@ int main(int argc, char** argv) {
                                "evaluates all contact pairs as one term)");
     o.forces.ligaments = wants("ligaments");
     o.forces.contact = wants("tibiofemoral_contact");
+    const std::string given_model = model_path;
     model_path = resolve_model(model_path);
     msk::Model model = msk::load_model(model_path);
     // A model with its own leg to the ground (an imported OpenSim model)
@@ -327,7 +329,20 @@ int main(int argc, char** argv) {
     info.synthetic = trial.synthetic;
     info.expected_frames = static_cast<std::int64_t>(frames.size());
     info.pressure_fields = !no_pressure;
-    msk::KinematicsFileWriter writer(out, problem, info, meta);
+    {
+      std::vector<common::NamedInput> inputs = common::files_of(given_model, "--model");
+      for (const auto& f : {common::NamedInput{model_path, "the URDF of --model"}, {prepared_path, "--prepared"},
+                            {scene_path, "--scene"}, {trial.source, "--trial"}})
+        inputs.push_back(f);
+      for (const auto& f : common::files_of(trial_path, "--trial")) inputs.push_back(f);
+      const msk::TrialDescription td = msk::read_trial_description(trial_path);
+      for (const auto& f : {td.kinematics_file, td.grf_file, td.knee_loads_file, td.external_loads_file})
+        inputs.push_back({f, "a file of --trial"});
+      common::refuse_output_over_inputs("arthrosim-comak", "--out", out, inputs);
+    }
+    // Written as <out>.partial, renamed over <out> when finished (common/output_file.h).
+    common::AtomicOutput atomic(out);
+    msk::KinematicsFileWriter writer(atomic.temp().string(), problem, info, meta);
     if (trial.truncated)
       common::log_warn(trial_path + ": the trial ends early at frame " +
                        std::to_string(trial.truncated->frame) + ": " + trial.truncated->reason);
@@ -347,13 +362,15 @@ int main(int argc, char** argv) {
       // Finish the file with the frames before the stop (attribute `stopped`).
       progress.finish();
       writer.finish(e.summary, ledger, sto_prefix);
-      // (run_comak has logged the reason, naming the frame.)
+      // (run_comak has logged the reason, naming the frame.) A previous
+      // complete <out> is kept; the stopped run stays under its partial name.
       std::cerr << "arthrosim-comak: stopped at frame " << e.frame << "; the " << e.summary.frames
-                << " frames before it are in " << out << "\n";
+                << " frames before it are in " << atomic.temp().string() << "\n";
       return 1;
     }
     progress.finish();
     writer.finish(summary, ledger, sto_prefix);
+    atomic.commit();
     std::printf("arthrosim-comak: %d frames, %d converged, %d failed, %d Ipopt iterations, %.2f s "
                 "(%.3f s/frame) -> %s\n",
                 summary.frames, summary.converged, summary.failed, summary.total_iterations,

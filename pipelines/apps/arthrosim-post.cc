@@ -14,6 +14,7 @@
 
 #include "common/error.h"
 #include "common/hdf5.h"
+#include "common/output_file.h"
 #include "common/scene.h"
 #include "pipelines/stages.h"
 #include "pipelines/post_stage.h"
@@ -28,6 +29,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> surfaces;
   std::string kinematics, map, scene_file, out, out_dir;
   double spacing = 0.0;
+  bool allow_partial = false;
   app.add_option("--surface", surfaces,
                  "surface output of one scenario, NAME=FILE or FILE (name from the file's 'scenario' attribute); repeat");
   app.add_option("--kinematics", kinematics, "kinematics file of the musculoskeletal stage (contact force, key frames)");
@@ -36,6 +38,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--scene", scene_file, "scene file: its post block sets the view, CPD and comparison options");
   app.add_option("--out", out, "output folder");
+  app.add_flag("--allow-partial", allow_partial,
+               "go on with incomplete inputs (killed or stopped runs); the report says so at the top");
   app.add_option("--out-dir", out_dir, "same as --out (the runner's spelling)");
   app.footer(
       "Sample run on bundled data (a CTest; no surface output, so the report lists what is missing):\n"
@@ -57,6 +61,7 @@ int main(int argc, char** argv) {
     if (!map.empty()) options.splitline_map = map;
     options.map_sample_spacing = spacing;
     inputs.kinematics = kinematics;
+    inputs.allow_partial = allow_partial;
     for (const auto& s : surfaces) {
       const auto eq = s.find('=');
       std::string name, file;
@@ -82,6 +87,10 @@ int main(int argc, char** argv) {
                 options.view.direction.x(), options.view.direction.y(), options.view.direction.z(), options.view.up.x(),
                 options.view.up.y(), options.view.up.z(), options.registration.w, options.registration.beta,
                 options.registration.lambda, options.registration.nonrigid ? "non-rigid" : "affine only", out.c_str());
+    std::vector<common::NamedInput> given = {{kinematics, "--kinematics"}, {options.splitline_map, "the map"},
+                                             {scene_file, "--scene"}};
+    for (const auto& [name, file] : inputs.surfaces) given.push_back({file, "--surface " + name});
+    common::refuse_output_over_inputs("arthrosim-post", "--out", out, given);
     const auto summary = pipelines::run_post(inputs, options, out);
     for (const auto& m : summary.missing) std::printf("  missing: %s\n", m.c_str());
     for (const auto& s : summary.scenarios)

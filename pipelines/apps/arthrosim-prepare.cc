@@ -16,6 +16,7 @@
 #include "common/log.h"
 #include "common/mesh_io.h"
 #include "common/metadata.h"
+#include "common/output_file.h"
 #include "pipelines/apps/name_value.h"
 #include "pipelines/prepare.h"
 
@@ -94,6 +95,10 @@ int main(int argc, char** argv) {
                      " remesh iterations -> " + out);
 
     const pipelines::ModelFiles files = pipelines::find_model_files(model_dir);
+    std::vector<common::NamedInput> inputs = {{files.manifest, "the manifest of --model"}};
+    for (const auto* m : {&files.bones, &files.cartilage})
+      for (const auto& [name, file] : *m) inputs.push_back({file, "mesh '" + name + "' of --model"});
+    common::refuse_output_over_inputs("arthrosim-prepare", "--out", out, inputs);
     const pipelines::PreparedModel model = pipelines::prepare_model(files, options);
     if (!model.manifest.empty()) common::log_info("manifest " + model.manifest);
     for (const auto& b : model.bones) {
@@ -122,7 +127,10 @@ int main(int argc, char** argv) {
     for (const auto& w : model.warnings) common::log_warn(w);
     const common::RunMetadata meta =
         common::collect_run_metadata("arthrosim-prepare", argc, argv, "", echo.str());
-    pipelines::write_prepared_model(model, options, meta, out);
+    // Written as <out>.partial, renamed over <out> when complete (common/output_file.h).
+    common::AtomicOutput atomic(out);
+    pipelines::write_prepared_model(model, options, meta, atomic.temp().string());
+    atomic.commit();
     common::log_info("wrote " + out + " and " + pipelines::xdmf_path_for(out));
   } catch (const std::exception& e) {
     common::log_error(e.what());

@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include "common/log.h"
+#include "common/output_file.h"
 #include "pipelines/surface_stage.h"
 
 using namespace arthrosim;
@@ -32,6 +33,8 @@ int main(int argc, char** argv) {
   app.add_option("--scene", o.scene, "scene YAML")->required();
   app.add_option("--scenario", o.scenario, "scenario of the scene (may be left out if it has only one)");
   app.add_option("--out", o.out, "output HDF5 (XDMF sidecar next to it, same stem)")->required();
+  app.add_flag("--allow-partial", o.allow_partial,
+               "go on with an incomplete kinematics file (a killed or stopped COMAK run); the output records it");
   app.add_flag("--verbose", verbose, "more messages");
   app.add_flag("--quiet", quiet, "warnings and errors only (no progress)");
   app.footer(
@@ -50,6 +53,8 @@ int main(int argc, char** argv) {
   o.progress = !quiet;
   for (int i = 0; i < argc; ++i) o.argv.emplace_back(argv[i]);
   try {
+    common::refuse_output_over_inputs("arthrosim-surface", "--out", o.out,
+                                      {{o.prepared, "--prepared"}, {o.kinematics, "--kinematics"}, {o.scene, "--scene"}});
     const pipelines::SurfaceStageResult r = pipelines::run_surface_stage(o);
     std::printf("scenario %s: %d frames, %ld steps, %ld Newton iterations, %ld rejected steps, %ld factorizations\n",
                 r.scenario.c_str(), r.frames, r.steps, r.newton_iterations, r.rejected_steps, r.factorizations);

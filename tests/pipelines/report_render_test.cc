@@ -52,6 +52,8 @@ void write_surface(const fs::path& path, double phase, bool walking = false, dou
       dir(t, i, 0) = std::cos(th), dir(t, i, 1) = std::sin(th), dir(t, i, 2) = 0;
     }
   common::H5File f(path.string(), common::H5File::Mode::kTruncate);
+  f.set_attribute("/", "schema", "arthrosim surface output 2");  // a finished run (common/file_check.h)
+  f.set_attribute("/", "status", "completed");
   f.set_attribute("/", "scenario", "test");
   f.write("/time", Eigen::VectorXd::LinSpaced(T, 0.0, t_end));
   f.write("/surfaces/femur/nodes", V);
@@ -86,6 +88,9 @@ void write_kinematics(const fs::path& path) {
     fl.row(k) << 0, 0, 0.4 * s;
   }
   common::H5File f(path.string(), common::H5File::Mode::kTruncate);
+  f.set_attribute("/", "format", "arthrosim kinematics file");  // a finished run (common/file_check.h)
+  f.set_attribute("/", "format_version", 1);
+  f.set_attribute("/", "frames", static_cast<int>(t.size()));
   f.write("/time", t);
   // Layout of docs/kinematics_file.md; cop and area must not be plotted as forces.
   f.write("/contact/tibiofemoral/force", Eigen::MatrixXd(fm + fl));

@@ -454,6 +454,9 @@ TEST(SurfaceStage, ImposedKinematicsMoveTheSurfaceRigidly) {
   X1.translation() << 0.002, -0.001, 0.0005;
   {
     common::H5File k(kin_path, common::H5File::Mode::kTruncate);
+    k.set_attribute("/", "format", "arthrosim kinematics file");  // a finished run (common/file_check.h)
+    k.set_attribute("/", "format_version", 1);
+    k.set_attribute("/", "frames", 3);
     k.write("/time", std::vector<double>{0.2, 0.2005, 0.201});
     std::vector<double> tib, fem;
     for (int f = 0; f < 3; ++f) {

@@ -426,7 +426,7 @@ TEST(ComakStability, NanInTrialStopsAtItsFrame) {
 
 // The same trial through the executable: non-zero exit, the message names
 // the frame, file and column, and the frames before it are readable in the
-// kinematics file (with the `stopped` attribute).
+// kinematics file <out>.partial (with the `stopped` attribute).
 TEST(ComakStability, NanInTrialStopsArthrosimComak) {
   const fs::path dir = scratch_trial("nan_executable");
   add_spikes(dir);
@@ -449,7 +449,9 @@ TEST(ComakStability, NanInTrialStopsArthrosimComak) {
   EXPECT_NE(err.find("grf.mot:26"), std::string::npos) << err;
   EXPECT_NE(err.find("'ground_force_vx'"), std::string::npos) << err;
 
-  arthrosim::common::H5File f(out.string(), arthrosim::common::H5File::Mode::kRead);
+  // A stopped run stays under its partial name (common/output_file.h).
+  EXPECT_FALSE(fs::exists(out));
+  arthrosim::common::H5File f(out.string() + ".partial", arthrosim::common::H5File::Mode::kRead);
   const Eigen::VectorXi idx = f.read_vector_int("/frame_index");
   ASSERT_EQ(idx.size(), 5);
   for (int i = 0; i < 5; ++i) EXPECT_EQ(idx[i], 11 + i);
@@ -510,7 +512,9 @@ TEST(ComakStability, KilledArthrosimComakLeavesWrittenFramesReadable) {
   ASSERT_EQ(solved, 6) << "the child ended before 6 frames";
   ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << "child was not killed, status " << status;
 
-  arthrosim::common::H5File f(out.string(), arthrosim::common::H5File::Mode::kRead);
+  // The killed run's frames are in <out>.partial (common/output_file.h).
+  EXPECT_FALSE(fs::exists(out));
+  arthrosim::common::H5File f(out.string() + ".partial", arthrosim::common::H5File::Mode::kRead);
   const Eigen::VectorXi idx = f.read_vector_int("/frame_index");
   const Eigen::VectorXd t = f.read_vector("/time");
   const Eigen::MatrixXd q = f.read_matrix("/coordinates/values");

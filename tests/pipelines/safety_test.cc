@@ -1,0 +1,518 @@
+// Issue 30 ("nothing stale, nothing lost, nothing hangs"): one test per
+// numbered failure this branch fixes, each failing before its fix.
+//   3. consumers took incomplete inputs: a kinematics file of a killed COMAK
+//      run, a surface output of a killed run (status running)
+//   5. versions were never checked (format_version 99, another schema)
+//   2. a rerun truncated the complete surface output at its start
+//   3. a killed runner orphaned its stage (it kept writing outside the
+//      lock); SIGTERM was not passed on; the lock named no holder
+//   6. --set injected YAML with a line break; an output path equal to an
+//      input overwrote it
+// Plus the helpers behind them (common/output_file.h, common/file_check.h).
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <thread>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <string>
+
+#include "common/error.h"
+#include "common/file_check.h"
+#include "common/hdf5.h"
+#include "common/metadata.h"
+#include "common/output_file.h"
+#include "common/scene_edit.h"
+#include "musculoskeletal/model.h"
+#include "musculoskeletal/model_io.h"
+#include "pipelines/post_stage.h"
+#include "pipelines/prepare.h"
+#include "pipelines/runner.h"
+#include "pipelines/stages.h"
+#include "pipelines/surface_stage.h"
+
+namespace arthrosim::pipelines {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kDir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / "safety_test";
+const fs::path kBin = fs::path(ARTHROSIM_BINARY_DIR) / "bin";
+const fs::path kCoarse = fs::path(ARTHROSIM_SOURCE_DIR) / "data/models/knee_parametric/coarse";
+
+template <typename F>
+std::string error_of(F f) {
+  try {
+    f();
+  } catch (const common::InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Runs a shell command; returns (exit status, stdout + stderr).
+std::pair<int, std::string> run(const std::string& command) {
+  std::string out;
+  FILE* p = ::popen((command + " 2>&1").c_str(), "r");
+  char buf[4096];
+  while (p && std::fgets(buf, sizeof buf, p)) out += buf;
+  const int status = p ? ::pclose(p) : -1;
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+fs::path scratch(const std::string& name) {
+  const fs::path d = kDir / name;
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+// The prepared coarse bundled knee (prepare takes well under a second).
+const fs::path& coarse_prepared() {
+  static const fs::path path = [] {
+    const fs::path p = scratch("prepared") / "prepared_coarse.h5";
+    PrepareOptions o;
+    const PreparedModel m = prepare_model(find_model_files(kCoarse.string()), o);
+    common::RunMetadata md;
+    md.program = "safety_test";
+    write_prepared_model(m, o, md, p.string());
+    return p;
+  }();
+  return path;
+}
+
+// ---- 6. --set values: one scalar on one line ------------------------------
+
+TEST(SafetySet, ValueWithALineBreakListOrMapIsRefused) {
+  const fs::path dir = scratch("set");
+  const fs::path scene = dir / "plate.yaml";
+  fs::copy_file(fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/cantilever_plate.yaml", scene);
+  fs::copy_file(fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/cantilever_plate.obj", dir / "cantilever_plate.obj");
+  std::string text = slurp(scene);
+  const std::string model = "model: ../models/knee_parametric/coarse";
+  text.replace(text.find(model), model.size(), "model: " + kCoarse.string());
+  std::ofstream(scene) << text;
+  const std::string key = "surface.scenarios.cantilever.youngs_modulus_mpa";
+  // Before: the line break ended the header comment and "outputs: []" became
+  // a key of the written scene.
+  std::string msg = error_of([&] { common::edit_scene_text(scene, scene_schema(), {{key, "400\noutputs: []"}}); });
+  EXPECT_NE(msg.find("the value of '" + key + "' must be a single scalar on one line"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("found a line break"), std::string::npos) << msg;
+  msg = error_of([&] { common::edit_scene_text(scene, scene_schema(), {{key, "[400, 500]"}}); });
+  EXPECT_NE(msg.find("found the list '[400, 500]'"), std::string::npos) << msg;
+  msg = error_of([&] { common::edit_scene_text(scene, scene_schema(), {{"description", "a: b"}}); });
+  EXPECT_NE(msg.find("found the map 'a: b'"), std::string::npos) << msg;
+  msg = error_of([&] { common::edit_scene_text(scene, scene_schema(), {{"description", std::string("a\x1b[2Jb")}}); });
+  EXPECT_NE(msg.find("found the control character 27"), std::string::npos) << msg;
+  // A single scalar still works, including text with ':' and '#'.
+  const std::string ok = common::edit_scene_text(scene, scene_schema(), {{key, "4e2"}, {"description", "C:/x #1"}});
+  const common::Scene copy = parse_scene(ok, dir / "copy.yaml");
+  EXPECT_EQ(copy.top.text("description"), "C:/x #1");
+}
+
+// ---- 6. an output never replaces an input ----------------------------------
+
+TEST(SafetyOutput, SameFileSeesThroughDotDotSymlinksAndHardLinks) {
+  const fs::path dir = scratch("same_file");
+  std::ofstream(dir / "a.h5") << "x";
+  fs::create_directories(dir / "sub");
+  fs::create_symlink(dir / "a.h5", dir / "link.h5");
+  fs::create_hard_link(dir / "a.h5", dir / "hard.h5");
+  EXPECT_TRUE(common::same_file(dir / "a.h5", dir / "sub" / ".." / "a.h5"));
+  EXPECT_TRUE(common::same_file(dir / "link.h5", dir / "a.h5"));
+  EXPECT_TRUE(common::same_file(dir / "hard.h5", dir / "a.h5"));
+  EXPECT_FALSE(common::same_file(dir / "b.h5", dir / "a.h5"));
+  EXPECT_TRUE(common::same_file(dir / "sub" / ".." / "new.h5", dir / "new.h5"));  // neither exists
+  const std::string msg = error_of([&] {
+    common::refuse_output_over_inputs("prog", "--out", dir / "link.h5", {{"", "--none"}, {dir / "a.h5", "--prepared"}});
+  });
+  EXPECT_NE(msg.find("prog: error: --out " + (dir / "link.h5").string() + " is the input " + (dir / "a.h5").string() +
+                     " (--prepared)"),
+            std::string::npos)
+      << msg;
+}
+
+// Before: exit 0 and the input STL replaced by an HDF5 file.
+TEST(SafetyOutput, PrepareRefusesToWriteOntoAnInputMesh) {
+  const fs::path dir = scratch("prepare_onto_input");
+  fs::copy(kCoarse, dir / "model", fs::copy_options::recursive);
+  fs::path cartilage;
+  for (const auto& e : fs::directory_iterator(dir / "model"))
+    if (e.path().filename().string().find("cartilage") != std::string::npos) cartilage = e.path();
+  ASSERT_FALSE(cartilage.empty());
+  const std::string before = slurp(cartilage);
+  const auto [status, out] = run((kBin / "arthrosim-prepare").string() + " --model " + (dir / "model").string() +
+                                 " --out " + (dir / "model" / "." / cartilage.filename()).string());
+  EXPECT_EQ(status, 1) << out;
+  EXPECT_NE(out.find("is the input " + cartilage.string()), std::string::npos) << out;
+  EXPECT_EQ(slurp(cartilage), before);
+}
+
+// Before: exit 0 and the prepared model replaced by the kinematics file.
+TEST(SafetyOutput, ComakRefusesToWriteOntoItsPreparedModel) {
+  const fs::path dir = scratch("comak_onto_prepared");
+  fs::copy_file(coarse_prepared(), dir / "prepared.h5");
+  const std::string before = slurp(dir / "prepared.h5");
+  const auto [status, out] =
+      run((kBin / "arthrosim-comak").string() + " --model " + kCoarse.string() + " --prepared " +
+          (dir / "prepared.h5").string() + " --trial " + ARTHROSIM_SOURCE_DIR +
+          "/data/trials/synthetic_gait --first-frame 0 --last-frame 0 --out " + (dir / "prepared.h5").string());
+  EXPECT_EQ(status, 1) << out;
+  EXPECT_NE(out.find("--out " + (dir / "prepared.h5").string() + " is the input"), std::string::npos) << out;
+  EXPECT_NE(out.find("(--prepared)"), std::string::npos) << out;
+  EXPECT_EQ(slurp(dir / "prepared.h5"), before);
+}
+
+// ---- 5. versions are checked -----------------------------------------------
+
+void write_kinematics_header(common::H5File& f, int version) {
+  f.set_attribute("/", "format", "arthrosim kinematics file");
+  f.set_attribute("/", "format_version", version);
+}
+
+TEST(SafetyVersions, KinematicsFormatVersionAndPreparedSchemaAreChecked) {
+  const fs::path dir = scratch("versions");
+  {
+    common::H5File f((dir / "k99.h5").string(), common::H5File::Mode::kTruncate);
+    write_kinematics_header(f, 99);
+    f.set_attribute("/", "frames", 1);
+    f.write("/time", std::vector<double>{0.0});
+  }
+  // Before: read as if current. The surface stage reads the kinematics first.
+  SurfaceStageOptions o;
+  o.kinematics = (dir / "k99.h5").string();
+  o.prepared = coarse_prepared().string();
+  o.scene = (fs::path(ARTHROSIM_SOURCE_DIR) / "data/scenes/gait.yaml").string();
+  o.out = (dir / "surface.h5").string();
+  o.progress = false;
+  std::string msg = error_of([&] { run_surface_stage(o); });
+  EXPECT_NE(msg.find(o.kinematics + ": error: a kinematics file of format_version 99; this build reads version 1"),
+            std::string::npos)
+      << msg;
+  EXPECT_FALSE(fs::exists(o.out));
+
+  // A prepared model of another schema, as COMAK and the surface stage read it.
+  fs::copy_file(coarse_prepared(), dir / "p2.h5");
+  {
+    common::H5File f((dir / "p2.h5").string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "schema", "arthrosim prepared model 2");
+  }
+  msg = error_of([&] {
+    musculoskeletal::Model model = musculoskeletal::load_model((kCoarse.parent_path() / "knee_coarse.urdf").string());
+    musculoskeletal::use_prepared_surfaces(model, (dir / "p2.h5").string());
+  });
+  EXPECT_NE(msg.find("p2.h5: error: a prepared model of another version: found schema 'arthrosim prepared model 2', "
+                     "this build reads 'arthrosim prepared model 1'"),
+            std::string::npos)
+      << msg;
+  // Another kind of file altogether.
+  msg = error_of([&] {
+    const common::H5File f((dir / "k99.h5").string(), common::H5File::Mode::kRead);
+    common::require_file_format(f, "k99.h5", common::StageFile::kPreparedModel);
+  });
+  EXPECT_NE(msg.find("k99.h5: error: expected a prepared model (root attribute schema = 'arthrosim prepared model 1'), "
+                     "found no attribute 'schema'"),
+            std::string::npos)
+      << msg;
+}
+
+// ---- 3. consumers refuse incomplete inputs -----------------------------------
+
+// A kinematics file as a COMAK run killed after `written` of `expected`
+// frames leaves it: no run summary (`frames`), the bones at rest.
+void write_killed_kinematics(const fs::path& file, int written, int expected) {
+  common::H5File k(file.string(), common::H5File::Mode::kTruncate);
+  write_kinematics_header(k, 1);
+  k.set_attribute("/", "frames_expected", expected);
+  std::vector<double> t, X;
+  for (int f = 0; f < written; ++f) {
+    t.push_back(0.2 + 5e-4 * f);
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) X.push_back(i == j ? 1.0 : 0.0);
+  }
+  k.write("/time", t);
+  k.write_tensor3("/bodies/tibia/X_W", {written, 4, 4}, X);
+  k.write_tensor3("/bodies/femur/X_W", {written, 4, 4}, X);
+}
+
+std::string moving_scene(const fs::path& dir) {
+  const fs::path p = dir / "moving.yaml";
+  std::ofstream(p) << "model: " << kCoarse.string() << "\noutputs: [surface]\ntrial: " << ARTHROSIM_SOURCE_DIR
+                   << "/data/trials/synthetic_gait\ncomak: {effects: [ligaments]}\n"
+                   << R"(surface:
+  scenarios:
+    moving:
+      surfaces: [femur]
+      time_step_s: 2.5e-4
+      output_interval_ms: 0.5
+      seating_time_s: 0
+      effects: [foundation_springs, periphery_fixed, imposed_kinematics]
+)";
+  return p.string();
+}
+
+TEST(SafetyPartial, SurfaceStageAndPostRefuseKilledRunsUnlessAllowed) {
+  const fs::path dir = scratch("partial");
+  write_killed_kinematics(dir / "killed.h5", 3, 21);
+  SurfaceStageOptions o;
+  o.kinematics = (dir / "killed.h5").string();
+  o.prepared = coarse_prepared().string();
+  o.scene = moving_scene(dir);
+  o.out = (dir / "surface_moving.h5").string();
+  o.progress = false;
+  o.argv = {"safety_test"};
+  // Before: the 3 frames were simulated as if they were the whole walk.
+  std::string msg = error_of([&] { run_surface_stage(o); });
+  EXPECT_NE(msg.find(o.kinematics + ": error: incomplete kinematics file: it holds 3 frames and no run summary (the "
+                                    "run that wrote it did not finish: killed or crashed); rerun the stage that writes "
+                                    "it, or pass --allow-partial"),
+            std::string::npos)
+      << msg;
+  EXPECT_FALSE(fs::exists(o.out));
+
+  o.allow_partial = true;
+  const SurfaceStageResult r = run_surface_stage(o);
+  ASSERT_EQ(r.status, SurfaceStageStatus::kCompleted);
+  {
+    const common::H5File f(o.out, common::H5File::Mode::kRead);
+    ASSERT_TRUE(f.has_attribute("/", "partial_input"));
+    EXPECT_NE(f.attribute_string("/", "partial_input").find("PARTIAL INPUT: " + o.kinematics), std::string::npos);
+  }
+
+  // A surface output of a killed run: status "running".
+  fs::copy_file(o.out, dir / "surface_killed.h5");
+  {
+    common::H5File f((dir / "surface_killed.h5").string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "status", "running");
+  }
+  PostInputs in;
+  in.surfaces = {{"moving", (dir / "surface_killed.h5").string()}};
+  // Before: exit 0 and a report of the frames it held.
+  msg = error_of([&] { run_post(in, PostOptions{}, (dir / "post").string()); });
+  EXPECT_NE(msg.find("surface_killed.h5: error: incomplete surface output: it holds status 'running' with 3 frames"),
+            std::string::npos)
+      << msg;
+  EXPECT_FALSE(fs::exists(dir / "post" / "report.html"));
+  // The finished run on the partial kinematics is refused too (it says so).
+  in.surfaces = {{"moving", o.out}};
+  msg = error_of([&] { run_post(in, PostOptions{}, (dir / "post").string()); });
+  EXPECT_NE(msg.find("incomplete surface output: it holds a run on a partial input (PARTIAL INPUT: "), std::string::npos)
+      << msg;
+
+  in.surfaces = {{"moving", (dir / "surface_killed.h5").string()}};
+  in.allow_partial = true;
+  const PostSummary s = run_post(in, PostOptions{}, (dir / "post").string());
+  ASSERT_EQ(s.partial_inputs.size(), 1u);
+  const std::string html = slurp(s.report_path);
+  const std::size_t partial = html.find("PARTIAL INPUT: " + (dir / "surface_killed.h5").string());
+  ASSERT_NE(partial, std::string::npos);
+  EXPECT_LT(partial, html.find("<h2>"));  // at the top, before the first section
+  EXPECT_NE(slurp(s.summary_path).find("\"partial_inputs\""), std::string::npos);
+}
+
+TEST(SafetyPartial, StoppedAndShortKinematicsFilesAreIncomplete) {
+  const fs::path dir = scratch("incomplete");
+  {
+    common::H5File k((dir / "stopped.h5").string(), common::H5File::Mode::kTruncate);
+    write_kinematics_header(k, 1);
+    k.set_attribute("/", "frames_expected", 21);
+    k.set_attribute("/", "frames", 18);
+    k.set_attribute("/", "stopped", "frame 18: non-finite trial value");
+    k.write("/time", std::vector<double>(18, 0.0));
+  }
+  const common::H5File f((dir / "stopped.h5").string(), common::H5File::Mode::kRead);
+  EXPECT_EQ(common::incompleteness(f, common::StageFile::kKinematics),
+            "18 of 21 frames (the run stopped: frame 18: non-finite trial value)");
+  const std::string line = common::require_usable_file(f, "stopped.h5", common::StageFile::kKinematics, true);
+  EXPECT_EQ(line, "PARTIAL INPUT: stopped.h5 is an incomplete kinematics file: it holds 18 of 21 frames (the run "
+                  "stopped: frame 18: non-finite trial value)");
+  {
+    common::H5File k((dir / "done.h5").string(), common::H5File::Mode::kTruncate);
+    write_kinematics_header(k, 1);
+    k.set_attribute("/", "frames_expected", 2);
+    k.set_attribute("/", "frames", 2);
+    k.write("/time", std::vector<double>{0.0, 0.01});
+  }
+  const common::H5File g((dir / "done.h5").string(), common::H5File::Mode::kRead);
+  EXPECT_EQ(common::require_usable_file(g, "done.h5", common::StageFile::kKinematics, false), "");
+}
+
+// ---- 3. process hygiene of the runner -----------------------------------------
+
+// A stage that records its pid and then runs for a minute (exec keeps the pid).
+const char* kSlowStage = R"SH(#!/bin/sh
+echo $$ > "$ARTHROSIM_SAFETY_PIDFILE"
+exec sleep 60
+)SH";
+
+bool alive(pid_t pid) {
+  // A zombie (nobody reaped it yet) is dead too.
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return false;
+  const std::size_t close = line.rfind(')');
+  return close != std::string::npos && close + 2 < line.size() && line[close + 2] != 'Z';
+}
+
+bool wait_until(const std::function<bool()>& f, double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < end) {
+    if (f()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return f();
+}
+
+// ---- 2. a complete output stays until its replacement is complete -----------
+
+// A finished kinematics file of `frames` frames at rest, 0.5 ms apart.
+void write_resting_kinematics(const fs::path& file, int frames) {
+  common::H5File k(file.string(), common::H5File::Mode::kTruncate);
+  write_kinematics_header(k, 1);
+  k.set_attribute("/", "frames_expected", frames);
+  k.set_attribute("/", "frames", frames);
+  std::vector<double> t, X;
+  for (int f = 0; f < frames; ++f) {
+    t.push_back(0.2 + 5e-4 * f);
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) X.push_back(i == j ? 1.0 : 0.0);
+  }
+  k.write("/time", t);
+  k.write_tensor3("/bodies/tibia/X_W", {frames, 4, 4}, X);
+  k.write_tensor3("/bodies/femur/X_W", {frames, 4, 4}, X);
+}
+
+// Before: the rerun truncated surface_moving.h5 when it started, and the kill
+// left a file of a few frames in its place.
+TEST(SafetyAtomic, KilledRerunKeepsTheCompleteSurfaceOutput) {
+  const fs::path dir = scratch("atomic");
+  write_resting_kinematics(dir / "short.h5", 3);
+  write_resting_kinematics(dir / "long.h5", 4001);  // 2 s of walk: 8,000 steps
+  const fs::path out = dir / "surface_moving.h5";
+  const std::string surface = (kBin / "arthrosim-surface").string() + " --quiet --prepared " +
+                              coarse_prepared().string() + " --scene " + moving_scene(dir) + " --out " + out.string();
+  const auto [status, printed] = run(surface + " --kinematics " + (dir / "short.h5").string());
+  ASSERT_EQ(status, 0) << printed;
+  ASSERT_FALSE(fs::exists(common::partial_name(out)));
+  const std::string complete = slurp(out);
+
+  const pid_t child = ::fork();
+  if (child == 0) {
+    ::execl("/bin/sh", "sh", "-c", ("exec " + surface + " --kinematics " + (dir / "long.h5").string()).c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ASSERT_TRUE(wait_until([&] { return fs::exists(common::partial_name(out)); }, 30));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ::kill(child, SIGKILL);
+  int st = 0;
+  ::waitpid(child, &st, 0);
+  ASSERT_TRUE(WIFSIGNALED(st)) << "the rerun finished before it was killed; make long.h5 longer";
+  EXPECT_EQ(slurp(out), complete);  // untouched
+  EXPECT_TRUE(fs::exists(common::partial_name(out)));  // what the killed run wrote, under a name no stage reads
+  const common::H5File partial(common::partial_name(out).string(), common::H5File::Mode::kRead);
+  EXPECT_EQ(partial.attribute_string("/", "status"), "running");
+  // The sidecar names the complete file, not the partial one.
+  EXPECT_EQ(slurp(dir / "surface_moving.xdmf").find(".partial"), std::string::npos);
+}
+
+class SafetyRunner : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = scratch(std::string("runner_") + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(root_ / "bin");
+    fs::create_directories(root_ / "models" / "knee");
+    std::ofstream(root_ / "models" / "knee" / "femur.stl") << "femur\n";
+    const fs::path stage = root_ / "bin" / "arthrosim-prepare";
+    std::ofstream(stage) << kSlowStage;
+    fs::permissions(stage, fs::perms::owner_all);
+    std::ofstream(root_ / "s.yaml") << "model: models/knee\noutputs: [prepared_model]\nprepare: {edge_length_mm: 3}\n";
+    pidfile_ = root_ / "stage.pid";
+    setenv("ARTHROSIM_SAFETY_PIDFILE", pidfile_.c_str(), 1);
+  }
+
+  // Forks a runner of the scene; returns its pid once its stage has started
+  // (and the stage's pid in *stage).
+  pid_t start_runner(pid_t* stage) {
+    const pid_t runner = ::fork();
+    if (runner == 0) {
+      RunnerOptions o;
+      o.out_dir = root_ / "out";
+      o.stage_dir = root_ / "bin";
+      std::ostringstream log;
+      const RunReport r = run_scene(load_scene(root_ / "s.yaml"), o, log);
+      ::_exit(r.status == RunStatus::kOk ? 0 : 3);
+    }
+    EXPECT_TRUE(wait_until([&] { return fs::exists(pidfile_) && fs::file_size(pidfile_) > 0; }, 20));
+    std::ifstream(pidfile_) >> *stage;
+    return runner;
+  }
+
+  fs::path root_, pidfile_;
+};
+
+// Before: the stage was orphaned and ran on (here: its full minute).
+TEST_F(SafetyRunner, KillNineOfTheRunnerEndsItsStage) {
+  pid_t stage = 0;
+  const pid_t runner = start_runner(&stage);
+  ASSERT_GT(stage, 0);
+  ASSERT_TRUE(alive(stage));
+  ASSERT_EQ(::kill(runner, SIGKILL), 0);
+  int status = 0;
+  ::waitpid(runner, &status, 0);
+  EXPECT_TRUE(wait_until([&] { return !alive(stage); }, 5)) << "stage " << stage << " outlived its runner";
+  if (alive(stage)) ::kill(stage, SIGKILL);
+
+  // The next run finds the killed run's record in the lock file and says so.
+  fs::remove(pidfile_);
+  std::ofstream(root_ / "bin" / "arthrosim-prepare") << "#!/bin/sh\nexit 0\n";
+  RunnerOptions o;
+  o.out_dir = root_ / "out";
+  o.stage_dir = root_ / "bin";
+  std::ostringstream log;
+  run_scene(load_scene(root_ / "s.yaml"), o, log);
+  EXPECT_NE(log.str().find("the previous run in " + (root_ / "out").string() +
+                           " did not end cleanly (killed or crashed; pid " + std::to_string(runner)),
+            std::string::npos)
+      << log.str();
+}
+
+// Before: SIGTERM ended the runner and left the stage running.
+TEST_F(SafetyRunner, SigtermIsForwardedToTheStageAndTheLockNamesItsHolder) {
+  pid_t stage = 0;
+  const pid_t runner = start_runner(&stage);
+  ASSERT_GT(stage, 0);
+  {  // While it runs, a second run is refused and told who holds the folder.
+    RunnerOptions o;
+    o.out_dir = root_ / "out";
+    o.stage_dir = root_ / "bin";
+    std::ostringstream log;
+    const RunReport r = run_scene(load_scene(root_ / "s.yaml"), o, log);
+    EXPECT_EQ(r.status, RunStatus::kFolderBusy);
+    EXPECT_NE(r.message.find(".arthrosim.lock: pid " + std::to_string(runner) + ", started "), std::string::npos)
+        << r.message;
+  }
+  ASSERT_EQ(::kill(runner, SIGTERM), 0);
+  EXPECT_TRUE(wait_until([&] { return !alive(stage); }, 5)) << "SIGTERM was not forwarded to stage " << stage;
+  int status = 0;
+  ASSERT_EQ(::waitpid(runner, &status, 0), runner);
+  ASSERT_TRUE(WIFEXITED(status));   // the runner ended on its own, after its stage
+  EXPECT_EQ(WEXITSTATUS(status), 3);  // with the stage reported as failed
+  if (alive(stage)) ::kill(stage, SIGKILL);
+}
+
+}  // namespace
+}  // namespace arthrosim::pipelines
