@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "common/prepared_model_file.h"
 #include "common/hdf5.h"
 #include "common/mesh_io.h"
 
@@ -576,14 +577,11 @@ PreparedSurfacesReport replace_contact_surfaces(
 }  // namespace
 
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
-  common::H5File f(prepared_path, common::H5File::Mode::kRead);
-  const std::vector<std::string> names = f.read_strings("/surfaces/names");
+  const common::PreparedModelReader f(prepared_path);
+  const std::vector<std::string> names = f.surface_names();
   // Prepared surfaces by the file name of their source mesh.
   std::map<std::string, std::string> by_file;
-  for (const auto& n : names)
-    by_file[std::filesystem::path(f.attribute_string("/surfaces/" + n, "source_file"))
-                .filename()
-                .string()] = n;
+  for (const auto& n : names) by_file[std::filesystem::path(f.source_file(n)).filename().string()] = n;
   auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
@@ -594,11 +592,10 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
                        "contact pair '" + pair + "': expected a prepared surface made from '" +
                            file + "' (surface '" + s.name + "'), found surfaces from: " + list);
     }
-    const std::string g = "/surfaces/" + it->second + "/triangles/";
-    common::TriangleMesh mesh;
-    mesh.V = f.read_matrix(g + "vertices", 3);
-    mesh.F = f.read_matrix_int(g + "faces", 3);
-    const Eigen::VectorXd tv = f.read_vector(g + "thickness");
+    common::PreparedModelReader::TriangleSurface prepared = f.triangles(it->second);
+    const std::string& g = prepared.group;
+    common::TriangleMesh mesh = std::move(prepared.mesh);
+    const Eigen::VectorXd tv = std::move(prepared.thickness);
     if (tv.size() != mesh.num_vertices() || mesh.num_triangles() == 0)
       throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
                                              std::to_string(tv.size()) + " values for " +
