@@ -41,6 +41,10 @@ const std::vector<EffectInfo>& known_effects() {
       {"pressure", EffectStage::kSurface, "generic mesh: pressure_mpa on the mid-surface (follower load)"},
       {"prescribed_displacement", EffectStage::kSurface,
        "generic mesh: the nodes in displaced_box_mm moved by displacement_mm"},
+      {"biphasic_layers", EffectStage::kBiphasic,
+       "cartilage layers as linear biphasic (u-p) volumes on their bones (docs/biphasic.md)"},
+      {"penetration_contact", EffectStage::kBiphasic,
+       "the penetration method's contact conditions from the overlap and stage 1's contact force"},
   };
   return kEffects;
 }
@@ -53,7 +57,12 @@ const EffectInfo* find_effect(std::string_view name) {
 }
 
 std::string_view to_string(EffectStage stage) {
-  return stage == EffectStage::kMusculoskeletal ? "musculoskeletal" : "surface";
+  switch (stage) {
+    case EffectStage::kMusculoskeletal: return "musculoskeletal";
+    case EffectStage::kSurface: return "surface";
+    case EffectStage::kBiphasic: return "biphasic";
+  }
+  return "";
 }
 
 std::string effect_names(EffectStage stage) {

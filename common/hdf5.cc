@@ -308,13 +308,41 @@ struct H5File::Impl {
     return d;
   }
 
+  // Elements of the readable dims, refused (InputError) when the file does
+  // not store them: HDF5 reads never-written parts of a dataset as fill
+  // values, so a small file can declare dims of 10^12 elements, and reading
+  // them would allocate terabytes. An uncompressed dataset must store at
+  // least `min_bytes_per_element` bytes per element; a compressed one (any
+  // filter) at least 1/1100 of that (deflate's best ratio is about 1:1032).
+  size_t stored_elements(hid_t dset, const std::string& norm, const std::vector<std::int64_t>& dims,
+                         size_t min_bytes_per_element) const {
+    size_t n = 1;
+    bool overflow = false;
+    for (auto v : dims) overflow = overflow || v < 0 || __builtin_mul_overflow(n, static_cast<size_t>(v), &n);
+    if (n == 0 && !overflow) return 0;
+    size_t needed = 0;
+    overflow = overflow || __builtin_mul_overflow(n, min_bytes_per_element, &needed);
+    Hid plist(H5Dget_create_plist(dset), H5Pclose);
+    const double ratio = plist.valid() && H5Pget_nfilters(plist.get()) > 0 ? 1100.0 : 1.0;
+    const double stored = static_cast<double>(H5Dget_storage_size(dset));
+    if (overflow || static_cast<double>(needed) > stored * ratio) {
+      std::ostringstream s;
+      s << "dataset " << norm << ": dims " << dims_text(dims) << " need "
+        << (overflow ? std::string("more than 2^64") : std::to_string(needed)) << " bytes, but the file stores "
+        << static_cast<std::uint64_t>(stored) << (ratio > 1 ? " compressed" : "")
+        << " (a truncated or never written dataset)";
+      fail(s.str());
+    }
+    return n;
+  }
+
   template <typename T>
   std::vector<T> read_numeric(const std::string& name, int rank, std::vector<std::int64_t>* dims) const {
     const std::string norm = normalize(name);
     constexpr bool is_double = std::is_same_v<T, double>;
     Hid d = open_checked(norm, rank, is_double ? H5Type::kDouble : H5Type::kInt, dims);
-    size_t n = 1;
-    for (auto v : *dims) n *= static_cast<size_t>(v);
+    Hid ftype(H5Dget_type(d.get()), H5Tclose);
+    const size_t n = stored_elements(d.get(), norm, *dims, std::max<size_t>(1, H5Tget_size(ftype.get())));
     std::vector<T> buf(n);
     if (n == 0) return buf;
     // Select the readable frames only (see kFramesAttribute).
@@ -620,8 +648,12 @@ std::vector<std::string> H5File::read_strings(const std::string& name) const {
   std::vector<std::int64_t> d;
   Hid dset = impl_->open_checked(norm, 1, H5Type::kString, &d);
   Hid ftype(H5Dget_type(dset.get()), H5Tclose);
+  // A variable-length string is stored as a global-heap reference (16 bytes);
+  // 8 per element is a safe lower bound for both kinds.
+  const size_t bytes = H5Tis_variable_str(ftype.get()) > 0 ? 8 : std::max<size_t>(1, H5Tget_size(ftype.get()));
+  const size_t n = impl_->stored_elements(dset.get(), norm, d, bytes);
   bool failed = false;
-  auto out = read_string_data(ftype.get(), static_cast<size_t>(d[0]), [&](hid_t mem, void* buf) {
+  auto out = read_string_data(ftype.get(), n, [&](hid_t mem, void* buf) {
     const herr_t r = H5Dread(dset.get(), mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf);
     failed = r < 0;
     return r;

@@ -313,6 +313,59 @@ QuadMesh split_triangles_to_quads(const TriangleMesh& mesh) {
   return out;
 }
 
+std::vector<int> connected_components(const TriangleMesh& mesh, int* count) {
+  const int nt = mesh.num_triangles();
+  check_indices(mesh, "connected_components");
+  std::vector<int> parent(nt);
+  for (int t = 0; t < nt; ++t) parent[t] = t;
+  auto find = [&](int x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  const MeshTopology topo = build_topology(mesh);
+  for (const auto& tris : topo.edge_triangles)
+    for (size_t i = 1; i < tris.size(); ++i) {
+      const int a = find(tris[0]), b = find(tris[i]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  std::vector<int> id(nt, -1), root_id(nt, -1);
+  int n = 0;
+  for (int t = 0; t < nt; ++t) {
+    const int r = find(t);
+    if (root_id[r] < 0) root_id[r] = n++;
+    id[t] = root_id[r];
+  }
+  if (count) *count = n;
+  return id;
+}
+
+TriangleMesh submesh(const TriangleMesh& mesh, const std::vector<int>& triangles) {
+  check_indices(mesh, "submesh");
+  TriangleMesh out;
+  out.name = mesh.name;
+  std::vector<int> index(mesh.num_vertices(), -1);
+  std::vector<int> order;
+  out.F.resize(static_cast<int>(triangles.size()), 3);
+  for (size_t j = 0; j < triangles.size(); ++j) {
+    const int t = triangles[j];
+    if (t < 0 || t >= mesh.num_triangles())
+      throw InputError(mesh.name.empty() ? std::string("<mesh>") : mesh.name, 0,
+                       "submesh: expected triangle indices in [0, " + std::to_string(mesh.num_triangles()) +
+                           "), found " + std::to_string(t));
+    for (int k = 0; k < 3; ++k) {
+      int& v = index[mesh.F(t, k)];
+      if (v < 0) {
+        v = static_cast<int>(order.size());
+        order.push_back(mesh.F(t, k));
+      }
+      out.F(static_cast<int>(j), k) = v;
+    }
+  }
+  out.V.resize(static_cast<int>(order.size()), 3);
+  for (size_t i = 0; i < order.size(); ++i) out.V.row(static_cast<int>(i)) = mesh.V.row(order[i]);
+  return out;
+}
+
 TriangleMesh transformed(const TriangleMesh& mesh, const Eigen::Isometry3d& X) {
   TriangleMesh out = mesh;
   out.V = (mesh.V * X.linear().transpose()).rowwise() + X.translation().transpose();

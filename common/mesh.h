@@ -112,6 +112,14 @@ std::vector<std::vector<int>> boundary_loops(const TriangleMesh& mesh);
 /// Quad 3t+k starts at vertex F(t,k).
 QuadMesh split_triangles_to_quads(const TriangleMesh& mesh);
 
+/// Edge-connected components: component id of every triangle (0-based, in
+/// order of each component's lowest triangle index) and their count.
+std::vector<int> connected_components(const TriangleMesh& mesh, int* count = nullptr);
+
+/// The triangles `triangles` of mesh (in that order) with only the vertices
+/// they use, renumbered in order of first use; name kept.
+TriangleMesh submesh(const TriangleMesh& mesh, const std::vector<int>& triangles);
+
 /// The mesh with every vertex mapped by X (p -> X * p); F and name unchanged.
 /// X is a rigid transform, so orientation (and normals' sense) is preserved.
 TriangleMesh transformed(const TriangleMesh& mesh, const Eigen::Isometry3d& X);

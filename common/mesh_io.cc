@@ -623,6 +623,7 @@ TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, co
   if (binary) {
     size_t off = pos;
     for (const auto& e : elements) {
+      if (e.properties.empty()) continue;  // no data, whatever its count (10^12 would loop for hours)
       for (long long i = 0; i < e.count; ++i) {
         std::array<double, 3> p{};
         std::vector<long long> poly;
@@ -664,6 +665,7 @@ TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, co
     std::string_view tok;
     int line = 0;
     for (const auto& e : elements) {
+      if (e.properties.empty()) continue;  // no data, whatever its count (10^12 would loop for hours)
       for (long long i = 0; i < e.count; ++i) {
         std::array<double, 3> p{};
         std::vector<long long> poly;

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <queue>
@@ -247,6 +248,89 @@ ValidationReport validate_or_throw(const TriangleMesh& mesh, const ValidationOpt
   return r;
 }
 
+// ------------------------------------------------------------ unit check --
+
+void check_plausible_extent(const TriangleMesh& mesh, LengthUnit declared, const std::string& source,
+                            const ExtentLimits& limits) {
+  const int n = mesh.num_vertices();
+  if (n == 0) return;
+  auto largest_side = [](const BoundingBox& b) { return b.empty() ? 0.0 : b.size().maxCoeff(); };
+  const double extent = largest_side(bounding_box(mesh.V));
+  if (extent >= limits.min && extent <= limits.max) return;
+  const double to_file = 1.0 / metres_per_unit(declared);  // metres -> numbers in the file
+  const std::string u = unit_name(declared);
+  auto num = [](double v) {
+    std::ostringstream s;
+    s.precision(4);
+    s << v;
+    return s.str();
+  };
+  std::ostringstream msg;
+  msg << "expected a knee surface whose largest extent is " << num(limits.min * to_file) << " to "
+      << num(limits.max * to_file) << " " << u;
+  if (declared != LengthUnit::kMillimetre) msg << " (" << num(limits.min * 1e3) << " to " << num(limits.max * 1e3) << " mm)";
+  msg << " in the declared unit " << u << ", found " << num(extent * to_file) << " " << u;
+  // Far vertices: distance from the per-axis median vertex.
+  Vec3 median;
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> c(mesh.V.col(k).data(), mesh.V.col(k).data() + n);
+    std::nth_element(c.begin(), c.begin() + n / 2, c.end());
+    median[k] = c[n / 2];
+  }
+  std::vector<double> dist(n);
+  for (int i = 0; i < n; ++i) dist[i] = (mesh.vertex(i) - median).norm();
+  std::vector<double> sorted = dist;
+  const int q = std::min(n - 1, static_cast<int>(0.9 * n));
+  std::nth_element(sorted.begin(), sorted.begin() + q, sorted.end());
+  const double q90 = sorted[q];
+  std::vector<int> far;
+  Points3 rest(n, 3);
+  int kept = 0;
+  for (int i = 0; i < n; ++i) {
+    if (dist[i] > 10.0 * q90 && std::isfinite(dist[i])) {
+      far.push_back(i);
+    } else {
+      rest.row(kept++) = mesh.V.row(i);
+    }
+  }
+  rest.conservativeResize(kept, 3);
+  const double rest_extent = largest_side(bounding_box(rest));
+  if (!far.empty() && static_cast<double>(far.size()) <= 0.01 * n && rest_extent >= limits.min &&
+      rest_extent <= limits.max) {
+    const Vec3 p = mesh.vertex(far[0]) * to_file;
+    msg << ": " << far.size() << " vertex" << (far.size() > 1 ? "es lie" : " lies")
+        << " far from all others (vertex " << far[0] << " at (" << num(p.x()) << ", " << num(p.y()) << ", "
+        << num(p.z()) << ") " << u << ", " << num(dist[far[0]] * to_file) << " " << u
+        << " from the median vertex, while 90 % of the vertices lie within " << num(q90 * to_file) << " " << u
+        << "; without them the extent is " << num(rest_extent * to_file) << " " << u
+        << "): a corrupted coordinate?";
+    throw InputError(source, 0, msg.str());
+  }
+  struct Candidate {
+    const char* name;
+    double metres;
+    bool readable;
+  };
+  const Candidate candidates[] = {{"um (micrometres)", 1e-6, false}, {"mm", 1e-3, true}, {"cm", 1e-2, true},
+                                  {"m", 1.0, true},                  {"inch", 0.0254, false}};
+  std::string likely;
+  for (const Candidate& c : candidates) {
+    if (c.metres == metres_per_unit(declared)) continue;
+    const double e = extent * to_file * c.metres;
+    if (e >= limits.min && e <= limits.max) {
+      likely += std::string(likely.empty() ? "" : "; or ") + c.name + " (its extent would be " + num(e * 1e3) +
+                " mm" + (c.readable ? "" : ", convert the file: arthrosim reads mm, cm and m") + ")";
+    }
+  }
+  if (!likely.empty()) {
+    msg << ": likely unit " << likely;
+  } else {
+    msg << ": no unit makes it plausible (" << (extent < limits.min ? "too small" : "too large")
+        << " in every one of um, mm, cm, m, inch)";
+  }
+  throw InputError(source, 0, msg.str());
+}
+
 // ------------------------------------------------------------------ repair --
 
 bool RepairReport::changed() const {
@@ -289,19 +373,41 @@ std::vector<int> merge_vertices(const Points3& V, double tol) {
     }
     return rep;
   }
+  // Grid of cells at least `tol` wide (so vertices within tol lie in the
+  // same or adjacent cells), indexed from the lower corner of the finite
+  // vertices. The cell is widened when the extent would need more than 2^40
+  // cells per axis, so every index is a non-negative integer far below the
+  // int64 range (no overflow for any finite coordinate; a coordinate so large
+  // that x - lo overflows is clamped into the last cell, where candidates are
+  // still compared by their true distance). Hashing in unsigned arithmetic.
+  constexpr double kMaxCells = 1099511627776.0;  // 2^40
+  Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
+  for (int i = 0; i < n; ++i) {
+    if (!V.row(i).allFinite()) continue;
+    lo = lo.cwiseMin(V.row(i).transpose());
+    hi = hi.cwiseMax(V.row(i).transpose());
+  }
+  double span = 0.0;
+  for (int k = 0; k < 3; ++k)
+    if (hi[k] >= lo[k]) span = std::max(span, hi[k] - lo[k]);  // inf if the extent overflows
+  const double cell = std::isfinite(span) ? std::max(tol, span / kMaxCells) : std::numeric_limits<double>::max();
+  auto index = [&](double x, int k) -> int64_t {
+    const double r = std::floor((x - lo[k]) / cell);
+    if (!(r >= 0.0)) return 0;  // NaN from inf - inf as well
+    return r >= kMaxCells ? static_cast<int64_t>(kMaxCells) : static_cast<int64_t>(r);
+  };
   using Cell = std::array<int64_t, 3>;
   struct CellHash {
     size_t operator()(const Cell& c) const {
-      return static_cast<size_t>(c[0] * 73856093LL) ^ static_cast<size_t>(c[1] * 19349663LL) ^
-             static_cast<size_t>(c[2] * 83492791LL);
+      return static_cast<size_t>(static_cast<uint64_t>(c[0]) * 73856093ULL ^ static_cast<uint64_t>(c[1]) * 19349663ULL ^
+                                 static_cast<uint64_t>(c[2]) * 83492791ULL);
     }
   };
   std::unordered_map<Cell, std::vector<int>, CellHash> grid;
   const double tol2 = tol * tol;
   for (int i = 0; i < n; ++i) {
     if (!V.row(i).allFinite()) continue;
-    const Cell c{static_cast<int64_t>(std::floor(V(i, 0) / tol)), static_cast<int64_t>(std::floor(V(i, 1) / tol)),
-                 static_cast<int64_t>(std::floor(V(i, 2) / tol))};
+    const Cell c{index(V(i, 0), 0), index(V(i, 1), 1), index(V(i, 2), 2)};
     int best = -1;
     for (int64_t dx = -1; dx <= 1; ++dx)
       for (int64_t dy = -1; dy <= 1; ++dy)

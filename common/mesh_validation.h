@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "common/mesh.h"
+#include "common/mesh_io.h"
 
 namespace arthrosim::common {
 
@@ -121,5 +122,29 @@ struct RepairResult {
 /// are not touched (validate() the result: they remain errors). Throws
 /// InputError if a triangle has an out-of-range index.
 RepairResult repair(const TriangleMesh& mesh, const RepairOptions& options = {});
+
+/// Plausible size of one surface of a knee model (a cartilage patch or a
+/// bone, possibly a whole femur or tibia): the largest side of its bounding
+/// box [m]. Defaults 5 mm .. 1 m.
+struct ExtentLimits {
+  double min = 5e-3;
+  double max = 1.0;
+};
+
+/// Unit check of a mesh read with `declared` (coordinates already in metres):
+/// throws InputError naming `source` when the largest bounding-box side lies
+/// outside `limits`, with the extent found (in the declared unit) and either
+///  - the vertices far from all others (a corrupted coordinate such as one
+///    flipped exponent bit: a vertex is "far" when its distance from the
+///    per-axis median vertex exceeds 10 times the 90th percentile distance;
+///    listed when they are at most 1 % of the vertices and without them the
+///    extent is plausible), or
+///  - the likely unit: each of um, mm, cm, m, inch whose reading of the
+///    file's numbers gives a plausible extent (um and inch are named so the
+///    user can convert; the readers take mm, cm and m).
+/// Factor-10 mistakes (cm read as mm) stay within the limits for most knee
+/// surfaces and are not caught here.
+void check_plausible_extent(const TriangleMesh& mesh, LengthUnit declared, const std::string& source,
+                            const ExtentLimits& limits = {});
 
 }  // namespace arthrosim::common

@@ -61,6 +61,25 @@ PreparedModelReader::TriangleSurface PreparedModelReader::triangles(const std::s
   s.mesh.V = f_->read_matrix(s.group + "vertices", 3);
   s.mesh.F = f_->read_matrix_int(s.group + "faces", 3);
   s.thickness = f_->read_vector(s.group + "thickness");
+  const std::string& g = s.group;
+  const Eigen::MatrixXd& V = s.mesh.V;
+  const Eigen::MatrixXi& F = s.mesh.F;
+  const Eigen::VectorXd& t = s.thickness;
+  if (t.size() != V.rows() || F.rows() == 0)
+    throw InputError(path(), 0, g + ": expected one thickness per vertex and triangles, found " +
+                                    std::to_string(t.size()) + " values for " + std::to_string(V.rows()) +
+                                    " vertices");
+  // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
+  for (int r = 0; r < F.rows(); ++r)
+    for (int k = 0; k < 3; ++k)
+      if (F(r, k) < 0 || F(r, k) >= V.rows())
+        throw InputError(path(), 0, g + "faces: expected vertex indices in [0, " + std::to_string(V.rows()) +
+                                        "), found " + std::to_string(F(r, k)) + " in triangle " +
+                                        std::to_string(r));
+  if (!V.allFinite()) throw InputError(path(), 0, g + "vertices: expected finite coordinates, found NaN or Inf");
+  if (!t.allFinite() || (t.array() < 0).any())
+    throw InputError(path(), 0,
+                     g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
   return s;
 }
 

@@ -48,6 +48,9 @@ class PreparedModelReader {
     Eigen::VectorXd thickness;
     std::string group;  ///< its group in the file (messages)
   };
+  /// Checked: one thickness per vertex, at least one triangle, indices in
+  /// range, finite coordinates, finite thickness >= 0; InputError naming the
+  /// file and dataset otherwise.
   TriangleSurface triangles(const std::string& surface) const;
 
  private:

@@ -91,6 +91,16 @@ TriangleMesh from_surface_mesh(SurfaceMesh& sm, const std::string& name) {
 
 }  // namespace
 
+double estimate_remesh_triangles(const TriangleMesh& mesh, double target_edge_length) {
+  const double L = target_edge_length;
+  const double area = surface_area(mesh);
+  double outline = 0.0;
+  const MeshTopology topo = build_topology(mesh);
+  for (Eigen::Index e = 0; e < topo.edges.rows(); ++e)
+    if (topo.edge_triangles[e].size() == 1) outline += (mesh.V.row(topo.edges(e, 0)) - mesh.V.row(topo.edges(e, 1))).norm();
+  return area / (std::sqrt(3.0) / 4.0 * L * L) + outline / L;
+}
+
 RemeshStatistics edge_length_statistics(const TriangleMesh& mesh) {
   RemeshStatistics s;
   s.input_triangles = mesh.num_triangles();

@@ -152,6 +152,10 @@ std::string edit_scene_text(const fs::path& file, const SceneSchema& schema,
     const OptionSpec& spec = find_settable_key(scene, key);
     const std::string v = spec.type == OptionType::kPath ? absolute_path(value, dir) : value;
     header += "#   " + key + " = " + value + "\n";
+    if (spec.block == "scene") {  // a top-level key, whose name may hold a dot (trial.start_s)
+      root[key] = v;
+      continue;
+    }
     const std::vector<std::string> parts = split_dots(key);
     // Node::operator= assigns contents; reset() rebinds the handle.
     YAML::Node node;

@@ -21,6 +21,8 @@
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Side_of_triangle_mesh.h>
+#include <CGAL/Surface_mesh.h>
 
 #include <algorithm>
 #include <array>
@@ -31,6 +33,7 @@
 #include <utility>
 
 #include "common/error.h"
+#include "common/mesh_validation.h"
 
 namespace arthrosim::common {
 
@@ -453,6 +456,46 @@ std::vector<int> TriangleTree::triangles_in_box(const Vec3& lo, const Vec3& hi) 
   for (const auto& it : ids) out.push_back(static_cast<int>(it - impl_->data.cgal_triangles.cbegin()));
   std::sort(out.begin(), out.end());
   return out;
+}
+
+// ------------------------------------------------------ ClosedSurfaceSide --
+
+struct ClosedSurfaceSide::Impl {
+  using SurfaceMesh = CGAL::Surface_mesh<K::Point_3>;
+  SurfaceMesh mesh;
+  std::unique_ptr<CGAL::Side_of_triangle_mesh<SurfaceMesh, K>> side;
+};
+
+ClosedSurfaceSide::ClosedSurfaceSide(const TriangleMesh& closed_mesh) : impl_(std::make_unique<Impl>()) {
+  ValidationOptions closed;
+  closed.require_closed = true;
+  const ValidationReport report = validate(closed_mesh, closed);
+  if (!report.ok())
+    throw InputError(closed_mesh.name.empty() ? "<mesh>" : closed_mesh.name, 0,
+                     "inside/outside test: expected a closed, consistently oriented surface, found:\n" +
+                         report.summary());
+  std::vector<Impl::SurfaceMesh::Vertex_index> v(closed_mesh.num_vertices());
+  for (int i = 0; i < closed_mesh.num_vertices(); ++i)
+    v[i] = impl_->mesh.add_vertex(K::Point_3(closed_mesh.V(i, 0), closed_mesh.V(i, 1), closed_mesh.V(i, 2)));
+  for (int t = 0; t < closed_mesh.num_triangles(); ++t)
+    if (impl_->mesh.add_face(v[closed_mesh.F(t, 0)], v[closed_mesh.F(t, 1)], v[closed_mesh.F(t, 2)]) ==
+        Impl::SurfaceMesh::null_face())
+      throw InputError(closed_mesh.name.empty() ? "<mesh>" : closed_mesh.name, 0,
+                       "inside/outside test: expected a manifold surface, found triangle " + std::to_string(t) +
+                           " cannot be added (a non-manifold vertex)");
+  impl_->side = std::make_unique<CGAL::Side_of_triangle_mesh<Impl::SurfaceMesh, K>>(impl_->mesh);
+}
+
+ClosedSurfaceSide::~ClosedSurfaceSide() = default;
+ClosedSurfaceSide::ClosedSurfaceSide(ClosedSurfaceSide&&) noexcept = default;
+ClosedSurfaceSide& ClosedSurfaceSide::operator=(ClosedSurfaceSide&&) noexcept = default;
+
+ClosedSurfaceSide::Side ClosedSurfaceSide::side(const Vec3& p) const {
+  switch ((*impl_->side)(K::Point_3(p.x(), p.y(), p.z()))) {
+    case CGAL::ON_BOUNDED_SIDE: return Side::kInside;
+    case CGAL::ON_BOUNDARY: return Side::kOnBoundary;
+    default: return Side::kOutside;
+  }
 }
 
 }  // namespace arthrosim::common

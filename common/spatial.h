@@ -70,4 +70,24 @@ class TriangleTree {
   std::unique_ptr<Impl> impl_;
 };
 
+/// Point-in-solid test of a closed triangle mesh (e.g. a bone): which side of
+/// the surface a point lies on. CGAL::Side_of_triangle_mesh (ray parity with
+/// exact predicates, so a ray through an edge or vertex is handled). The mesh
+/// must be closed and consistently oriented (validate with require_closed);
+/// InputError naming the mesh otherwise. Queries are const and thread-safe.
+class ClosedSurfaceSide {
+ public:
+  enum class Side { kInside, kOnBoundary, kOutside };
+  explicit ClosedSurfaceSide(const TriangleMesh& closed_mesh);
+  ~ClosedSurfaceSide();
+  ClosedSurfaceSide(ClosedSurfaceSide&&) noexcept;
+  ClosedSurfaceSide& operator=(ClosedSurfaceSide&&) noexcept;
+  Side side(const Vec3& p) const;
+  bool inside(const Vec3& p) const { return side(p) == Side::kInside; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 }  // namespace arthrosim::common

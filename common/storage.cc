@@ -13,6 +13,8 @@
 #include <ostream>
 #include <set>
 #include <sstream>
+#include <string_view>
+#include <unordered_map>
 
 #include "common/error.h"
 
@@ -202,12 +204,14 @@ StorageTable parse_storage(std::istream& in, const std::string& source, const Ro
   if (labels_line == 0) fail(line_no, "expected a line of column labels after endheader, found the end of the file");
   table.labels = split_labels(line);
   const size_t n_cols = table.labels.size();
+  // Hashed (linear in the number of columns: a damaged file can hold a
+  // "label line" of a million words).
+  std::unordered_map<std::string_view, size_t> first_column;
   for (size_t i = 0; i < n_cols; ++i) {
-    for (size_t j = 0; j < i; ++j) {
-      if (table.labels[i] == table.labels[j]) {
-        fail(labels_line, "duplicate column label '" + table.labels[i] + "' (columns " + std::to_string(j + 1) +
-                              " and " + std::to_string(i + 1) + ")");
-      }
+    const auto [it, added] = first_column.emplace(table.labels[i], i);
+    if (!added) {
+      fail(labels_line, "duplicate column label '" + table.labels[i] + "' (columns " + std::to_string(it->second + 1) +
+                            " and " + std::to_string(i + 1) + ")");
     }
   }
 

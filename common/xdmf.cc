@@ -12,6 +12,34 @@
 namespace arthrosim::common {
 namespace {
 
+std::int64_t nodes_per_cell(XdmfCellType type) {
+  switch (type) {
+    case XdmfCellType::kTriangle: return 3;
+    case XdmfCellType::kQuadrilateral: return 4;
+    case XdmfCellType::kHexahedron: return 8;
+    case XdmfCellType::kPolyvertex: return 1;
+  }
+  return 0;
+}
+const char* cell_name(XdmfCellType type) {
+  switch (type) {
+    case XdmfCellType::kTriangle: return "triangles";
+    case XdmfCellType::kQuadrilateral: return "quads";
+    case XdmfCellType::kHexahedron: return "hexahedra";
+    case XdmfCellType::kPolyvertex: return "points";
+  }
+  return "";
+}
+const char* topology_type(XdmfCellType type) {
+  switch (type) {
+    case XdmfCellType::kTriangle: return "Triangle";
+    case XdmfCellType::kQuadrilateral: return "Quadrilateral";
+    case XdmfCellType::kHexahedron: return "Hexahedron";
+    case XdmfCellType::kPolyvertex: return "Polyvertex";
+  }
+  return "";
+}
+
 namespace fs = std::filesystem;
 
 std::string escape(const std::string& s) {
@@ -136,10 +164,10 @@ class Builder {
     if (out.geometry.is_int) fail(out.geometry.dataset, "expected floating-point coordinates, found integer");
     // Topology: (M x 3) triangles or (M x 4) quads, int, indices in [0, N).
     out.topology = inspect(s.topology_dataset);
-    const std::int64_t per_cell = s.cell_type == XdmfCellType::kTriangle ? 3 : 4;
+    const std::int64_t per_cell = nodes_per_cell(s.cell_type);
     const auto& t = out.topology.dims;
     if (!out.topology.is_int || t.size() != 2 || t[1] != per_cell) {
-      fail(out.topology.dataset, "expected integer " + std::string(per_cell == 3 ? "triangles" : "quads") +
+      fail(out.topology.dataset, "expected integer " + std::string(cell_name(s.cell_type)) +
                                      " of dims (M, " + std::to_string(per_cell) + "), found " +
                                      (out.topology.is_int ? "integer" : "floating-point") + " dims " +
                                      dims_text(t));
@@ -215,9 +243,8 @@ class Builder {
     const XdmfSurface& surf = *s.surface;
     out_ << pad << "<Grid Name=\"" << escape(surf.name) << "\" GridType=\"Uniform\">\n";
     if (with_time) out_ << pad << "  <Time Value=\"" << number(series_.times[step]) << "\"/>\n";
-    const bool tri = surf.cell_type == XdmfCellType::kTriangle;
-    out_ << pad << "  <Topology TopologyType=\"" << (tri ? "Triangle" : "Quadrilateral") << "\" NumberOfElements=\""
-         << s.n_cells << "\" NodesPerElement=\"" << (tri ? 3 : 4) << "\">\n";
+    out_ << pad << "  <Topology TopologyType=\"" << topology_type(surf.cell_type) << "\" NumberOfElements=\""
+         << s.n_cells << "\" NodesPerElement=\"" << nodes_per_cell(surf.cell_type) << "\">\n";
     data_item(s.topology, step, pad + "    ");
     out_ << pad << "  </Topology>\n";
     out_ << pad << "  <Geometry GeometryType=\"XYZ\">\n";

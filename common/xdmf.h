@@ -35,14 +35,19 @@ struct XdmfField {
   bool per_step = true;
 };
 
-enum class XdmfCellType { kTriangle, kQuadrilateral };
+/// kHexahedron: 8 nodes per cell in VTK order (corners 0-3 around one face,
+/// 4-7 around the opposite face in the same rotational order, 4 above 0), for
+/// volume meshes; kPolyvertex: a point cloud (e.g. movable cellular automata),
+/// its topology dataset (M x 1) point indices.
+enum class XdmfCellType { kTriangle, kQuadrilateral, kHexahedron, kPolyvertex };
 
 struct XdmfSurface {
   std::string name;
   /// Node coordinates [m]: (N x 3) static, or (n_steps x N x 3) when the
   /// surface deforms (detected from the rank).
   std::string geometry_dataset;
-  /// Connectivity, 0-based int: (M x 3) triangles or (M x 4) quads.
+  /// Connectivity, 0-based int: (M x 3) triangles, (M x 4) quads, (M x 8)
+  /// hexahedra or (M x 1) points.
   std::string topology_dataset;
   XdmfCellType cell_type = XdmfCellType::kTriangle;
   std::vector<XdmfField> fields;

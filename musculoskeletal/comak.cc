@@ -22,10 +22,10 @@ namespace arthrosim::musculoskeletal {
 namespace {
 
 int require_coordinate(const Model& m, const std::string& name) {
-  const int i = m.tree.coordinate_index(name);
+  const int i = m.role_coordinate(name);
   if (i < 0)
     throw common::InputError(m.source + ": error: COMAK needs the coordinate '" + name +
-                             "', the model has none");
+                             "' (by name or <arthrosim:role>), the model has none");
   return i;
 }
 
@@ -70,6 +70,18 @@ std::string frame_name(const ComakFrameInput& in) {
 void check_frame_input(const ComakFrameInput& in) {
   if (!in.invalid_input.empty())
     throw common::NumericalError(frame_name(in) + ": trial input not finite: " + in.invalid_input);
+  if (in.model_dynamics) {
+    // Every value the model needs (NaN only for coordinates the trial lacks,
+    // which comak_model_frame_inputs allows for secondary coordinates only).
+    for (const LabForce& f : in.lab_forces) {
+      Eigen::VectorXd v(9);
+      v << f.force_L, f.point_L, f.torque_L;
+      common::check_finite(v, frame_name(in) + ": external force on body " + std::to_string(f.body));
+    }
+    if (!std::isfinite(in.time) || !std::isfinite(in.knee_flexion))
+      throw common::NumericalError(frame_name(in) + ": input (time, knee flexion) not finite");
+    return;
+  }
   Eigen::VectorXd v(12);
   v << in.time, in.knee_flexion, in.hip_angles, in.ankle_flexion, in.F_ext_T, in.M_ext_T;
   common::check_finite(v, frame_name(in) +
@@ -104,17 +116,24 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
       !(options.second_start_move_limit_scale > 0) ||
       options.move_limit_iterations < 1)
     throw common::InputError("COMAK: move limits must be positive and rounds and iterations >= 1");
+  // A model with its own leg to the ground (an imported OpenSim model) gets
+  // its loads from its own bodies (model_loads.h); the hip angles are then
+  // prescribed coordinates like any other, and the ankle is needed only for
+  // the ankle row.
+  ground_ = model.role_body("ground");
+  model_dynamics_ = ground_ >= 0;
   flexion_ = require_coordinate(model, "knee_flexion");
-  hip_[0] = require_coordinate(model, "hip_flexion");
-  hip_[1] = require_coordinate(model, "hip_adduction");
-  hip_[2] = require_coordinate(model, "hip_rotation");
-  ankle_ = require_coordinate(model, "ankle_flexion");
-  tibia_ = model.tree.body_index("tibia");
-  if (tibia_ < 0) throw common::InputError(model.source + ": error: COMAK needs a body 'tibia'");
+  const char* hips[3] = {"hip_flexion", "hip_adduction", "hip_rotation"};
+  for (int k = 0; k < 3; ++k)
+    hip_[k] = model_dynamics_ ? model.role_coordinate(hips[k]) : require_coordinate(model, hips[k]);
+  ankle_ = model_dynamics_ && !options.ankle_equilibrium ? model.role_coordinate("ankle_flexion")
+                                                         : require_coordinate(model, "ankle_flexion");
+  tibia_ = model.role_body("tibia");
+  if (tibia_ < 0) throw common::InputError(model.source + ": error: COMAK needs a body 'tibia' (or the role)");
   inertial_bodies_ = {tibia_};
-  if (const int patella = model.tree.body_index("patella"); patella >= 0)
-    inertial_bodies_.push_back(patella);
+  if (const int patella = model.role_body("patella"); patella >= 0) inertial_bodies_.push_back(patella);
   free_ = model.free_coordinates;
+  if (model_dynamics_) inertial_bodies_ = bodies_moved_by(model.tree, free_);
   if (std::find(free_.begin(), free_.end(), flexion_) == free_.end())
     throw common::InputError(model.source + ": error: knee_flexion must be a free coordinate");
   for (int c : free_) {
@@ -125,39 +144,79 @@ ComakProblem::ComakProblem(const Model& model, const ComakOptions& options)
   rows_ = free_;
   if (options.ankle_equilibrium) {
     const Joint* j = joint_of(model, ankle_);
-    if (!j || j->type != JointType::kRevolute || j->parent != tibia_)
+    if (model_dynamics_) {
+      // The foot's balance about the model's own ankle: its external term
+      // comes from the trial's forces and the foot's dynamics like the knee's.
+      for (int b : bodies_moved_by(model.tree, {ankle_}))
+        if (std::find(inertial_bodies_.begin(), inertial_bodies_.end(), b) == inertial_bodies_.end())
+          inertial_bodies_.push_back(b);
+    } else if (!j || j->type != JointType::kRevolute || j->parent != tibia_)
       throw common::InputError(model.source + ": error: COMAK ankle equilibrium needs 'ankle_flexion' "
                                "to be a revolute joint whose parent is the tibia");
-    ankle_axis_T_ = j->X_PJ.linear() * j->axis_J;
-    ankle_origin_T_ = j->X_PJ.translation();
+    if (!model_dynamics_) {
+      ankle_axis_T_ = j->X_PJ.linear() * j->axis_J;
+      ankle_origin_T_ = j->X_PJ.translation();
+    }
     rows_.push_back(ankle_);
     revolute_.push_back(true);
+  }
+  if (options.hip_equilibrium) {
+    if (!model_dynamics_)
+      throw common::InputError(model.source + ": error: COMAK hip equilibrium needs a model with its own leg "
+                               "to the ground (a 'ground' role, e.g. an imported OpenSim model)");
+    for (int k = 0; k < 3; ++k) {
+      if (hip_[k] < 0)
+        throw common::InputError(model.source + ": error: COMAK hip equilibrium needs the coordinates "
+                                 "hip_flexion, hip_adduction and hip_rotation (roles)");
+      const Joint* j = joint_of(model, hip_[k]);
+      if (!j || j->type != JointType::kRevolute)
+        throw common::InputError(model.source + ": error: COMAK hip equilibrium: '" +
+                                 model.tree.coordinates[hip_[k]] + "' is not a revolute joint");
+      hip_rows_.push_back(hip_[k]);
+      hip_joints_.push_back(static_cast<int>(j - model.tree.joints.data()));
+      rows_.push_back(hip_[k]);
+      revolute_.push_back(true);
+    }
+    // The leg: every body the hip coordinates do not move (the root's side).
+    const std::vector<int> pelvis_side = bodies_moved_by(model.tree, hip_rows_);
+    for (int b = 0; b < static_cast<int>(model.tree.bodies.size()); ++b)
+      if (std::find(pelvis_side.begin(), pelvis_side.end(), b) == pelvis_side.end()) leg_bodies_.push_back(b);
+    for (int b : leg_bodies_)
+      if (std::find(inertial_bodies_.begin(), inertial_bodies_.end(), b) == inertial_bodies_.end())
+        inertial_bodies_.push_back(b);
   }
   const int nr = static_cast<int>(rows_.size());
   row_scale_.resize(nr);
   for (int k = 0; k < nr; ++k) row_scale_[k] = revolute_[k] ? 1.0 / options.length_scale : 1.0;
 
-  // Volume weights from the path length at q = 0 (stand-in for l_opt).
+  // Volume weights V = F_max l_opt / sigma (COMAK's), with the path length at
+  // the default pose standing in for l_opt where the model file gives none.
   const int nm = static_cast<int>(model.muscles.size());
   V_.resize(nm);
   w_ = Eigen::VectorXd::Ones(nm);
   KinematicsData kin;
-  forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), kin);
+  const Eigen::VectorXd q_ref = model.default_q.size() == model.num_coordinates()
+                                    ? model.default_q
+                                    : Eigen::VectorXd::Zero(model.num_coordinates());
+  forward_kinematics(model.tree, q_ref, kin);
   for (int i = 0; i < nm; ++i) {
-    const PathState p = evaluate_path(model.muscles[i].path, kin.X_WB);
-    V_[i] = model.muscles[i].max_isometric_force * p.length / options.muscle_stress;
+    const Muscle& mu = model.muscles[i];
+    const double l = mu.optimal_fiber_length > 0 ? mu.optimal_fiber_length
+                                                 : evaluate_path(mu.path, kin.X_WB, q_ref).length;
+    V_[i] = mu.max_isometric_force * l / options.muscle_stress;
   }
   if (options.ankle_equilibrium) {
     // The ankle row must be balanceable both ways: plantarflexors (moment
     // arm < 0 about the dorsiflexion axis) for push-off and dorsiflexors for
     // the heel-strike moment. Checked at q = 0.
     KinematicsData k0;
-    forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), k0);
+    forward_kinematics(model.tree, q_ref, k0);
     ModelData d0 = make_data(model);
     d0.kinematics = k0;
     bool plantar = false, dorsi = false;
     for (int i = 0; i < nm; ++i) {
-      const double r = moment_arms(model, d0, evaluate_path(model.muscles[i].path, k0.X_WB))[ankle_];
+      const double r = moment_arms(
+          model, d0, evaluate_path(model.muscles[i].path, k0.X_WB, q_ref))[ankle_];
       plantar = plantar || r < -1e-3;
       dorsi = dorsi || r > 1e-3;
     }
@@ -180,7 +239,16 @@ Eigen::VectorXd ComakProblem::coordinates(const ComakFrameInput& in,
                                           const Eigen::VectorXd& q_source) const {
   Eigen::VectorXd q = q_source.size() == model_.num_coordinates()
                           ? q_source
-                          : Eigen::VectorXd::Zero(model_.num_coordinates());
+                          : (model_.default_q.size() == model_.num_coordinates()
+                                 ? model_.default_q
+                                 : Eigen::VectorXd::Zero(model_.num_coordinates()));
+  if (in.model_dynamics) {
+    if (in.q_trial.size() != model_.num_coordinates())
+      throw common::InputError(frame_name(in) + ": model-dynamics input of the wrong size");
+    for (int c : model_.prescribed_coordinates) q[c] = in.q_trial[c];
+    q[flexion_] = in.q_trial[flexion_];
+    return q;
+  }
   q[flexion_] = in.knee_flexion;
   for (int k = 0; k < 3; ++k) q[hip_[k]] = in.hip_angles[k];
   q[ankle_] = in.ankle_flexion;
@@ -190,6 +258,14 @@ Eigen::VectorXd ComakProblem::coordinates(const ComakFrameInput& in,
 Eigen::VectorXd ComakProblem::external_generalized_force(const ModelData& data,
                                                          const ComakFrameInput& in) const {
   Eigen::VectorXd Q = Eigen::VectorXd::Zero(model_.num_coordinates());
+  if (in.model_dynamics) {
+    // The trial's forces on the model's own bodies (the foot's ground
+    // reaction where the trial puts it); weight and inertia: inertial_generalized_force.
+    const std::vector<BodyWrench> w = lab_force_wrenches(data.kinematics, ground_, in.lab_forces);
+    add_wrenches(model_.tree, data.kinematics, w, Q);
+    add_hip_moments(data.kinematics, w, Q);
+    return Q;
+  }
   const Pose& X_WT = data.kinematics.X_WB[tibia_];
   const Eigen::Matrix3d R_WT = X_WT.linear();
   // With body_inertia the shank's weight and d'Alembert terms of the inverse
@@ -208,6 +284,22 @@ Eigen::VectorXd ComakProblem::external_generalized_force(const ModelData& data,
 Eigen::VectorXd ComakProblem::inertial_generalized_force(const Eigen::VectorXd& q,
                                                          const ComakFrameInput& in) const {
   Eigen::VectorXd Q = Eigen::VectorXd::Zero(model_.num_coordinates());
+  if (in.model_dynamics) {
+    // Lab motion of the model's own chain: the prescribed coordinates (and
+    // the knee flexion) move with the trial's rates, the secondary ones are
+    // held at zero rate (see docs/comak.md, "Body inertia").
+    Eigen::VectorXd qd = Eigen::VectorXd::Zero(q.size()), qdd = qd;
+    for (int c : model_.prescribed_coordinates) qd[c] = in.qd_trial[c], qdd[c] = in.qdd_trial[c];
+    qd[flexion_] = in.qd_trial[flexion_];
+    qdd[flexion_] = in.qdd_trial[flexion_];
+    KinematicsData centre;
+    const std::vector<BodyWrench> w =
+        lab_inertial_wrenches(model_.tree, ground_, q, qd, qdd, inertial_bodies_, Vec3(0.0, -9.80665, 0.0), 1e-4,
+                              &centre);
+    add_wrenches(model_.tree, centre, w, Q);
+    add_hip_moments(centre, w, Q);
+    return Q;
+  }
   if (!options_.body_inertia) return Q;
   if (!in.has_femur_motion)
     throw common::InputError(frame_name(in) + ": COMAK body inertia needs the femur's lab motion "
@@ -218,8 +310,62 @@ Eigen::VectorXd ComakProblem::inertial_generalized_force(const Eigen::VectorXd& 
   return Q;
 }
 
+void ComakProblem::add_hip_moments(const KinematicsData& k, const std::vector<BodyWrench>& w,
+                                   Eigen::VectorXd& Q) const {
+  // Hip row c: the leg's balance about the hip axis. The tree measures the
+  // muscles' and ligaments' moment on the pelvis side (Q[c] through the
+  // reversed hip joint), which is minus their moment on the leg; a force on a
+  // leg body adds -a . ((x - o) x f + tau) (a, o: the joint's world axis and
+  // origin), so Q[c] = 0 says the leg's moments about the axis sum to zero.
+  if (hip_rows_.empty()) return;
+  std::vector<BodyWrench> leg;
+  for (const BodyWrench& x : w)
+    if (std::find(leg_bodies_.begin(), leg_bodies_.end(), x.body) != leg_bodies_.end()) leg.push_back(x);
+  for (std::size_t r = 0; r < hip_rows_.size(); ++r) {
+    const int ji = hip_joints_[r];
+    Q[hip_rows_[r]] -= axis_moment(leg, k.joint_origin_W[ji], k.joint_axis_W[ji]);
+  }
+}
+
+Eigen::VectorXd ComakProblem::neutral_pose(const ComakFrameInput& in) const {
+  Eigen::VectorXd q = coordinates(in, Eigen::VectorXd());  // defaults + the frame's prescribed values
+  if (in.model_dynamics) {
+    bool all = true;
+    for (int c : secondary_) all = all && std::isfinite(in.q_trial[c]);
+    if (all) {
+      for (int c : secondary_) q[c] = in.q_trial[c];
+      return q;
+    }
+  }
+  const int pf = model_.role_coordinate("pf_flexion");
+  const double knee = q[flexion_];
+  q[pf >= 0 ? pf : flexion_] += 0.7 * knee;
+  q[flexion_] = knee;
+  return q;
+}
+
+Eigen::VectorXd ComakProblem::damping_generalized_force(const Eigen::VectorXd& q,
+                                                       const ComakFrameInput& in) const {
+  Eigen::VectorXd Q = Eigen::VectorXd::Zero(model_.num_coordinates());
+  if (!options_.coordinate_damping || !in.has_previous || !(in.dt_previous > 0)) return Q;
+  for (const CoordinateSpring& sp : model_.coordinate_springs) {
+    if (sp.viscosity == 0.0) continue;
+    const int c = sp.coordinate;
+    const bool secondary = std::find(secondary_.begin(), secondary_.end(), c) != secondary_.end();
+    double v = 0.0;
+    if (secondary)
+      v = (q[c] - in.q_previous[c]) / in.dt_previous;
+    else if (in.model_dynamics)
+      v = in.qd_trial[c];
+    else if (c == flexion_ && in.has_femur_motion)
+      v = in.femur_motion.velocity;
+    Q[c] -= sp.viscosity * v;
+  }
+  return Q;
+}
+
 double ComakProblem::external_ankle_moment(const ComakFrameInput& in) const {
-  if (!options_.ankle_equilibrium) return 0.0;
+  if (!options_.ankle_equilibrium || in.model_dynamics) return 0.0;
   // The foot's load is given about the leg model's ankle centre; moved to a
   // point on the model's ankle axis, projected on that axis.
   const Vec3 M = in.M_foot_T + (in.ankle_centre_T - ankle_origin_T_).cross(in.F_foot_T);
@@ -231,7 +377,8 @@ Eigen::VectorXd ComakProblem::residual(ModelData& data, const ComakFrameInput& i
                                        const Eigen::VectorXd& e) const {
   evaluate_forces(model_, data, q, Eigen::VectorXd(), a, options_.forces);
   Eigen::VectorXd Qe = external_generalized_force(data, in);
-  if (options_.body_inertia) Qe += inertial_generalized_force(q, in);
+  if (options_.body_inertia || in.model_dynamics) Qe += inertial_generalized_force(q, in);
+  Qe += damping_generalized_force(q, in);
   const int nr = num_rows();
   Eigen::VectorXd r(nr);
   for (int k = 0; k < nr; ++k)
@@ -268,12 +415,21 @@ Eigen::MatrixXd ComakProblem::residual_jacobian(ModelData& data, const ComakFram
     Eigen::VectorXd Qp = external_generalized_force(work, in);
     forward_kinematics(model_.tree, qm, work.kinematics);
     Eigen::VectorXd Qm = external_generalized_force(work, in);
-    if (options_.body_inertia) {
+    if (options_.body_inertia || in.model_dynamics) {
       Qp += inertial_generalized_force(qp, in);
       Qm += inertial_generalized_force(qm, in);
     }
     for (int k = 0; k < nf; ++k)
       J(k, nm + c) = data.dQ_dq(rows_[k], secondary_[c]) + (Qp[rows_[k]] - Qm[rows_[k]]) / (2 * h);
+  }
+  // Coordinate dampers: -c (s - s_prev) / dt on the coordinate's own row (exact).
+  if (options_.coordinate_damping && in.has_previous && in.dt_previous > 0) {
+    for (const CoordinateSpring& sp : model_.coordinate_springs) {
+      const auto sc = std::find(secondary_.begin(), secondary_.end(), sp.coordinate);
+      const auto rk = std::find(rows_.begin(), rows_.end(), sp.coordinate);
+      if (sc == secondary_.end() || rk == rows_.end()) continue;
+      J(rk - rows_.begin(), nm + (sc - secondary_.begin())) -= sp.viscosity / in.dt_previous;
+    }
   }
   return J;
 }
@@ -571,11 +727,7 @@ SettleResult settle_at_flexion(const ComakProblem& p, ModelData& data, const Eig
 // where it follows the trochlea): a start that does not depend on the frames
 // before. The first frame of a run starts here, and every frame's second start.
 SettleResult settle_from_neutral(const ComakProblem& p, ModelData& data, const ComakFrameInput& in) {
-  Eigen::VectorXd q = p.coordinates(in, Eigen::VectorXd());
-  const int pf = p.model().tree.coordinate_index("pf_flexion");
-  q[pf >= 0 ? pf : p.flexion_coordinate()] = 0.7 * in.knee_flexion;
-  q[p.flexion_coordinate()] = in.knee_flexion;
-  return settle_at_flexion(p, data, q);
+  return settle_at_flexion(p, data, p.neutral_pose(in));
 }
 
 }  // namespace
@@ -591,11 +743,16 @@ ComakFrameResult solve_comak_frame(const ComakProblem& p, ModelData& data,
   const int nf = static_cast<int>(p.free_coordinates().size());
   const int ne = o.reserve_actuators ? ns : 0;
   check_frame_input(in);
-  if (o.ankle_equilibrium && !in.has_foot_load)
+  if (p.model_dynamics() != in.model_dynamics)
+    throw common::InputError(frame_name(in) + ": " +
+                             (p.model_dynamics() ? "the model has its own leg to the ground: its frames must come "
+                                                   "from comak_model_frame_inputs (the trial's coordinates by name)"
+                                                 : "model-dynamics frames need a model with a ground body"));
+  if (o.ankle_equilibrium && !in.has_foot_load && !in.model_dynamics)
     throw common::InputError(frame_name(in) + ": COMAK ankle equilibrium needs the load on the foot "
                              "from the inverse dynamics (a trial with pelvis and ground-reaction "
                              "columns); this frame has none (knee loads given by the trial?)");
-  if (o.body_inertia && (!in.has_foot_load || !in.has_femur_motion))
+  if (o.body_inertia && !in.model_dynamics && (!in.has_foot_load || !in.has_femur_motion))
     throw common::InputError(frame_name(in) + ": COMAK body inertia needs the load on the foot and "
                              "the femur's lab motion from the inverse dynamics (a trial with "
                              "pelvis and ground-reaction columns, frames from comak_frame_inputs "
@@ -837,6 +994,96 @@ std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int firs
   return out;
 }
 
+std::vector<ComakFrameInput> comak_model_frame_inputs(const Model& model, const GaitTrial& trial, int first,
+                                                      int last, int stride, std::vector<std::string>* ignored) {
+  const int n = trial.num_samples();
+  const int n_trial = trial.truncated ? trial.truncated->full_samples : n;
+  if (n == 0) throw common::InputError(trial.source + ": error: the trial has no samples");
+  if (last < 0) last = n_trial - 1;
+  if (first < 0 || first >= n_trial || last >= n_trial || last < first || stride < 1)
+    throw common::InputError("COMAK: frame selection first " + std::to_string(first) + ", last " +
+                             std::to_string(last) + ", stride " + std::to_string(stride) +
+                             " outside the trial's frames 0.." + std::to_string(n_trial - 1));
+  const int nc = model.num_coordinates();
+  const int flexion = model.role_coordinate("knee_flexion");
+  // Trial column of every model coordinate (by name); the prescribed ones and
+  // the flexion must have one.
+  std::vector<int> col(nc, -1);
+  std::string missing;
+  for (int c = 0; c < nc; ++c) {
+    col[c] = trial.kinematics_column(model.tree.coordinates[c]);
+    const bool needed = c == flexion || std::find(model.prescribed_coordinates.begin(),
+                                                  model.prescribed_coordinates.end(), c) !=
+                                            model.prescribed_coordinates.end();
+    if (col[c] < 0 && needed) missing += (missing.empty() ? "" : ", ") + model.tree.coordinates[c];
+  }
+  if (!missing.empty())
+    throw common::InputError(trial.source + ": error: the model's coordinates " + missing +
+                             " have no column in the trial's kinematics file (expected one per prescribed "
+                             "coordinate and the knee flexion, by name)");
+  std::vector<std::pair<int, const TrialExternalForce*>> forces;
+  for (const TrialExternalForce& f : trial.external_forces) {
+    const int b = model.tree.body_index(f.body);
+    if (b >= 0)
+      forces.push_back({b, &f});
+    else if (ignored)
+      ignored->push_back(f.name + " (acts on " + f.body + ", not a body of the model)");
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<ComakFrameInput> out;
+  for (int i = first; i <= last; i += stride) {
+    ComakFrameInput in;
+    in.index = i;
+    in.model_dynamics = true;
+    if (i >= n) {
+      // The first selected frame after a truncated trial's end (see comak_frame_inputs).
+      const double h = n > 1 ? trial.time[1] - trial.time[0] : 0.0;
+      in.time = trial.truncated->time + (i - trial.truncated->frame) * h;
+      in.knee_flexion = nan;
+      in.q_trial = in.qd_trial = in.qdd_trial = Eigen::VectorXd::Constant(nc, nan);
+      in.invalid_input = trial.truncated->reason + " (the trial was read up to the row before it)";
+      out.push_back(in);
+      break;
+    }
+    in.time = trial.time[i];
+    in.q_trial = in.qd_trial = in.qdd_trial = Eigen::VectorXd::Constant(nc, nan);
+    for (int c = 0; c < nc; ++c) {
+      if (col[c] < 0) continue;
+      in.q_trial[c] = trial.kinematics_q(i, col[c]);
+      in.qd_trial[c] = trial.kinematics_qd(i, col[c]);
+      in.qdd_trial[c] = trial.kinematics_qdd(i, col[c]);
+    }
+    in.knee_flexion = in.q_trial[flexion];
+    const char* hips[3] = {"hip_flexion", "hip_adduction", "hip_rotation"};
+    for (int k = 0; k < 3; ++k)
+      if (const int c = model.role_coordinate(hips[k]); c >= 0) in.hip_angles[k] = in.q_trial[c];
+    if (const int c = model.role_coordinate("ankle_flexion"); c >= 0) in.ankle_flexion = in.q_trial[c];
+    for (const auto& [b, f] : forces) {
+      LabForce lf;
+      lf.body = b;
+      lf.force_L = f->force_W.row(i).transpose();
+      lf.point_L = f->point_W.row(i).transpose();
+      lf.torque_L = f->torque_W.row(i).transpose();
+      lf.has_point = f->has_point;
+      in.lab_forces.push_back(lf);
+    }
+    // Every value the model uses must be finite (NaN of a missing secondary
+    // column is allowed: it only decides the neutral start).
+    for (int c = 0; c < nc; ++c) {
+      const bool needed = col[c] >= 0 &&
+                          (c == flexion || std::find(model.prescribed_coordinates.begin(),
+                                                     model.prescribed_coordinates.end(), c) !=
+                                               model.prescribed_coordinates.end());
+      if (needed && !(std::isfinite(in.q_trial[c]) && std::isfinite(in.qd_trial[c]) &&
+                      std::isfinite(in.qdd_trial[c])))
+        in.invalid_input = trial.source + ": coordinate '" + model.tree.coordinates[c] + "' at t = " +
+                           std::to_string(in.time) + " s";
+    }
+    out.push_back(in);
+  }
+  return out;
+}
+
 ComakRunSummary run_comak(
     const ComakProblem& p, const std::vector<ComakFrameInput>& frames,
     const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
@@ -870,8 +1117,16 @@ ComakRunSummary run_comak(
   Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, o.activation_min);
   ComakMultipliers warm;
   bool have_warm = false;
+  // The previous pose of the coordinate dampers: the first frame's settle,
+  // one frame spacing before it; then the last converged frame.
+  Eigen::VectorXd q_prev = q;
+  double t_prev = frames.front().time - (frames.size() > 1 ? frames[1].time - frames[0].time : 0.01);
   t0 = std::chrono::steady_clock::now();
-  for (const ComakFrameInput& f : frames) {
+  for (const ComakFrameInput& frame : frames) {
+    ComakFrameInput f = frame;
+    f.has_previous = true;
+    f.q_previous = q_prev;
+    f.dt_previous = f.time - t_prev;
     ComakFrameResult r;
     try {
       r = solve_comak_frame(p, data, f, q, a,
@@ -886,6 +1141,8 @@ ComakRunSummary run_comak(
     if (r.status == ComakFrameStatus::kConverged) {
       ++sum.converged;
       q = r.q;
+      q_prev = r.q;
+      t_prev = f.time;
       a = r.activations;
       warm = r.multipliers;
       have_warm = true;

@@ -92,8 +92,10 @@
 
 #include "common/error.h"
 #include "common/options.h"
+#include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model.h"
+#include "musculoskeletal/model_loads.h"
 #include "musculoskeletal/settle.h"
 
 namespace arthrosim::musculoskeletal {
@@ -142,6 +144,13 @@ struct ComakOptions {
   /// the foot (knee_loads.h), so a trial that gives knee loads directly
   /// cannot be used. The row is scaled like the other moment rows.
   bool ankle_equilibrium = false;
+  /// Hip equilibrium (off by default; a model with its own leg only,
+  /// ComakProblem::model_dynamics): three more rows, the leg's moment balance
+  /// about the hip joint's three axes under the muscles and ligaments that
+  /// span the hip and the trial's forces and the weight and d'Alembert forces
+  /// of every leg body (OpenSim-JAM's primary hip coordinates; the model must
+  /// carry the hip muscles: `arthrosim import-osim --muscles leg`).
+  bool hip_equilibrium = false;
   /// Weight and d'Alembert forces of the tibia and patella bodies (off by
   /// default; see the header): needs the foot load and the femur's lab motion
   /// of the inverse dynamics (ComakFrameInput::has_foot_load and
@@ -190,6 +199,12 @@ struct ComakOptions {
   /// knee's laxity, the faceted contact), and a warm start carries the
   /// previous frame's branch forward.
   bool second_start = true;
+  /// The model's coordinate dampers (Model::coordinate_springs' viscosity,
+  /// OpenSim's SpringGeneralizedForce) act on the secondary coordinates with
+  /// the speed (s - s_prev) / dt from the previous converged frame (dt the
+  /// time between them) and on the prescribed ones with the trial's speed
+  /// (docs/comak.md, "Coordinate dampers"). Without it the frame is static.
+  bool coordinate_damping = true;
   /// Force terms and the finite-difference step of dQ/dq.
   ForceOptions forces;
   /// Passive settle of the first frame and of retry 1 (its `fixed` is set
@@ -197,8 +212,9 @@ struct ComakOptions {
   SettleOptions settle;
 
   /// Scene keys of the comak block (common/options.h; comak_options.cc):
-  /// ipopt_tolerance, ipopt_max_iterations, activation_min,
-  /// reserve_actuators, ankle_equilibrium, body_inertia, second_start.
+  /// ipopt_tolerance, ipopt_acceptable_iterations, ipopt_max_iterations,
+  /// activation_min, reserve_actuators, ankle_equilibrium, hip_equilibrium,
+  /// coordinate_damping, body_inertia, second_start.
   void declare(common::OptionVisitor& v);
 };
 
@@ -226,6 +242,21 @@ struct ComakFrameInput {
   /// ComakOptions::body_inertia, which needs has_femur_motion.
   bool has_femur_motion = false;
   RootMotion femur_motion;
+  /// Model dynamics (a model with its own leg that reaches the ground,
+  /// model_loads.h; frames from comak_model_frame_inputs): every model
+  /// coordinate's value and rates from the trial by name (NaN where the
+  /// trial has no column: only secondary coordinates may lack one), and the
+  /// trial's forces on the model's bodies. F_ext_T, M_ext_T and the foot
+  /// load are then unused.
+  bool model_dynamics = false;
+  Eigen::VectorXd q_trial, qd_trial, qdd_trial;
+  std::vector<LabForce> lab_forces;
+  /// The previous frame's coordinates and the time since it (set by
+  /// run_comak; for the coordinate dampers). The first frame's previous pose
+  /// is the passive settle it starts from, one frame spacing earlier.
+  bool has_previous = false;
+  Eigen::VectorXd q_previous;
+  double dt_previous = 0.0;
   /// Why this frame has no finite input, naming the trial file, line and
   /// column (set by comak_frame_inputs for the first frame after a trial
   /// that ended early at a non-finite value; its values are then NaN).
@@ -292,8 +323,20 @@ class ComakProblem {
   /// (all coordinates; zero without options().body_inertia).
   Eigen::VectorXd inertial_generalized_force(const Eigen::VectorXd& q,
                                              const ComakFrameInput& in) const;
-  /// Bodies whose inertial forces are added (tibia, and patella if present).
+  /// Bodies whose inertial forces are added (tibia, and patella if present;
+  /// with model dynamics every body the free coordinates move).
   const std::vector<int>& inertial_bodies() const { return inertial_bodies_; }
+  /// The model has its own leg to the ground (model_loads.h): frames must
+  /// come from comak_model_frame_inputs.
+  bool model_dynamics() const { return model_dynamics_; }
+  /// Generalized force of the coordinate dampers on the equilibrium rows'
+  /// coordinates at q (zero without options().coordinate_damping or a
+  /// previous frame); all coordinates.
+  Eigen::VectorXd damping_generalized_force(const Eigen::VectorXd& q, const ComakFrameInput& in) const;
+  /// The neutral start of a frame (secondary coordinates): the trial's
+  /// secondary values when it has them (model dynamics), else the model's
+  /// defaults with the patella flexed 0.7 x the knee.
+  Eigen::VectorXd neutral_pose(const ComakFrameInput& in) const;
   /// Unscaled residual Q + Q_ext (+ Q_inertia) + e over the equilibrium rows [N, N m]
   /// (e: one per free coordinate, or empty; the ankle row has none).
   Eigen::VectorXd residual(ModelData& data, const ComakFrameInput& in, const Eigen::VectorXd& q,
@@ -316,6 +359,12 @@ class ComakProblem {
   int flexion_ = -1, tibia_ = -1;
   int hip_[3] = {-1, -1, -1};
   int ankle_ = -1;
+  bool model_dynamics_ = false;
+  int ground_ = -1;
+  /// Hip rows (hip_equilibrium): the hip coordinates, their joints, and the
+  /// leg's bodies (every body the hip coordinates do not move).
+  std::vector<int> hip_rows_, hip_joints_, leg_bodies_;
+  void add_hip_moments(const KinematicsData& k, const std::vector<BodyWrench>& w, Eigen::VectorXd& Q) const;
   Eigen::VectorXd V_, w_, row_scale_;
 };
 
@@ -345,6 +394,17 @@ ComakFrameResult solve_comak_frame(const ComakProblem& problem, ModelData& data,
 /// the loads' X_WT (InputError otherwise: another leg model, or a left leg).
 std::vector<ComakFrameInput> comak_frame_inputs(const KneeLoads& loads, int first, int last,
                                                 int stride, const LegModel* leg = nullptr);
+
+/// Frame inputs for a model with its own leg (ComakProblem::model_dynamics):
+/// every coordinate of the model from the trial's kinematics columns by
+/// name (GaitTrial::kinematics_*; every prescribed coordinate and the knee
+/// flexion must have one, else InputError naming the kinematics file and the
+/// missing names), and every ExternalForce of the trial acting on a body of
+/// the model (those on other bodies are listed in `ignored`). Frames
+/// first..last every stride-th (last = -1: the trial's last).
+std::vector<ComakFrameInput> comak_model_frame_inputs(const Model& model, const GaitTrial& trial, int first,
+                                                      int last, int stride,
+                                                      std::vector<std::string>* ignored = nullptr);
 
 struct ComakRunSummary {
   int frames = 0, converged = 0, failed = 0;

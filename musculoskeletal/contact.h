@@ -20,14 +20,14 @@
 //  1. the last hit triangle of i and its edge neighbours are tried first with
 //     an exact ray/triangle test (TriangleTree::hit_triangle);
 //  2. for a triangle that had no hit, the distance D from the midpoint m0 of
-//     its ray segment (c - d_max/2 n) to the target surface is cached (target
-//     frame); while |m - m0| + d_max/2 < D for the current midpoint m, the
+//     its ray segment (c - L/2 n; L below) to the target surface is cached
+//     (target frame); while |m - m0| + L/2 < D for the current midpoint m, the
 //     whole segment lies inside the target-free ball of radius D about m0, so
 //     the ray cannot hit and the query is skipped (rigorous; it also skips
 //     triangles separated from the target by a gap, not only distant ones).
 //  3. for a triangle whose last full query missed with a weak distance bound
-//     (D - d_max/2 < mu, mu = 0.05 d_max: typically the ring around a contact
-//     patch, where the target passes within d_max/2 of the ray's midpoint
+//     (D - L/2 < mu, mu = 0.05 h_max: typically the ring around a contact
+//     patch, where the target passes within L/2 of the ray's midpoint
 //     sideways), the target triangles meeting the ray segment's bounding box
 //     grown by mu were cached with the segment's end points; while both end
 //     points stay within mu of the cached ones, the new segment lies in that
@@ -36,6 +36,17 @@
 //     index, as first_hit), which gives the tree query's result;
 //  4. otherwise a full first_hit query (and on a miss a closest-point
 //     refresh, and the box candidates of 3 when the bound is weak).
+// Steps 2 and 3 work on the NEAR part of the segment, of length
+// L = min(d_max, h_max) with h_max = d_max / max_overlap_factor the largest
+// combined thickness (the whole segment for the bundled models). A longer
+// search range (OpenSim-JAM's max_proximity, 20 mm over 6 mm of cartilage in
+// lenhart2015) adds a FAR part [c + L dir, c + d_max dir] inside the casting
+// body: the target triangles whose boxes meet it grown by M = h_max / 2 are
+// cached (usually none) with its end points, and while both move less than M
+// only they can be hit there; they are tested with the near part's
+// candidates in steps 2 and 3 (the result is still the tree query's). With
+// the whole long segment in one ball and one box instead, lenhart2015's
+// stage 1 took 6.4 x the time (measured, docs/comak.md).
 #include <Eigen/Geometry>
 #include <memory>
 #include <string>
@@ -154,6 +165,11 @@ struct ContactPairData {
   std::vector<char> has_candidates;
   std::vector<std::vector<int>> candidates;
   common::Points3 candidate_start_B, candidate_end_B;
+  /// Far part of a long segment (max_overlap_factor > 1, see the header):
+  /// target triangles within M of it and its end points.
+  std::vector<char> has_far;
+  std::vector<std::vector<int>> far_candidates;
+  common::Points3 far_start_B, far_end_B;
   ContactResult result;
   ContactSearchStats stats;
   /// Forget cached guesses (results are unchanged by this; only speed).

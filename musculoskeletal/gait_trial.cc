@@ -10,6 +10,7 @@
 
 #include "common/error.h"
 #include "common/storage.h"
+#include "musculoskeletal/external_loads.h"
 
 namespace arthrosim::musculoskeletal {
 
@@ -34,6 +35,8 @@ const std::vector<std::string> kLegKeys = {"thigh_length_m", "shank_length_m", "
                                            "foot_length_m",  "hip_x_m",        "hip_y_m",
                                            "hip_z_m"};
 constexpr const char* kLabFrame = "opensim_x_forward_y_up_z_right";
+// Most samples a trial may have on its uniform grid (2.8 hours at 100 Hz).
+constexpr double kMaxTrialSamples = 1e6;
 
 std::string trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t\r");
@@ -78,7 +81,8 @@ TrialDescription parse_trial_description(std::istream& in, const std::string& so
   quantities.insert(kKneeLoadQuantities.begin(), kKneeLoadQuantities.end());
   const std::set<std::string> plain_keys = {"synthetic", "periodic", "description", "subject_mass_kg",
                                             "subject_height_m", "side",           "lab_frame",
-                                            "kinematics_file",  "grf_file",       "knee_loads_file"};
+                                            "kinematics_file",  "grf_file",       "knee_loads_file",
+                                            "external_loads_file", "foot_body"};
   auto resolve = [&](const std::string& f) {
     const std::filesystem::path p(f);
     return (p.is_absolute() || directory.empty()) ? p.string()
@@ -187,6 +191,10 @@ TrialDescription parse_trial_description(std::istream& in, const std::string& so
       d.grf_file = resolve(value);
     } else if (key == "knee_loads_file") {
       d.knee_loads_file = resolve(value);
+    } else if (key == "external_loads_file") {
+      d.external_loads_file = resolve(value);
+    } else if (key == "foot_body") {
+      d.foot_body = value;
     }
   }
   const int end_line = line;
@@ -195,13 +203,27 @@ TrialDescription parse_trial_description(std::istream& in, const std::string& so
       throw InputError(source_name, end_line, "missing required key '" + key + "'");
     }
   };
-  for (const char* k : {"subject_mass_kg", "subject_height_m", "side", "lab_frame", "kinematics_file"})
-    require(k);
-  if (d.grf_file.empty() && d.knee_loads_file.empty()) {
-    throw InputError(source_name, end_line, "expected grf_file or knee_loads_file, found neither");
+  for (const char* k : {"side", "lab_frame", "kinematics_file"}) require(k);
+  if (d.grf_file.empty() && d.knee_loads_file.empty() && d.external_loads_file.empty()) {
+    throw InputError(source_name, end_line,
+                     "expected grf_file, knee_loads_file or external_loads_file, found none");
   }
-  for (const char* q : {"hip_flexion", "hip_adduction", "hip_rotation", "knee_flexion", "ankle_flexion"})
-    require(std::string("column.") + q);
+  if (!d.grf_file.empty() && !d.external_loads_file.empty()) {
+    throw InputError(source_name, d.key_lines["external_loads_file"],
+                     "expected either grf_file or external_loads_file, found both (grf_file on line " +
+                         std::to_string(d.key_lines["grf_file"]) + ")");
+  }
+  if (!d.foot_body.empty() && d.external_loads_file.empty()) {
+    throw InputError(source_name, d.key_lines["foot_body"],
+                     "foot_body names a body of the external_loads_file, found no external_loads_file");
+  }
+  // Without an ExternalLoads file the generic leg chain is the only way to
+  // use the trial, and it needs the five joint angles (and the stature).
+  if (d.external_loads_file.empty()) {
+    for (const char* k : {"subject_mass_kg", "subject_height_m"}) require(k);
+    for (const char* q : {"hip_flexion", "hip_adduction", "hip_rotation", "knee_flexion", "ankle_flexion"})
+      require(std::string("column.") + q);
+  }
   int pelvis = 0;
   for (int c = kPelvisTilt; c <= kPelvisTz; ++c) pelvis += d.columns.count(trial_coordinate_names()[c]);
   if (pelvis != 0 && pelvis != 6) {
@@ -270,7 +292,8 @@ struct BadValue {
 // where (a bad value in the first row still throws: nothing to keep).
 LoadedTable load_columns(const TrialDescription& d, const std::string& file,
                          const std::vector<std::string>& quantities, bool angles_possible,
-                         std::optional<BadValue>* bad = nullptr) {
+                         std::optional<BadValue>* bad = nullptr,
+                         const common::StorageTable* pre_read = nullptr) {
   // Angle columns are exactly the mapped angle quantities; the rest keep the
   // storage reader's default rule (translations, forces, ... are not angles).
   std::set<std::string> angle_labels;
@@ -291,7 +314,7 @@ LoadedTable load_columns(const TrialDescription& d, const std::string& file,
     if (mapped.count(l)) return false;
     return common::default_is_rotational(l);
   };
-  const common::StorageTable table = common::read_storage(file, pred);
+  const common::StorageTable table = pre_read ? *pre_read : common::read_storage(file, pred);
   LoadedTable out;
   out.time = table.time();
   out.values.resize(table.num_rows(), static_cast<Eigen::Index>(quantities.size()));
@@ -312,6 +335,10 @@ LoadedTable load_columns(const TrialDescription& d, const std::string& file,
   }
   const int labels_at = label_line(file);
   auto line_of = [&](Eigen::Index r) { return labels_at > 0 ? labels_at + 1 + static_cast<int>(r) : 0; };
+  if (out.time.size() < 2) {
+    throw InputError(file, line_of(out.time.size()),
+                     "expected at least 2 data rows (a time series), found " + std::to_string(out.time.size()));
+  }
   for (Eigen::Index r = 0; r < out.values.rows(); ++r) {
     if (!std::isfinite(out.time(r))) throw InputError(file, line_of(r), "non-finite time");
     if (r > 0 && !(out.time(r) > out.time(r - 1))) {
@@ -354,6 +381,9 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
   t.rate_hz = options.rate_hz;
   t.leg_overrides = d.leg_overrides;
   t.has_pelvis = d.columns.count("pelvis_tilt") > 0;
+  t.has_joint_angles = true;
+  for (const char* q : {"hip_flexion", "hip_adduction", "hip_rotation", "knee_flexion", "ankle_flexion"})
+    t.has_joint_angles = t.has_joint_angles && d.columns.count(q) > 0;
 
   // With truncate_at_non_finite each file reports its first bad value; the
   // trial then ends at the earliest one (`bad`), in every file.
@@ -367,17 +397,61 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
   if (!d.knee_loads_file.empty())
     loads = load_columns(d, d.knee_loads_file, kKneeLoadQuantities, false,
                          truncate ? &bad_loads : nullptr);
+  // An ExternalLoads file: every force's columns (force, point, torque; 9
+  // per force, zero where an identifier is empty) through the same reader,
+  // mapped as "ext.<force>.<k>" quantities of a description of its own.
+  std::optional<ExternalLoadsSpec> ext_spec;
+  std::optional<LoadedTable> ext;
+  std::optional<BadValue> bad_ext;
+  if (!d.external_loads_file.empty()) {
+    ext_spec = read_external_loads(d.external_loads_file);
+    const common::StorageTable table =
+        common::read_storage(ext_spec->datafile, [](const std::string&) { return false; });
+    TrialDescription dx;
+    dx.path = d.external_loads_file;
+    std::vector<std::string> quantities;
+    for (std::size_t f = 0; f < ext_spec->forces.size(); ++f) {
+      const ExternalForceSpec& fs = ext_spec->forces[f];
+      const std::string* ids[3] = {&fs.force_identifier, &fs.point_identifier, &fs.torque_identifier};
+      const int lines[3] = {fs.force_line, fs.point_line, fs.torque_line};
+      for (int part = 0; part < 3; ++part) {
+        std::array<int, 3> cols = {-1, -1, -1};
+        if (!ids[part]->empty())
+          cols = identifier_columns(table.labels, *ids[part], ext_spec->datafile, d.external_loads_file,
+                                    lines[part]);
+        for (int k = 0; k < 3; ++k) {
+          const std::string q = "ext." + std::to_string(f) + "." + std::to_string(3 * part + k);
+          quantities.push_back(q);
+          if (cols[k] >= 0) dx.columns[q] = ColumnMapping{table.labels[cols[k]], 1.0, lines[part]};
+        }
+      }
+    }
+    ext = load_columns(dx, ext_spec->datafile, quantities, false, truncate ? &bad_ext : nullptr, &table);
+  }
   std::optional<BadValue> bad;
-  for (const auto* b : {&bad_kin, &bad_grf, &bad_loads})
+  for (const auto* b : {&bad_kin, &bad_grf, &bad_loads, &bad_ext})
     if (*b && (!bad || (*b)->last_good < bad->last_good)) bad = **b;
 
   // Common time range (and, for a truncated trial, the range without the cut).
   double t0 = kin.time(0), t1 = kin.time(kin.time.size() - 1);
-  for (const auto* tab : {grf ? &*grf : nullptr, loads ? &*loads : nullptr}) {
+  for (const auto* tab : {grf ? &*grf : nullptr, loads ? &*loads : nullptr, ext ? &*ext : nullptr}) {
     if (!tab) continue;
     t0 = std::max(t0, tab->time(0));
     t1 = std::min(t1, tab->time(tab->time.size() - 1));
   }
+  // Bounded work: a time column in the wrong unit or a damaged time value
+  // (1e6 s, 1e300 s) would make the uniform grid need gigabytes or overflow
+  // its size.
+  auto check_grid = [&](double a, double b) {
+    if (!((b - a) * options.rate_hz <= kMaxTrialSamples)) {
+      std::ostringstream s;
+      s << "the time range common to the trial's files, [" << a << ", " << b << "] s, needs "
+        << (b - a) * options.rate_hz << " samples at " << options.rate_hz << " Hz; expected at most "
+        << kMaxTrialSamples << " (times in seconds?)";
+      throw InputError(d.path, 0, s.str());
+    }
+  };
+  check_grid(t0, t1);
   if (bad) {
     // The grid of the whole trial had the value been finite (for the frame
     // selection; its rows after the bad value are not checked).
@@ -386,7 +460,10 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
     if (loads)
       t1_full = std::min(t1_full, bad_loads ? bad_loads->file_end
                                             : loads->time(loads->time.size() - 1));
+    if (ext)
+      t1_full = std::min(t1_full, bad_ext ? bad_ext->file_end : ext->time(ext->time.size() - 1));
     const Eigen::Index kept = t1 >= t0 ? uniform_grid(t0, t1, options.rate_hz).size() : 0;
+    check_grid(t0, t1_full);
     const Eigen::Index full = t1_full >= t0 ? uniform_grid(t0, t1_full, options.rate_hz).size() : 0;
     if (kept < full) {  // else the bad value lies outside the common time range
       if (kept < 4)
@@ -469,7 +546,105 @@ GaitTrial load_gait_trial(const TrialDescription& d, const GaitTrialOptions& opt
     t.knee_force_T = l.leftCols(3);
     t.knee_moment_T = l.rightCols(3);
   }
+  if (ext) {
+    Eigen::MatrixXd g = resample_linear(ext->time, ext->values, t.time, ext_spec->datafile);
+    if (options.filter_grf) g = filtfilt_lowpass(g, options.rate_hz, options.lowpass, ext_spec->datafile);
+    t.external_loads_file = d.external_loads_file;
+    for (std::size_t f = 0; f < ext_spec->forces.size(); ++f) {
+      const ExternalForceSpec& fs = ext_spec->forces[f];
+      TrialExternalForce tf;
+      tf.name = fs.name;
+      tf.body = fs.applied_to_body;
+      tf.has_point = !fs.point_identifier.empty();
+      tf.has_torque = !fs.torque_identifier.empty();
+      Eigen::MatrixXd block = g.middleCols(9 * static_cast<Eigen::Index>(f), 9);
+      for (Eigen::Index i = 0; i < block.rows(); ++i)
+        if (block(i, 1) < options.min_vertical_grf_n) block.row(i).setZero();
+      tf.force_W = block.leftCols(3);
+      tf.point_W = block.middleCols(3, 3);
+      tf.torque_W = block.rightCols(3);
+      t.external_forces.push_back(std::move(tf));
+    }
+    if (!d.foot_body.empty()) {
+      // The generic leg chain's ground reaction: the one force on foot_body.
+      std::vector<const TrialExternalForce*> on_foot;
+      std::string bodies;
+      for (const auto& tf : t.external_forces) {
+        if (tf.body == d.foot_body) on_foot.push_back(&tf);
+        bodies += (bodies.empty() ? "" : ", ") + tf.name + " -> " + tf.body;
+      }
+      if (on_foot.size() != 1 || !on_foot[0]->has_point)
+        throw InputError(d.path, d.key_lines.at("foot_body"),
+                         "foot_body '" + d.foot_body + "': expected exactly one ExternalForce with a point "
+                         "acting on it in " + d.external_loads_file + ", found " +
+                             std::to_string(on_foot.size()) + " (" + bodies + ")");
+      t.has_grf = true;
+      t.grf_force_W = on_foot[0]->force_W;
+      t.grf_cop_W = on_foot[0]->point_W;
+      t.grf_torque_W = on_foot[0]->torque_W;
+    }
+  }
+  {
+    // Every column of the kinematics file, processed like the mapped ones.
+    common::RotationalPredicate rot = options.is_rotational ? common::RotationalPredicate(options.is_rotational)
+                                                            : common::RotationalPredicate(common::default_is_rotational);
+    const common::StorageTable table = common::read_storage(d.kinematics_file, rot);
+    // Rows up to the first one at or after the grid's end (enough to
+    // interpolate; a truncated trial's bad row lies after it) must be finite.
+    const double t_end = t.time(t.time.size() - 1);
+    Eigen::Index rows = 0;
+    while (rows < table.data.rows() && (rows == 0 || table.data(rows - 1, 0) < t_end)) ++rows;
+    for (Eigen::Index r = 0; r < rows; ++r)
+      for (Eigen::Index c = 1; c < table.data.cols(); ++c)
+        if (!std::isfinite(table.data(r, c))) {
+          std::ostringstream s;
+          s << "non-finite value in column '" << table.labels[c] << "' (time " << table.data(r, 0) << " s)";
+          throw InputError(d.kinematics_file, table.data_line > 0 ? table.data_line + static_cast<int>(r) : 0,
+                           s.str());
+        }
+    t.kinematics_labels.assign(table.labels.begin() + 1, table.labels.end());
+    const Eigen::VectorXd times = table.data.col(0).head(rows);
+    const Eigen::MatrixXd values = table.data.block(0, 1, rows, table.data.cols() - 1);
+    Eigen::MatrixXd all = resample_linear(times, values, t.time, d.kinematics_file);
+    if (options.filter_kinematics) {
+      LowPassOptions lp = options.lowpass;
+      lp.periodic = t.periodic;
+      all = filtfilt_lowpass(all, options.rate_hz, lp, d.kinematics_file);
+    }
+    t.kinematics_q = all;
+    t.kinematics_qd = first_derivative(all, h, t.periodic);
+    t.kinematics_qdd = second_derivative(all, h, t.periodic);
+  }
   return t;
+}
+
+std::pair<int, int> frames_in_window(const GaitTrial& trial, double start_s, double end_s) {
+  const int n = trial.num_samples();
+  if (n == 0) throw InputError(trial.source, 0, "the trial has no samples");
+  const double t0 = trial.time(0), t1 = trial.time(n - 1);
+  const double a = std::isnan(start_s) ? t0 : start_s, b = std::isnan(end_s) ? t1 : end_s;
+  constexpr double eps = 1e-9;
+  auto fail = [&](const std::string& why) {
+    std::ostringstream s;
+    s << "time window [" << a << ", " << b << "] s: " << why << " (the trial covers [" << t0 << ", " << t1
+      << "] s at " << trial.rate_hz << " Hz)";
+    throw InputError(trial.source, 0, s.str());
+  };
+  if (!std::isfinite(a) || !std::isfinite(b)) fail("expected finite times");
+  if (b < a) fail("expected start <= end");
+  if (a < t0 - eps || b > t1 + eps) fail("expected a window inside the trial");
+  int first = 0;
+  while (first < n && trial.time(first) < a - eps) ++first;
+  int last = n - 1;
+  while (last >= 0 && trial.time(last) > b + eps) --last;
+  if (first > last) fail("expected at least one sample in it, found none");
+  return {first, last};
+}
+
+int GaitTrial::kinematics_column(const std::string& label) const {
+  for (std::size_t i = 0; i < kinematics_labels.size(); ++i)
+    if (kinematics_labels[i] == label) return static_cast<int>(i);
+  return -1;
 }
 
 GaitTrial load_gait_trial(const std::string& trial_path, const GaitTrialOptions& options) {

@@ -7,10 +7,23 @@
 // YAML restricted to flat "key: value" lines (comments '#', blank lines), so it
 // is read line by line here with file:line errors (yaml-cpp is private to
 // arthrosim_common). Keys:
-//   subject_mass_kg: 61         subject_height_m: 1.65     (required)
+//   subject_mass_kg: 61         subject_height_m: 1.65
+//       (optional: without them the mass comes from the model, see
+//       Model::subject_mass_kg, and the generic leg chain of knee_loads.h,
+//       which needs the height, cannot be used)
 //   side: right|left            lab_frame: opensim_x_forward_y_up_z_right (required)
 //   kinematics_file: ik.mot     (required; paths relative to the trial file)
-//   grf_file: grf.mot           knee_loads_file: loads.sto  (at least one)
+//   grf_file: grf.mot           knee_loads_file: loads.sto
+//   external_loads_file: ext_loads.xml
+//       (at least one of the three; grf_file and external_loads_file exclude
+//       each other). external_loads_file is OpenSim's ExternalLoads XML
+//       (external_loads.h): every ExternalForce it lists is read with the
+//       body it acts on and its columns; no column.grf_* mapping is needed.
+//   foot_body: calcn_r          with external_loads_file: the ExternalForce
+//       acting on this body is the foot's ground reaction of the generic leg
+//       chain (grf_* below; exactly one force must act on it). A model with
+//       its own foot bodies takes every force acting on one of its bodies
+//       (comak_model_loads.h) and needs no foot_body.
 //   synthetic: true|false       description: free text
 //   periodic: true|false        the kinematics are exactly one cycle (last row
 //                               = first row one period later; pelvis_tx/tz may
@@ -22,8 +35,10 @@
 //   centre in the pelvis frame) so it matches the model that produced the IK.
 // Quantities (kinematics file): pelvis_tilt, pelvis_list, pelvis_rotation,
 // pelvis_tx, pelvis_ty, pelvis_tz, hip_flexion, hip_adduction, hip_rotation,
-// knee_flexion, ankle_flexion. The five joint angles are required; the six
-// pelvis columns are needed for the inverse dynamics (all or none). Angles are
+// knee_flexion, ankle_flexion. The five joint angles are required unless the
+// trial has an external_loads_file (then a model with its own coordinates
+// reads the kinematics columns by coordinate name, GaitTrial::kinematics_*);
+// the six pelvis columns are needed for the inverse dynamics (all or none). Angles are
 // converted to radians when the file says inDegrees=yes. Sign conventions are
 // OpenSim's (gait2392/Rajagopal): hip flexion, adduction and internal rotation
 // positive, knee flexion positive (map "-knee_angle_r" for gait2392, whose knee
@@ -44,12 +59,17 @@
 // differentiated by central differences to velocities and accelerations;
 // ground reactions are not filtered by default (their steps at heel strike and
 // toe-off would leak into swing) and are zeroed wherever the vertical force is
-// below options.min_vertical_grf_n (COP undefined there).
+// below options.min_vertical_grf_n (COP undefined there). Every column of the
+// kinematics file (not only the mapped quantities) is processed the same way
+// into GaitTrial::kinematics_labels/q/qd/qdd, and every ExternalForce of an
+// external_loads_file into GaitTrial::external_forces.
 #include <Eigen/Core>
+#include <functional>
 #include <iosfwd>
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "musculoskeletal/signal.h"
@@ -84,6 +104,8 @@ struct TrialDescription {
   std::string kinematics_file;        ///< resolved against the trial file's folder
   std::string grf_file;               ///< empty when absent
   std::string knee_loads_file;        ///< empty when absent
+  std::string external_loads_file;    ///< OpenSim ExternalLoads XML, empty when absent
+  std::string foot_body;              ///< body of the generic chain's ground reaction, or empty
   std::map<std::string, ColumnMapping> columns;  ///< quantity -> column
   std::map<std::string, double> leg_overrides;   ///< "thigh_length_m" -> value, ...
   std::map<std::string, int> key_lines;          ///< key -> line (for messages)
@@ -116,6 +138,10 @@ struct GaitTrialOptions {
   /// A non-finite time stays an InputError; so does a bad value leaving fewer
   /// than 4 samples.
   bool truncate_at_non_finite = false;
+  /// Which columns of the kinematics file are angles (converted from degrees
+  /// when the file says inDegrees=yes) in GaitTrial::kinematics_*: empty =
+  /// common::default_is_rotational; a model passes its revolute coordinates.
+  std::function<bool(const std::string&)> is_rotational;
 };
 
 /// Where a trial read with truncate_at_non_finite ends early.
@@ -127,12 +153,24 @@ struct TrialTruncation {
 };
 
 /// A trial on a uniform time grid, SI units, lab frame.
+/// One ExternalForce of an external_loads_file on the trial's grid (lab
+/// frame): the force on `body` from the ground [N], its point of application
+/// [m] (zero without a point identifier) and the free torque [N m] (zero
+/// without a torque identifier). Force, point and torque are zero wherever
+/// the force's vertical component is below GaitTrialOptions::min_vertical_grf_n.
+struct TrialExternalForce {
+  std::string name;   ///< ExternalForce name
+  std::string body;   ///< applied_to_body
+  bool has_point = false, has_torque = false;
+  Eigen::MatrixXd force_W, point_W, torque_W;  ///< n x 3 each
+};
+
 struct GaitTrial {
   std::string source;            ///< trial file
   bool synthetic = false;
   bool periodic = false;         ///< filtered/differentiated as one cycle
-  double body_mass_kg = 0.0;
-  double height_m = 0.0;
+  double body_mass_kg = 0.0;     ///< 0 when the trial does not give it
+  double height_m = 0.0;         ///< 0 when the trial does not give it
   Side side = Side::kRight;
   double rate_hz = 0.0;
   Eigen::VectorXd time;          ///< n [s]
@@ -140,6 +178,9 @@ struct GaitTrial {
   /// first and second time derivatives. Unmapped pelvis columns are zero.
   Eigen::MatrixXd q, qd, qdd;
   bool has_pelvis = false;
+  /// The five joint angles of q are mapped (column.hip_flexion ...
+  /// ankle_flexion); load_gait_trial sets false for a trial without them.
+  bool has_joint_angles = true;
   bool has_grf = false;
   Eigen::MatrixXd grf_force_W;   ///< n x 3 [N] on the foot from the ground
   Eigen::MatrixXd grf_cop_W;     ///< n x 3 [m]
@@ -147,6 +188,16 @@ struct GaitTrial {
   bool has_knee_loads = false;
   Eigen::MatrixXd knee_force_T;  ///< n x 3 [N], given by the trial
   Eigen::MatrixXd knee_moment_T; ///< n x 3 [N m], given by the trial
+  /// Every column of the kinematics file (labels without time), resampled,
+  /// filtered and differentiated like q: angles [rad] (per
+  /// GaitTrialOptions::is_rotational), translations [m]; n x labels.
+  std::vector<std::string> kinematics_labels;
+  Eigen::MatrixXd kinematics_q, kinematics_qd, kinematics_qdd;
+  /// Column of `label` in kinematics_*, -1 if absent.
+  int kinematics_column(const std::string& label) const;
+  /// Every ExternalForce of the trial's external_loads_file.
+  std::vector<TrialExternalForce> external_forces;
+  std::string external_loads_file;  ///< as resolved, empty when absent
   std::map<std::string, double> leg_overrides;  ///< from the description
   /// Set when a non-finite value ended the trial early (see
   /// GaitTrialOptions::truncate_at_non_finite); the samples above are those
@@ -154,6 +205,12 @@ struct GaitTrial {
   std::optional<TrialTruncation> truncated;
   int num_samples() const { return static_cast<int>(time.size()); }
 };
+
+/// The first and last sample of the trial's grid inside the time window
+/// [start_s, end_s] (NaN = the trial's first / last time), within 1e-9 s.
+/// Throws InputError naming the trial when the window is empty, reversed or
+/// outside the trial's time range.
+std::pair<int, int> frames_in_window(const GaitTrial& trial, double start_s, double end_s);
 
 /// Loads, resamples, filters and differentiates a described trial.
 GaitTrial load_gait_trial(const TrialDescription& description, const GaitTrialOptions& options = {});

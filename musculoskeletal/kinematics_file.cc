@@ -49,11 +49,11 @@ Eigen::Matrix4d pose_matrix(const Pose& X) { return X.matrix(); }
 }  // namespace
 
 ContactSummary tibiofemoral_contact(const Model& model, const ModelData& data) {
-  return summarize(model, data, model.tree.body_index("tibia"), true);
+  return summarize(model, data, model.role_body("tibia"), true);
 }
 
 ContactSummary patellofemoral_contact(const Model& model, const ModelData& data) {
-  return summarize(model, data, model.tree.body_index("patella"), false);
+  return summarize(model, data, model.role_body("patella"), false);
 }
 
 struct KinematicsFileWriter::Impl {
@@ -102,6 +102,11 @@ KinematicsFileWriter::KinematicsFileWriter(const std::string& path, const ComakP
   // the applied external load was the foot's moved to the knee; /external_loads
   // still holds the inverse dynamics' F_ext, M_ext (shank included).
   f.set_attribute("/", "body_inertia", problem.options().body_inertia ? 1 : 0);
+  // "model dynamics": the model's own leg carried the trial's forces and its
+  // bodies' weight and inertia (no /external_loads datasets); otherwise the
+  // generic leg chain's knee loads (/external_loads).
+  f.set_attribute("/", "external_loads",
+                  problem.model_dynamics() ? "model dynamics" : "generic leg chain (knee_loads.h)");
   for (int c : problem.free_coordinates()) impl_->coordinate_names.push_back(m.tree.coordinates[c]);
   f.write("/coordinates/names", impl_->coordinate_names);
   std::vector<std::string> pres;
@@ -118,7 +123,7 @@ KinematicsFileWriter::KinematicsFileWriter(const std::string& path, const ComakP
   std::vector<std::string> bundles, groups;
   for (const auto& l : m.ligaments)
     for (size_t b = 0; b < l.bundles.size(); ++b) {
-      bundles.push_back(l.name + "/" + std::to_string(b + 1));
+      bundles.push_back(l.bundles[b].name.empty() ? l.name + "/" + std::to_string(b + 1) : l.bundles[b].name);
       groups.push_back(l.name);
     }
   f.write("/ligaments/names", bundles);
@@ -155,7 +160,7 @@ void KinematicsFileWriter::append(const ComakFrameInput& in, const ComakFrameRes
   for (size_t k = 0; k < m.prescribed_coordinates.size(); ++k) qp[k] = r.q[m.prescribed_coordinates[k]];
   w.a("/coordinates/prescribed_values", {qp.size()}).append(qp);
   for (const char* b : {"femur", "tibia", "patella"}) {
-    const int bi = m.tree.body_index(b);
+    const int bi = m.role_body(b);
     if (bi < 0) continue;
     w.a(std::string("/bodies/") + b + "/X_W", {4, 4}).append(pose_matrix(d.kinematics.X_WB[bi]));
   }
@@ -185,8 +190,10 @@ void KinematicsFileWriter::append(const ComakFrameInput& in, const ComakFrameRes
     const std::string g = "/contact/pairs/" + w.pair_names[i];
     w.a(g + "/pressure", {w.pair_rows[i]}).append(d.contacts[i].result.pressure);
   }
-  w.a("/external_loads/force_T", {3}).append(in.F_ext_T);
-  w.a("/external_loads/moment_T", {3}).append(in.M_ext_T);
+  if (!in.model_dynamics) {  // model dynamics: the trial's own forces, see the root attribute
+    w.a("/external_loads/force_T", {3}).append(in.F_ext_T);
+    w.a("/external_loads/moment_T", {3}).append(in.M_ext_T);
+  }
   if (p.options().ankle_equilibrium)
     w.a("/external_loads/ankle_moment", {}).append(p.external_ankle_moment(in));
   if (p.options().reserve_actuators) w.a("/reserves/values", {nf}).append(r.reserves);

@@ -57,6 +57,12 @@ LegPoses leg_poses(const LegModel& leg, const Coords& q) {
 }
 
 LegModel leg_model_for_trial(const GaitTrial& trial) {
+  if (!(trial.body_mass_kg > 0) || !(trial.height_m > 0))
+    throw common::InputError(trial.source, 0,
+                             "the generic leg chain (knee_loads.h) needs subject_mass_kg and "
+                             "subject_height_m, found " +
+                                 std::string(trial.body_mass_kg > 0 ? "no height" : "no mass") +
+                                 " (a model with its own leg bodies needs neither)");
   LegModel leg = leg_model_from_anthropometry(trial.body_mass_kg, trial.height_m);
   for (const auto& [key, v] : trial.leg_overrides) {
     if (key == "thigh_length_m") leg.thigh_length_m = v;
@@ -76,6 +82,11 @@ LegModel leg_model_for_trial(const GaitTrial& trial) {
 KneeLoads compute_knee_loads(const GaitTrial& trial, const LegModel& leg,
                              const KneeLoadOptions& options) {
   const int n = trial.num_samples();
+  if (!trial.has_joint_angles)
+    throw common::InputError(trial.source, 0,
+                             "the knee loads of the generic leg chain need the joint angles mapped "
+                             "(column.hip_flexion, column.hip_adduction, column.hip_rotation, "
+                             "column.knee_flexion, column.ankle_flexion), found none");
   KneeLoads out;
   out.time = trial.time;
   out.truncated = trial.truncated;

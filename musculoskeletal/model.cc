@@ -24,6 +24,16 @@ int Model::muscle_index(const std::string& n) const {
   return -1;
 }
 
+int Model::role_coordinate(const std::string& role) const {
+  if (auto it = coordinate_roles.find(role); it != coordinate_roles.end()) return it->second;
+  return tree.coordinate_index(role);
+}
+
+int Model::role_body(const std::string& role) const {
+  if (auto it = body_roles.find(role); it != body_roles.end()) return it->second;
+  return tree.body_index(role);
+}
+
 int Model::contact_index(const std::string& n) const {
   for (size_t i = 0; i < contacts.size(); ++i)
     if (contacts[i].name() == n) return static_cast<int>(i);
@@ -45,7 +55,7 @@ ModelData make_data(const Model& model) {
   d.muscle_force_length = Eigen::VectorXd::Ones(model.muscles.size());
   d.contacts.resize(model.contacts.size());
   const int n = model.num_coordinates();
-  d.Q_ligaments = d.Q_muscles = d.Q_contact = d.Q = Eigen::VectorXd::Zero(n);
+  d.Q_ligaments = d.Q_muscles = d.Q_contact = d.Q_springs = d.Q = Eigen::VectorXd::Zero(n);
   d.dQ_dq = Eigen::MatrixXd::Zero(n, n);
   return d;
 }
@@ -54,6 +64,7 @@ Eigen::VectorXd moment_arms(const Model& model, const ModelData& data, const Pat
   Eigen::VectorXd r = Eigen::VectorXd::Zero(model.num_coordinates());
   for (const PathApplication& a : path.applications)
     add_point_force(model.tree, data.kinematics, a.body, a.point_W, a.direction_W, r);
+  for (const CoordinateForce& f : path.coordinate_forces) r[f.coordinate] += f.force;
   return r;
 }
 
@@ -82,7 +93,16 @@ void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
   d.Q_ligaments.setZero(n);
   d.Q_muscles.setZero(n);
   d.Q_contact.setZero(n);
+  d.Q_springs.setZero(n);
 
+  if (opt.coordinate_springs) {
+    // Each acts on its own coordinate only (so every Jacobian column gets
+    // its -stiffness from the difference quotient, and masks need not know them).
+    for (const CoordinateSpring& s : model.coordinate_springs)
+      d.Q_springs[s.coordinate] += -s.stiffness * (q[s.coordinate] - s.rest_length) -
+                                   s.viscosity * (qdot.size() ? qdot[s.coordinate] : 0.0);
+    check_finite(d.Q_springs, "coordinate spring generalized forces");
+  }
   if (opt.ligaments) {
     int flat = 0;
     for (size_t li = 0; li < model.ligaments.size(); ++li) {
@@ -90,7 +110,7 @@ void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
       for (size_t bi = 0; bi < lig.bundles.size(); ++bi, ++flat) {
         if (mask && !mask->bundle[flat]) continue;
         BundleResult& br = d.ligaments[li][bi];
-        br.path = evaluate_path(lig.bundles[bi].path, X);
+        br.path = evaluate_path(lig.bundles[bi].path, X, q);
         const Eigen::VectorXd r = moment_arms(model, d, br.path);
         const double ldot = qdot.size() ? -r.dot(qdot) : 0.0;
         br.force = blankevoort_force(lig.bundles[bi].parameters, br.path.length, ldot);
@@ -104,7 +124,7 @@ void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
       if (mask && !mask->muscle[mi]) continue;
       const Muscle& m = model.muscles[mi];
       const double a = activations.size() ? activations[mi] : 0.0;
-      d.muscle_paths[mi] = evaluate_path(m.path, X);
+      d.muscle_paths[mi] = evaluate_path(m.path, X, q);
       double fl = 1.0;
       if (opt.force_length) {
         if (!(m.optimal_fiber_length > 0) || !(m.tendon_slack_length > 0))
@@ -136,7 +156,7 @@ void evaluate_terms(const Model& model, ModelData& d, const Eigen::VectorXd& q,
     }
     check_finite(d.Q_contact, "contact generalized forces");
   }
-  d.Q = d.Q_ligaments + d.Q_muscles + d.Q_contact;
+  d.Q = d.Q_ligaments + d.Q_muscles + d.Q_contact + d.Q_springs;
 }
 
 // moved[b]: body b moves when coordinate c changes (b lies below c's joint).
@@ -149,22 +169,16 @@ std::vector<char> bodies_moved_by(const KinematicTree& tree, int c) {
   return moved;
 }
 
-bool path_moves(const Path& p, const std::vector<char>& moved) {
-  for (const PathPoint& pt : p.points)
-    if (moved[pt.body]) return true;
-  return p.cylinder && moved[p.cylinder->body];
-}
-
 // The terms whose forces or moment arms change with coordinate c: those
-// attached to a body that c moves. The others give the same generalized
+// attached to a body that c moves (or with path points that depend on c). The others give the same generalized
 // force at q +- h e_c (their bodies, and the joint axes between those bodies
 // and the root, do not move), so their difference quotient is exactly zero.
 TermMask terms_moved_by(const Model& model, int c) {
   const std::vector<char> moved = bodies_moved_by(model.tree, c);
   TermMask m;
   for (const Ligament& l : model.ligaments)
-    for (const LigamentBundle& b : l.bundles) m.bundle.push_back(path_moves(b.path, moved));
-  for (const Muscle& mu : model.muscles) m.muscle.push_back(path_moves(mu.path, moved));
+    for (const LigamentBundle& b : l.bundles) m.bundle.push_back(path_depends_on(b.path, moved, c));
+  for (const Muscle& mu : model.muscles) m.muscle.push_back(path_depends_on(mu.path, moved, c));
   for (const ContactPair& p : model.contacts)
     m.pair.push_back(moved[p.casting().body] || moved[p.target().body]);
   return m;

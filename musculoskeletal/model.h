@@ -15,6 +15,7 @@
 // dQ/dq is computed by central differences of Q (see evaluate_jacobian),
 // re-evaluating in each column only the terms on bodies that column moves.
 #include <Eigen/Core>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -26,8 +27,18 @@
 namespace arthrosim::musculoskeletal {
 
 struct LigamentBundle {
+  std::string name;  ///< optional (an imported model keeps OpenSim's bundle names)
   BlankevoortParameters parameters;
   Path path;
+};
+
+/// A generalized spring-damper on one coordinate (OpenSim's
+/// SpringGeneralizedForce): Q_c = -stiffness (q_c - rest_length) - viscosity qdot_c
+/// [N m or N], stiffness [N m/rad or N/m], viscosity [N m s/rad or N s/m].
+struct CoordinateSpring {
+  std::string name;
+  int coordinate = -1;
+  double stiffness = 0.0, rest_length = 0.0, viscosity = 0.0;
 };
 
 /// A named group of bundles (e.g. "MCLs" with 6 bundles).
@@ -39,6 +50,9 @@ struct Ligament {
 struct Muscle {
   std::string name;
   double max_isometric_force = 0.0;  ///< F_max [N], > 0
+  /// Pennation angle at optimal fibre length [rad] (recorded from the model
+  /// file; COMAK's force a F_max along the path does not use it).
+  double pennation_angle = 0.0;
   /// Optimal fibre length l_opt and tendon slack length l_ts [m] (both > 0,
   /// or both 0 = not given). Used only by ForceOptions::force_length.
   double optimal_fiber_length = 0.0;
@@ -59,9 +73,28 @@ class Model {
   std::vector<Ligament> ligaments;
   std::vector<Muscle> muscles;
   std::vector<ContactPair> contacts;
+  std::vector<CoordinateSpring> coordinate_springs;
   /// Coordinates solved for (the 12 knee DOF) and prescribed (hip, ankle),
   /// indices into tree.coordinates.
   std::vector<int> free_coordinates, prescribed_coordinates;
+  /// Mass of the whole subject [kg] (for body-weight units and a trial that
+  /// gives none): <arthrosim:subject mass_kg> (an imported model records the
+  /// source model's total, which includes bodies it did not import), else the
+  /// sum of the link masses.
+  double subject_mass_kg = 0.0;
+  /// Default value of every coordinate (<arthrosim:default>; zero unless
+  /// given): the neutral pose a solver starts from when it has nothing better
+  /// (an imported patella sits 53 mm in front of the knee at its default).
+  Eigen::VectorXd default_q;
+  /// Roles (<arthrosim:role>): which coordinate is the "knee_flexion",
+  /// "hip_flexion", ... and which body is the "femur", "tibia", "patella",
+  /// for models whose names are not arthrosim's (an imported OpenSim model).
+  std::map<std::string, int> coordinate_roles, body_roles;
+  /// The coordinate with that role: its role entry, else the coordinate
+  /// named like the role, else -1.
+  int role_coordinate(const std::string& role) const;
+  /// The body with that role: its role entry, else the body named like it, else -1.
+  int role_body(const std::string& role) const;
 
   int num_coordinates() const { return tree.num_coordinates(); }
   int num_bundles() const;
@@ -75,6 +108,8 @@ struct ForceOptions {
   bool ligaments = true;
   bool muscles = true;
   bool contact = true;
+  /// The model's coordinate springs (Model::coordinate_springs).
+  bool coordinate_springs = true;
   /// Muscle force a F_max f_L(l~) instead of a F_max (COMAK's default, off):
   /// every muscle must then give optimal_fiber_length and tendon_slack_length.
   bool force_length = false;
@@ -107,7 +142,7 @@ struct ModelData {
   std::vector<ContactPairData> contacts;
   /// Generalized forces by term and in total (one entry per coordinate;
   /// N m for revolute, N for prismatic).
-  Eigen::VectorXd Q_ligaments, Q_muscles, Q_contact, Q;
+  Eigen::VectorXd Q_ligaments, Q_muscles, Q_contact, Q_springs, Q;
   /// dQ/dq (n x n), filled by evaluate_jacobian.
   Eigen::MatrixXd dQ_dq;
 };

@@ -79,15 +79,41 @@ struct Reader {
   }
   Pose pose(const XMLElement* e) const {
     const Vec3 xyz = vec3(e, "xyz", Vec3::Zero(), false);
-    const Vec3 rpy = vec3(e, "rpy", Vec3::Zero(), false);
     Pose X = Pose::Identity();
-    // URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll).
-    X.linear() = (Eigen::AngleAxisd(rpy.z(), Vec3::UnitZ()) *
-                  Eigen::AngleAxisd(rpy.y(), Vec3::UnitY()) *
-                  Eigen::AngleAxisd(rpy.x(), Vec3::UnitX()))
-                     .toRotationMatrix();
+    if (has(e, "xyz_body_rotation")) {
+      if (has(e, "rpy"))
+        fail(e, std::string("<") + e->Name() + "> expected one of rpy or xyz_body_rotation, found both");
+      // OpenSim's body-fixed X-Y-Z Euler angles: R = Rx(a) Ry(b) Rz(c).
+      const Vec3 a = vec3(e, "xyz_body_rotation", Vec3::Zero(), true);
+      X.linear() = (Eigen::AngleAxisd(a.x(), Vec3::UnitX()) * Eigen::AngleAxisd(a.y(), Vec3::UnitY()) *
+                    Eigen::AngleAxisd(a.z(), Vec3::UnitZ()))
+                       .toRotationMatrix();
+    } else {
+      const Vec3 rpy = vec3(e, "rpy", Vec3::Zero(), false);
+      // URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll).
+      X.linear() = (Eigen::AngleAxisd(rpy.z(), Vec3::UnitZ()) *
+                    Eigen::AngleAxisd(rpy.y(), Vec3::UnitY()) *
+                    Eigen::AngleAxisd(rpy.x(), Vec3::UnitX()))
+                       .toRotationMatrix();
+    }
     X.translation() = xyz;
     return X;
+  }
+  // Whitespace-separated finite numbers (at least one).
+  std::vector<double> numbers(const XMLElement* e, const char* name) const {
+    const std::string str = attr(e, name);
+    std::istringstream in(str);
+    std::vector<double> v;
+    std::string tok;
+    while (in >> tok) {
+      char* end = nullptr;
+      const double x = std::strtod(tok.c_str(), &end);
+      if (!end || *end != '\0' || !std::isfinite(x))
+        fail(e, std::string("attribute '") + name + "' expected finite numbers, found '" + tok + "'");
+      v.push_back(x);
+    }
+    if (v.empty()) fail(e, std::string("attribute '") + name + "' expected numbers, found none");
+    return v;
   }
 };
 
@@ -98,6 +124,11 @@ bool is_ext(const XMLElement* e, const char* local) {
 // --- URDF structure pre-check (urdfdom reports no line numbers) -------------
 void precheck_urdf(const Reader& rd, const XMLElement* robot, std::map<std::string, int>& link_line,
                    std::map<std::string, int>& joint_line) {
+  // The joint whose child each link is: a tree has one per link (but the
+  // root) and no loop. urdfdom refuses other graphs too, but only after
+  // building them with owning pointers in a cycle, which it never frees.
+  std::map<std::string, const XMLElement*> parent_joint;
+  std::map<std::string, std::string> parent_link;
   for (const XMLElement* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
     const std::string n = rd.attr(l, "name");
     if (!link_line.emplace(n, l->GetLineNum()).second)
@@ -123,12 +154,30 @@ void precheck_urdf(const Reader& rd, const XMLElement* robot, std::map<std::stri
       const std::string link = rd.attr(pc, "link");
       if (!link_line.count(link)) rd.fail(pc, "joint '" + n + "': unknown " + role + " link '" + link + "'");
     }
+    const std::string parent = rd.attr(j->FirstChildElement("parent"), "link");
+    const std::string child = rd.attr(j->FirstChildElement("child"), "link");
+    if (parent == child) rd.fail(j, "joint '" + n + "' expected different parent and child links, found '" + child + "' for both");
+    if (const auto [it, added] = parent_joint.emplace(child, j); !added)
+      rd.fail(j, "joint '" + n + "': link '" + child + "' is already the child of joint '" +
+                     rd.attr(it->second, "name") + "' (line " + std::to_string(it->second->GetLineNum()) +
+                     "); a kinematic tree gives each link one parent");
+    parent_link[child] = parent;
     if ((type == "revolute" || type == "prismatic") && !j->FirstChildElement("limit"))
       rd.fail(j, "joint '" + n + "' (" + type + ") expected a <limit> element, found none");
     if (const XMLElement* lim = j->FirstChildElement("limit")) {
       if (rd.has(lim, "lower") && rd.has(lim, "upper") &&
           rd.number(lim, "lower") > rd.number(lim, "upper"))
         rd.fail(lim, "joint '" + n + "' expected lower <= upper limit");
+    }
+  }
+  // No loop: going up from any link must reach a link without a parent.
+  for (const auto& [start, joint] : parent_joint) {
+    std::string link = start;
+    for (std::size_t steps = 0; parent_link.count(link); ++steps) {
+      if (steps > parent_link.size())
+        rd.fail(joint, "joint '" + std::string(rd.attr(joint, "name")) + "' is part of a loop of joints through link '" +
+                           start + "'; a kinematic tree has none");
+      link = parent_link[link];
     }
   }
 }
@@ -191,7 +240,7 @@ struct Context {
   const Reader& rd;
   Model& model;
   const KinematicsData& ref;  ///< kinematics at the reference pose q = 0
-  std::map<std::string, WrapCylinder> cylinders;
+  std::map<std::string, WrapSurface> wraps;
   std::map<std::string, ContactSurface> surfaces;
   std::map<std::string, int> surface_line;
 };
@@ -212,37 +261,171 @@ Pose to_body(const Context& c, const XMLElement* e, int body) {
   c.rd.fail(e, "attribute 'frame' expected body or reference, found '" + f + "'");
 }
 
+int coordinate_of(const Context& c, const XMLElement* e) {
+  const std::string n = c.rd.attr(e, "coordinate");
+  const int ci = c.model.tree.coordinate_index(n);
+  if (ci < 0)
+    c.rd.fail(e, "attribute 'coordinate': expected a revolute or prismatic joint, found '" + n + "'");
+  return ci;
+}
+
+// A function of a coordinate (the single child element of e).
+CoordinateFunction read_function(const Context& c, const XMLElement* e, const std::string& what) {
+  const XMLElement* f = e->FirstChildElement();
+  if (!f || f->NextSiblingElement())
+    c.rd.fail(e, what + ": expected exactly one function element (constant, linear_function, simm_spline, "
+                        "natural_cubic_spline, piecewise_linear_function, multiplier_function)");
+  const std::string kind = f->Name();
+  try {
+    if (kind == "constant") return CoordinateFunction::constant(c.rd.number(f, "value"));
+    if (kind == "linear_function") {
+      const std::vector<double> k = c.rd.numbers(f, "coefficients");
+      if (k.size() != 2) c.rd.fail(f, what + ": linear_function expected coefficients=\"slope intercept\"");
+      return CoordinateFunction::linear(k[0], k[1]);
+    }
+    if (kind == "simm_spline" || kind == "natural_cubic_spline")
+      return CoordinateFunction::cubic_spline(c.rd.numbers(f, "x"), c.rd.numbers(f, "y"));
+    if (kind == "piecewise_linear_function")
+      return CoordinateFunction::piecewise_linear(c.rd.numbers(f, "x"), c.rd.numbers(f, "y"));
+    if (kind == "multiplier_function") return read_function(c, f, what).scaled(c.rd.number(f, "scale"));
+  } catch (const InputError& err) {
+    if (err.line() > 0) throw;
+    c.rd.fail(f, what + ": " + err.what());
+  }
+  c.rd.fail(f, what + ": unknown function type <" + kind +
+                   "> (expected constant, linear_function, simm_spline, natural_cubic_spline, "
+                   "piecewise_linear_function or multiplier_function)");
+}
+
 Path read_path(Context& c, const XMLElement* e, const std::string& what) {
   Path p;
-  for (const XMLElement* pt = e->FirstChildElement("point"); pt; pt = pt->NextSiblingElement("point"))
-  {
-    const int b = body_of(c, pt);
-    const XMLElement* frame_src = c.rd.has(pt, "frame") ? pt : e;  // point overrides its parent
-    p.points.push_back({b, to_body(c, frame_src, b) * c.rd.vec3(pt, "xyz", Vec3::Zero(), true)});
+  std::vector<const XMLElement*> wrap_elements;
+  int fixed = 0;
+  for (const XMLElement* pt = e->FirstChildElement(); pt; pt = pt->NextSiblingElement()) {
+    const std::string tag = pt->Name();
+    const XMLElement* frame_src = c.rd.has(pt, "frame") ? pt : e;  // a point overrides its parent
+    if (tag == "point" || tag == "conditional_point") {
+      PathPoint pp;
+      pp.body = body_of(c, pt);
+      pp.p_B = to_body(c, frame_src, pp.body) * c.rd.vec3(pt, "xyz", Vec3::Zero(), true);
+      if (tag == "conditional_point") {
+        pp.condition_coordinate = coordinate_of(c, pt);
+        const std::vector<double> r = c.rd.numbers(pt, "range");
+        if (r.size() != 2 || !(r[0] <= r[1]))
+          c.rd.fail(pt, what + ": conditional_point expected range=\"min max\" with min <= max");
+        pp.range_min = r[0];
+        pp.range_max = r[1];
+      } else {
+        ++fixed;
+      }
+      p.points.push_back(pp);
+    } else if (tag == "moving_point") {
+      PathPoint pp;
+      pp.body = body_of(c, pt);
+      if (c.rd.has(frame_src, "frame") && std::string(c.rd.attr(frame_src, "frame")) != "body")
+        c.rd.fail(pt, what + ": a moving_point's functions give body-frame coordinates; expected frame=\"body\"");
+      const char* axes[3] = {"x", "y", "z"};
+      for (int j = 0; j < 3; ++j) {
+        const XMLElement* f = pt->FirstChildElement(axes[j]);
+        if (!f) c.rd.fail(pt, what + ": moving_point expected an <" + std::string(axes[j]) + "> element");
+        pp.moving_coordinate[j] = coordinate_of(c, f);
+        pp.moving[j] = std::make_shared<const CoordinateFunction>(
+            read_function(c, f, what + " moving_point " + axes[j]));
+      }
+      ++fixed;
+      p.points.push_back(pp);
+    } else if (tag == "wrap") {
+      wrap_elements.push_back(pt);
+    } else {
+      c.rd.fail(pt, what + ": unknown element <" + tag +
+                        "> (expected point, conditional_point, moving_point or wrap)");
+    }
   }
-  if (p.points.size() < 2)
-    c.rd.fail(e, what + ": expected at least 2 <point> elements, found " +
-                     std::to_string(p.points.size()));
-  if (c.rd.has(e, "wrap")) {
-    const std::string w = c.rd.attr(e, "wrap");
-    auto it = c.cylinders.find(w);
-    if (it == c.cylinders.end()) c.rd.fail(e, what + ": unknown wrap cylinder '" + w + "'");
-    if (p.points.size() != 2)
-      c.rd.fail(e, what + ": cylinder wrapping expected exactly 2 points, found " +
-                       std::to_string(p.points.size()));
-    p.cylinder = it->second;
-  }
+  if (p.points.size() < 2 || fixed < 2)
+    c.rd.fail(e, what + ": expected at least 2 <point> elements that are not conditional, found " +
+                     std::to_string(fixed));
+  const int n = static_cast<int>(p.points.size());
+  auto add_wrap = [&](const XMLElement* we, const std::string& name) {
+    auto it = c.wraps.find(name);
+    if (it == c.wraps.end())
+      c.rd.fail(we, what + ": unknown wrap object '" + name + "' (wrap objects must be declared before use)");
+    PathWrap pw;
+    pw.surface = it->second;
+    if (we != e && c.rd.has(we, "range")) {
+      const std::vector<double> r = c.rd.numbers(we, "range");
+      bool ok = r.size() == 2;
+      for (double v : r) ok = ok && v == std::floor(v) && (v == -1 || (v >= 1 && v <= n));
+      if (ok && r[0] != -1 && r[1] != -1) ok = r[0] <= r[1];
+      if (!ok)
+        c.rd.fail(we, what + ": wrap range expected \"first last\" (1-based point indices in 1.." +
+                          std::to_string(n) + ", -1 = first/last, first <= last), found '" +
+                          c.rd.attr(we, "range") + "'");
+      pw.first_point = r[0] < 0 ? -1 : static_cast<int>(r[0]) - 1;
+      pw.last_point = r[1] < 0 ? -1 : static_cast<int>(r[1]) - 1;
+    }
+    if (we != e && c.rd.has(we, "method")) {
+      const std::string m = c.rd.attr(we, "method");
+      if (m == "hybrid") pw.method = WrapMethod::kHybrid;
+      else if (m == "midpoint") pw.method = WrapMethod::kMidpoint;
+      else if (m == "axial") pw.method = WrapMethod::kAxial;
+      else if (m == "shortest") pw.method = WrapMethod::kShortest;
+      else c.rd.fail(we, what + ": wrap method expected hybrid, midpoint, axial or shortest, found '" + m + "'");
+    }
+    p.wraps.push_back(pw);
+  };
+  for (const XMLElement* we : wrap_elements) add_wrap(we, c.rd.attr(we, "object"));
+  if (c.rd.has(e, "wrap")) add_wrap(e, c.rd.attr(e, "wrap"));
   return p;
 }
 
-void read_cylinder(Context& c, const XMLElement* e) {
-  const std::string n = c.rd.attr(e, "name");
-  WrapCylinder w;
+WrapQuadrant read_quadrant(const Context& c, const XMLElement* e) {
+  if (!c.rd.has(e, "quadrant")) return WrapQuadrant::kAll;
+  const std::string q = c.rd.attr(e, "quadrant");
+  if (q == "all") return WrapQuadrant::kAll;
+  if (q == "+x" || q == "x") return WrapQuadrant::kPosX;
+  if (q == "-x") return WrapQuadrant::kNegX;
+  if (q == "+y" || q == "y") return WrapQuadrant::kPosY;
+  if (q == "-y") return WrapQuadrant::kNegY;
+  if (q == "+z" || q == "z") return WrapQuadrant::kPosZ;
+  if (q == "-z") return WrapQuadrant::kNegZ;
+  c.rd.fail(e, "attribute 'quadrant' expected all, +x, -x, +y, -y, +z or -z, found '" + q + "'");
+}
+
+void read_wrap_surface(Context& c, const XMLElement* e, WrapShape shape) {
+  WrapSurface w;
+  w.name = c.rd.attr(e, "name");
+  w.shape = shape;
   w.body = body_of(c, e);
-  w.X_BC = to_body(c, e, w.body) * c.rd.pose(e);
-  w.radius = c.rd.number(e, "radius");
-  if (!(w.radius > 0)) c.rd.fail(e, "wrap cylinder '" + n + "' expected radius > 0 m");
-  if (!c.cylinders.emplace(n, w).second) c.rd.fail(e, "duplicate wrap cylinder '" + n + "'");
+  w.X_BS = to_body(c, e, w.body) * c.rd.pose(e);
+  w.quadrant = read_quadrant(c, e);
+  switch (shape) {
+    case WrapShape::kCylinder:
+      w.radius = c.rd.number(e, "radius");
+      w.length = c.rd.number_or(e, "length", w.length);
+      break;
+    case WrapShape::kSphere:
+      w.radius = c.rd.number(e, "radius");
+      break;
+    case WrapShape::kEllipsoid:
+      w.semi_axes = c.rd.vec3(e, "dimensions", Vec3::Zero(), true);
+      if (c.rd.has(e, "chords")) {
+        const double n = c.rd.number(e, "chords");
+        if (n != std::floor(n) || n < 2 || n > 1000)
+          c.rd.fail(e, "attribute 'chords' expected an integer in 2..1000, found " + std::to_string(n));
+        w.ellipsoid_chords = static_cast<int>(n);
+      }
+      break;
+    case WrapShape::kTorus:
+      w.radius = c.rd.number(e, "inner_radius");
+      w.ring_radius = c.rd.number(e, "outer_radius");
+      break;
+  }
+  try {
+    validate(w);
+  } catch (const InputError& err) {
+    c.rd.fail(e, err.what());
+  }
+  if (!c.wraps.emplace(w.name, w).second) c.rd.fail(e, "duplicate wrap object '" + w.name + "'");
 }
 
 Eigen::VectorXd read_thickness_file(const Reader& rd, const XMLElement* e, const std::string& path,
@@ -348,8 +531,9 @@ void read_surface(Context& c, const XMLElement* e) {
   } else {
     s.thickness = read_thickness_csv(c.rd, e, c.rd.existing_file(e, "thickness_csv"), s.mesh);
   }
-  // Mesh coordinates given in the reference (model) frame move to the body frame.
-  const Pose X = to_body(c, e, s.body);
+  // Mesh coordinates given in the reference (model) frame move to the body
+  // frame; xyz/rpy place the mesh file's frame in that frame (default identity).
+  const Pose X = to_body(c, e, s.body) * c.rd.pose(e);
   for (int i = 0; i < s.mesh.num_vertices(); ++i)
     s.mesh.V.row(i) = (X * Vec3(s.mesh.V.row(i).transpose())).transpose();
   s.name = n;
@@ -400,6 +584,7 @@ void read_ligament(Context& c, const XMLElement* e) {
        b = b->NextSiblingElement("bundle"), ++k) {
     const std::string where = "ligament '" + lig.name + "' bundle " + std::to_string(k);
     LigamentBundle lb;
+    if (c.rd.has(b, "name")) lb.name = c.rd.attr(b, "name");
     BlankevoortParameters& p = lb.parameters;
     // Bundle attributes override the group's.
     auto value = [&](const char* name, double def) {
@@ -421,7 +606,8 @@ void read_ligament(Context& c, const XMLElement* e) {
       // l0 = l_ref / (1 + e_ref) with l_ref the length at the reference pose (q = 0).
       const double e_ref = value("reference_strain", 0.0);
       if (!(e_ref > -1.0)) c.rd.fail(b, where + " expected reference_strain > -1");
-      p.slack_length = evaluate_path(lb.path, ref.X_WB).length / (1.0 + e_ref);
+      p.slack_length =
+          evaluate_path(lb.path, ref.X_WB, Eigen::VectorXd::Zero(c.model.num_coordinates())).length / (1.0 + e_ref);
     }
     try {
       validate(p, where);
@@ -450,6 +636,9 @@ void read_muscle(Context& c, const XMLElement* e) {
     if (!(m.optimal_fiber_length > 0) || !(m.tendon_slack_length > 0))
       c.rd.fail(e, "muscle '" + m.name + "' expected optimal_fiber_length > 0 m and tendon_slack_length > 0 m");
   }
+  m.pennation_angle = c.rd.number_or(e, "pennation_angle", 0.0);
+  if (!(m.pennation_angle >= 0 && m.pennation_angle < M_PI / 2))
+    c.rd.fail(e, "muscle '" + m.name + "' expected 0 <= pennation_angle < pi/2 rad");
   m.path = read_path(c, e, "muscle '" + m.name + "'");
   c.model.muscles.push_back(std::move(m));
 }
@@ -484,6 +673,8 @@ Model parse_model(const std::string& xml, const std::string& file_name,
   forward_kinematics(model.tree, Eigen::VectorXd::Zero(model.num_coordinates()), ref);
   Context c{rd, model, ref, {}, {}, {}};
   std::set<int> prescribed;
+  bool have_subject = false;
+  model.default_q = Eigen::VectorXd::Zero(model.num_coordinates());
   for (const XMLElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
     const std::string name = e->Name();
     if (name.rfind(kNs, 0) != 0) continue;
@@ -493,7 +684,13 @@ Model parse_model(const std::string& xml, const std::string& file_name,
       if (ci < 0) rd.fail(e, "prescribed: expected a revolute or prismatic joint, found '" + j + "'");
       prescribed.insert(ci);
     } else if (is_ext(e, "wrap_cylinder")) {
-      read_cylinder(c, e);
+      read_wrap_surface(c, e, WrapShape::kCylinder);
+    } else if (is_ext(e, "wrap_ellipsoid")) {
+      read_wrap_surface(c, e, WrapShape::kEllipsoid);
+    } else if (is_ext(e, "wrap_sphere")) {
+      read_wrap_surface(c, e, WrapShape::kSphere);
+    } else if (is_ext(e, "wrap_torus")) {
+      read_wrap_surface(c, e, WrapShape::kTorus);
     } else if (is_ext(e, "surface")) {
       read_surface(c, e);
     } else if (is_ext(e, "contact")) {
@@ -502,12 +699,50 @@ Model parse_model(const std::string& xml, const std::string& file_name,
       read_ligament(c, e);
     } else if (is_ext(e, "muscle")) {
       read_muscle(c, e);
+    } else if (is_ext(e, "default")) {
+      const std::string j = rd.attr(e, "joint");
+      const int ci = model.tree.coordinate_index(j);
+      if (ci < 0) rd.fail(e, "default: expected a revolute or prismatic joint, found '" + j + "'");
+      model.default_q[ci] = rd.number(e, "value");
+    } else if (is_ext(e, "role")) {
+      const std::string role = rd.attr(e, "name");
+      const bool joint = rd.has(e, "joint"), link = rd.has(e, "link");
+      if (joint == link) rd.fail(e, "role '" + role + "': expected exactly one of joint or link");
+      if (joint) {
+        const std::string j = rd.attr(e, "joint");
+        const int ci = model.tree.coordinate_index(j);
+        if (ci < 0) rd.fail(e, "role '" + role + "': expected a revolute or prismatic joint, found '" + j + "'");
+        if (!model.coordinate_roles.emplace(role, ci).second) rd.fail(e, "duplicate role '" + role + "'");
+      } else {
+        const int b = body_of(c, e, "link");
+        if (!model.body_roles.emplace(role, b).second) rd.fail(e, "duplicate role '" + role + "'");
+      }
+    } else if (is_ext(e, "coordinate_spring")) {
+      CoordinateSpring sp;
+      sp.name = rd.has(e, "name") ? rd.attr(e, "name") : rd.attr(e, "joint");
+      const std::string j = rd.attr(e, "joint");
+      sp.coordinate = model.tree.coordinate_index(j);
+      if (sp.coordinate < 0) rd.fail(e, "coordinate_spring: expected a revolute or prismatic joint, found '" + j + "'");
+      sp.stiffness = rd.number_or(e, "stiffness", 0.0);
+      sp.rest_length = rd.number_or(e, "rest_length", 0.0);
+      sp.viscosity = rd.number_or(e, "viscosity", 0.0);
+      if (!(sp.stiffness >= 0) || !(sp.viscosity >= 0))
+        rd.fail(e, "coordinate_spring '" + sp.name + "': expected stiffness >= 0 and viscosity >= 0");
+      model.coordinate_springs.push_back(sp);
+    } else if (is_ext(e, "subject")) {
+      if (have_subject) rd.fail(e, "expected one <arthrosim:subject>, found a second");
+      have_subject = true;
+      model.subject_mass_kg = rd.number(e, "mass_kg");
+      if (!(model.subject_mass_kg > 0)) rd.fail(e, "subject: expected mass_kg > 0");
     } else {
       rd.fail(e, "unknown element <" + name +
-                     "> (expected arthrosim:prescribed, wrap_cylinder, surface, contact, "
-                     "ligament or muscle)");
+                     "> (expected arthrosim:prescribed, default, role, wrap_cylinder, wrap_ellipsoid, "
+                     "wrap_sphere, wrap_torus, surface, contact, ligament, muscle, coordinate_spring or "
+                     "subject)");
     }
   }
+  if (!have_subject)
+    for (const Body& b : model.tree.bodies) model.subject_mass_kg += b.mass;
   for (int i = 0; i < model.num_coordinates(); ++i)
     (prescribed.count(i) ? model.prescribed_coordinates : model.free_coordinates).push_back(i);
   return model;
@@ -579,9 +814,11 @@ PreparedSurfacesReport replace_contact_surfaces(
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
   const common::PreparedModelReader f(prepared_path);
   const std::vector<std::string> names = f.surface_names();
-  // Prepared surfaces by the file name of their source mesh.
-  std::map<std::string, std::string> by_file;
-  for (const auto& n : names) by_file[std::filesystem::path(f.source_file(n)).filename().string()] = n;
+  // Prepared surfaces by the file name of their source mesh; several for one
+  // file when prepare split it into compartments (a tibial cartilage mesh
+  // holding both plateaus): the model's surface is then their union.
+  std::map<std::string, std::vector<std::string>> by_file;
+  for (const auto& n : names) by_file[std::filesystem::path(f.source_file(n)).filename().string()].push_back(n);
   auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
@@ -592,25 +829,32 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
                        "contact pair '" + pair + "': expected a prepared surface made from '" +
                            file + "' (surface '" + s.name + "'), found surfaces from: " + list);
     }
-    common::PreparedModelReader::TriangleSurface prepared = f.triangles(it->second);
-    const std::string& g = prepared.group;
-    common::TriangleMesh mesh = std::move(prepared.mesh);
-    const Eigen::VectorXd tv = std::move(prepared.thickness);
-    if (tv.size() != mesh.num_vertices() || mesh.num_triangles() == 0)
-      throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
-                                             std::to_string(tv.size()) + " values for " +
-                                             std::to_string(mesh.num_vertices()) + " vertices");
+    common::TriangleMesh mesh;
+    Eigen::VectorXd tv;
+    std::string groups;
+    for (const std::string& part : it->second) {
+      // Checked by the reader (indices in range, finite, thickness >= 0).
+      const common::PreparedModelReader::TriangleSurface p = f.triangles(part);
+      const int n0 = mesh.num_vertices(), t0 = mesh.num_triangles();
+      mesh.V.conservativeResize(n0 + p.mesh.V.rows(), 3);
+      mesh.V.bottomRows(p.mesh.V.rows()) = p.mesh.V;
+      mesh.F.conservativeResize(t0 + p.mesh.F.rows(), 3);
+      mesh.F.bottomRows(p.mesh.F.rows()) = p.mesh.F.array() + n0;
+      tv.conservativeResize(n0 + p.thickness.size());
+      tv.tail(p.thickness.size()) = p.thickness;
+      groups += (groups.empty() ? "" : "+") + p.group;
+    }
     // Same place as the model's own mesh (in the file frame): the centroids
     // of the two surfaces must agree to within 2 mm, else the prepared file
     // belongs to another geometry.
     const double offset = centroid_offset(s, mesh);
-    if (offset > 2e-3) {
+    if (!(offset <= 2e-3)) {
       std::ostringstream m;
-      m << g << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
+      m << groups << ": the prepared surface's centroid lies " << offset * 1e3 << " mm from that of the model's '"
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";
       throw InputError(prepared_path, 0, m.str());
     }
-    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + g);
+    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + groups);
   };
   return replace_contact_surfaces(model, make);
 }

@@ -1,6 +1,8 @@
 #include "pipelines/comak_stage.h"
 
 #include <algorithm>
+#include <cmath>
+#include <tuple>
 #include <fstream>
 #include <iterator>
 #include <sstream>
@@ -11,6 +13,7 @@
 #include "common/metadata.h"
 #include "common/progress.h"
 #include "common/scene.h"
+#include "common/storage.h"
 #include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/knee_loads.h"
@@ -66,6 +69,9 @@ ComakStageOptions comak_from_scene(const common::Scene& scene) {
     o.effects = {"ligaments", "muscles", "tibiofemoral_contact", "patellofemoral_contact"};
   }
   check_comak_effects(o.effects, scene.file.string());
+  const SceneInputs in = scene_inputs(scene);
+  if (in.trial_start_s) o.start_time_s = *in.trial_start_s;
+  if (in.trial_end_s) o.end_time_s = *in.trial_end_s;
   return o;
 }
 
@@ -73,22 +79,27 @@ namespace {
 namespace msk = musculoskeletal;
 
 // The stage's text of the options it runs with (log and run metadata).
-std::string options_text(const ComakStageConfig& c, const std::string& model_path) {
+std::string options_text(const ComakStageConfig& c, const std::string& model_path, int first_frame,
+                         int last_frame, bool model_dynamics) {
   const msk::ComakOptions& o = c.options.solver;
   std::ostringstream opts;
   opts << "model: " << model_path << "\nprepared: " << (c.prepared.empty() ? "none" : c.prepared.string())
-       << "\ntrial: " << c.trial.string() << "\nfirst_frame: " << c.first_frame << "\nlast_frame: " << c.last_frame
+       << "\ntrial: " << c.trial.string() << "\nfirst_frame: " << first_frame << "\nlast_frame: " << last_frame
        << "\nstride: " << c.stride << "\nforce_tolerance_n: " << o.force_tolerance
        << "\nlength_scale_m: " << o.length_scale << "\nipopt_tolerance: " << o.ipopt_tolerance
        << "\nmax_iterations: " << o.max_iterations << "\nactivation_min: " << o.activation_min
+       << "\nacceptable_iterations: " << o.acceptable_iterations
        << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
        << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
+       << "\nhip_equilibrium: " << (o.hip_equilibrium ? "true" : "false")
        << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
        << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
        << "\nsecond_start: " << (o.second_start ? "true" : "false") << "\nretries: " << o.retries
        << "\nmove_limits_first: " << (o.move_limits_first ? "true" : "false")
        << "\nmove_limit_m: " << o.move_limit_m << "\nmove_limit_rad: " << o.move_limit_rad
        << "\nsecond_start_move_limit_scale: " << o.second_start_move_limit_scale
+       << "\ncoordinate_damping: " << (o.coordinate_damping ? "true" : "false")
+       << "\nloads: " << (model_dynamics ? "model dynamics (the model's own leg)" : "generic leg chain (knee_loads.h)")
        << "\nlowpass_cutoff_hz: " << c.options.trial.lowpass.cutoff_hz << "\nhessian: limited-memory\n";
   for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
   std::string effect_text;
@@ -111,7 +122,10 @@ ComakStageResult run_comak_stage(const ComakStageConfig& config) {
   o.forces.contact = wants("tibiofemoral_contact");
   const std::string model_path = comak_model_file(config.model).string();
   msk::Model model = msk::load_model(model_path);
-  if (o.ankle_equilibrium) {
+  // A model with its own leg to the ground (an imported OpenSim model)
+  // takes the trial's coordinates by name and its forces on its bodies.
+  const bool model_dynamics = model.role_body("ground") >= 0;
+  if (o.ankle_equilibrium && !model_dynamics) {
     // Uniarticular ankle muscles so that the ankle row can be balanced in
     // both directions (musculoskeletal/ankle_muscles.h).
     msk::add_ankle_muscles(model);
@@ -129,17 +143,44 @@ ComakStageResult run_comak_stage(const ComakStageConfig& config) {
   // A non-finite trial value: run the frames before it, then stop naming
   // the frame, file, line and column (exit 1; the file keeps those frames).
   to.truncate_at_non_finite = true;
+  if (model_dynamics) {
+    // Angles are the model's revolute coordinates (translations by its prismatic ones).
+    to.is_rotational = [&model](const std::string& label) {
+      const int c = model.tree.coordinate_index(label);
+      if (c < 0) return common::default_is_rotational(label);
+      for (const msk::Joint& j : model.tree.joints)
+        if (j.coordinate == c) return j.type == msk::JointType::kRevolute;
+      return false;
+    };
+  }
   const std::string trial_path = config.trial.string();
-  const msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+  msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+  if (!(trial.body_mass_kg > 0)) {
+    trial.body_mass_kg = model.subject_mass_kg;
+    common::log_info("subject mass from the model: " + std::to_string(model.subject_mass_kg) + " kg");
+  }
+  int first = config.first_frame, last = config.last_frame;
+  const double start_s = config.options.start_time_s, end_s = config.options.end_time_s;
+  if (!std::isnan(start_s) || !std::isnan(end_s)) {
+    // The time window: frames of the trial's grid inside [start, end].
+    std::tie(first, last) = msk::frames_in_window(trial, start_s, end_s);
+  }
   if (trial.side != msk::Side::kRight)
     throw common::InputError(trial_path + ": error: the bundled knee models are right knees; this trial is of the "
                              "left leg");
-  const msk::LegModel leg = msk::leg_model_for_trial(trial);
-  const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
-  const auto frames = msk::comak_frame_inputs(loads, config.first_frame, config.last_frame, config.stride, &leg);
+  std::vector<msk::ComakFrameInput> frames;
+  if (model_dynamics) {
+    std::vector<std::string> ignored;
+    frames = msk::comak_model_frame_inputs(model, trial, first, last, config.stride, &ignored);
+    for (const auto& i : ignored) common::log_info("external force not applied: " + i);
+  } else {
+    const msk::LegModel leg = msk::leg_model_for_trial(trial);
+    const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
+    frames = msk::comak_frame_inputs(loads, first, last, config.stride, &leg);
+  }
   msk::ComakProblem problem(model, o);
 
-  const std::string opts = options_text(config, model_path);
+  const std::string opts = options_text(config, model_path, first, last, model_dynamics);
   common::log_info("options:\n" + opts + (trial.synthetic ? "trial is SYNTHETIC\n" : ""));
   std::vector<const char*> argv;
   for (const std::string& a : config.argv) argv.push_back(a.c_str());
@@ -148,7 +189,7 @@ ComakStageResult run_comak_stage(const ComakStageConfig& config) {
   common::EffectLedger ledger("comak");
   if (o.forces.ligaments) ledger.record("ligaments", model.num_bundles());
   ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
-  const int tibia = model.tree.body_index("tibia"), patella = model.tree.body_index("patella");
+  const int tibia = model.role_body("tibia"), patella = model.role_body("patella");
   for (const auto& c : model.contacts) {
     if (!o.forces.contact) break;
     if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());
@@ -229,6 +270,11 @@ StageDescriptor comak_stage_descriptor() {
     s.inputs.emplace_back("prepared.h5", prepared);
     const common::OptionBlock& block = scene.block("comak");
     s.options = block.canonical();
+    // The trial window (top-level trial.start_s / trial.end_s) decides which
+    // frames the stage solves.
+    for (const auto& kv : scene.top.canonical())
+      if (kv.first.rfind("scene.trial.", 0) == 0) s.options.push_back(kv);
+    std::sort(s.options.begin(), s.options.end());
     if (block.has("effects")) s.effects = block.list("effects");
     add_path_inputs(block, s);
     s.outputs = {kinematics};

@@ -3,6 +3,7 @@
 // Method: musculoskeletal/comak.h, docs/comak.md; output: the kinematics
 // file (docs/kinematics_file.md).
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,12 @@ struct ComakStageOptions {
   musculoskeletal::ComakOptions solver;
   /// The trial's processing (its low-pass filter).
   musculoskeletal::GaitTrialOptions trial;
+  /// The time window of the trial to solve [s] (the scene's top-level
+  /// trial.start_s / trial.end_s; NaN: from the first / to the last frame).
+  /// The whole trial is still filtered and differentiated. When either is
+  /// set, it replaces the frame range of ComakStageConfig.
+  double start_time_s = std::numeric_limits<double>::quiet_NaN();
+  double end_time_s = std::numeric_limits<double>::quiet_NaN();
   void declare(common::OptionVisitor& v);
 };
 
@@ -38,8 +45,9 @@ StageDescriptor comak_stage_descriptor();
 /// together (one contact term). InputError naming `where` otherwise.
 void check_comak_effects(const std::vector<std::string>& effects, const std::string& where);
 
-/// The comak block of a scene as options, effects checked (pure: no file is
-/// read). A scene without a comak block gives the defaults with every effect.
+/// The comak block of a scene as options, effects checked, with the scene's
+/// trial window (pure: no file is read). A scene without a comak block gives
+/// the defaults with every effect.
 ComakStageOptions comak_from_scene(const common::Scene& scene);
 
 /// Everything one run of the stage needs.
@@ -65,7 +73,8 @@ struct ComakStageResult {
 };
 
 /// Builds (model with its prepared surfaces and the ankle muscles when
-/// asked, trial and knee loads, the NLP) and runs the stage: every frame
+/// asked, trial and its loads: the generic leg chain, or for a model with
+/// its own leg to the ground the model's dynamics; the NLP) and runs the stage: every frame
 /// solved and written into the kinematics file as it converges
 /// (docs/kinematics_file.md), with progress. Throws common::InputError for bad
 /// input.

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <unordered_map>
@@ -118,6 +119,22 @@ struct Dimensions {
   double tibia_lateral_semi_ap = mm(15.0), tibia_lateral_semi_ml = mm(10.5);
   double patella_cart_semi_si = mm(14.0), patella_cart_semi_ml = mm(13.0);
 
+  // Menisci (docs/knee_geometry.md): C-rings around the compartment centres.
+  // Outer outline an ellipse (semi-axes AP, ML) cut open between the horns;
+  // length 40 / 33 mm, overall width 27 mm (Fox, Bedi & Rodeo 2012 report
+  // medial 40.5-45.5 x 27 mm, lateral 32.4-35.7 x 26.6-29.3 mm; the length is
+  // held to the 45 mm plateau), body width (rim) 9 / 10 mm, distance between
+  // the horns 24 / 11 mm (Murlimanju et al. 2012: 24.1 and 11.3 mm), wedge
+  // cross-section from 1 mm at the inner free edge to 6 mm at the periphery.
+  struct Meniscus {
+    double semi_ap, semi_ml, rim, horn_gap;
+  };
+  Meniscus medial_meniscus{mm(20.0), mm(15.0), mm(9.0), mm(24.0)};
+  Meniscus lateral_meniscus{mm(16.5), mm(14.0), mm(10.0), mm(11.0)};
+  double meniscus_peripheral_height = mm(6.0);
+  double meniscus_inner_height = mm(1.0);
+  double meniscus_femur_clearance = mm(0.2);
+
   // Limb (Winter 2009 segment proportions of stature, 1.65 m subject).
   double stature = 1.65;
   double thigh_fraction = 0.245;
@@ -165,6 +182,24 @@ struct ParametricKnee::Impl {
   double table_y0 = 0, table_z0 = 0, table_h = mm(0.25);
   int table_ny = 0, table_nz = 0;
   std::vector<double> back;      // B(y, z)
+  // Meniscus tables (built on first use): per meniscus, on a grid over its
+  // footprint, the lower face height (tibial articular surface) and the
+  // highest admissible upper face (below the femoral articular surface).
+  struct MeniscusTable {
+    double x0 = 0, z0 = 0, h = mm(0.5);
+    int nx = 0, nz = 0;
+    std::vector<double> low, limit;
+    double at(const std::vector<double>& v, double x, double z) const {
+      const double fx = std::clamp((x - x0) / h, 0.0, nx - 1.000001);
+      const double fz = std::clamp((z - z0) / h, 0.0, nz - 1.000001);
+      const int ix = static_cast<int>(fx), iz = static_cast<int>(fz);
+      const double tx = fx - ix, tz = fz - iz;
+      auto g = [&](int i, int k) { return v[static_cast<size_t>(i) * nz + k]; };
+      return (1 - tx) * ((1 - tz) * g(ix, iz) + tz * g(ix, iz + 1)) + tx * ((1 - tz) * g(ix + 1, iz) + tz * g(ix + 1, iz + 1));
+    }
+  };
+  mutable std::once_flag meniscus_once;
+  mutable MeniscusTable meniscus_table[2];
   double patella_centre_x = 0.0;  // ellipsoid centre
   double patella_back_x0 = 0.0;   // B at the patella centre
 
@@ -252,6 +287,91 @@ struct ParametricKnee::Impl {
   double patella(const Vec3& p) const {
     const Vec3 c(patella_centre_x, d.patella_y, d.patella_z);
     return smax(ellipsoid(p, c, d.patella_semi), back_at(p.y(), p.z()) - p.x(), mm(2.0));
+  }
+
+  // --- menisci ---------------------------------------------------------------
+  const Dimensions::Meniscus& meniscus_dims(KneeMeniscus w) const {
+    return w == KneeMeniscus::kMedial ? d.medial_meniscus : d.lateral_meniscus;
+  }
+  double meniscus_centre_z(KneeMeniscus w) const {
+    return w == KneeMeniscus::kMedial ? d.medial.centre_z : d.lateral.centre_z;
+  }
+  void meniscus_box(KneeMeniscus w, Vec3* lo, Vec3* hi) const {
+    const auto& md = meniscus_dims(w);
+    const double zc = meniscus_centre_z(w);
+    const double yc = plateau_height(d.plateau_centre_x, zc);
+    *lo = Vec3(d.plateau_centre_x - md.semi_ap - mm(3.0), yc - mm(8.0), zc - md.semi_ml - mm(3.0));
+    *hi = Vec3(d.plateau_centre_x + md.semi_ap + mm(3.0), yc + mm(14.0), zc + md.semi_ml + mm(3.0));
+  }
+  void build_meniscus_tables() const {
+    for (KneeMeniscus w : {KneeMeniscus::kMedial, KneeMeniscus::kLateral}) {
+      MeniscusTable& t = meniscus_table[w == KneeMeniscus::kMedial ? 0 : 1];
+      Vec3 lo, hi;
+      meniscus_box(w, &lo, &hi);
+      t.x0 = lo.x();
+      t.z0 = lo.z();
+      t.nx = static_cast<int>(std::ceil((hi.x() - lo.x()) / t.h)) + 1;
+      t.nz = static_cast<int>(std::ceil((hi.z() - lo.z()) / t.h)) + 1;
+      t.low.assign(static_cast<size_t>(t.nx) * t.nz, 0.0);
+      t.limit.assign(t.low.size(), 1e9);
+      const KneeCartilage tc = w == KneeMeniscus::kMedial ? KneeCartilage::kTibiaMedial : KneeCartilage::kTibiaLateral;
+      for (int i = 0; i < t.nx; ++i)
+        for (int k = 0; k < t.nz; ++k) {
+          const double x = t.x0 + i * t.h, z = t.z0 + k * t.h;
+          const size_t idx = static_cast<size_t>(i) * t.nz + k;
+          // Lower face: the tibial bone surface plus the tibial cartilage
+          // (faded to 0 over the last 1 mm inside its outline).
+          const Vec3 q(x, plateau_height(x, z), z);
+          const Vec3 n = gradient(KneeBone::kTibia, q).normalized();
+          const double r = region(tc, q, n);
+          const double tcart = r > 0.0 ? thickness(tc, q, n) * smoothstep(r / mm(1.0)) : 0.0;
+          t.low[idx] = q.y() + tcart;
+          // Upper limit: the lowest femoral bone point above (x, z), found by
+          // marching down from the flexion axis height, minus the femoral
+          // cartilage there (vertical extent t / |n_y|) and a clearance.
+          double y = mm(0.0);
+          const double step = mm(0.25);
+          double lowest_inside = 1e9;
+          bool prev_inside = femur(Vec3(x, y, z)) < 0.0;
+          for (; y > t.low[idx]; y -= step) {
+            const bool inside = femur(Vec3(x, y - step, z)) < 0.0;
+            if (prev_inside && !inside) {
+              const Vec3 b = bisect([&](const Vec3& p) { return femur(p); }, Vec3(x, y, z), Vec3(x, y - step, z));
+              lowest_inside = b.y();
+            }
+            prev_inside = inside;
+          }
+          if (lowest_inside < 1e8) {
+            const Vec3 b(x, lowest_inside, z);
+            const Vec3 nf = gradient(KneeBone::kFemur, b).normalized();
+            const double tf = region(KneeCartilage::kFemur, b, nf) > 0.0 ? thickness(KneeCartilage::kFemur, b, nf) : 0.0;
+            t.limit[idx] = lowest_inside - tf / std::max(std::abs(nf.y()), 0.3) - d.meniscus_femur_clearance;
+          }
+        }
+    }
+  }
+  double meniscus(KneeMeniscus w, const Vec3& p) const {
+    std::call_once(meniscus_once, [this] { build_meniscus_tables(); });
+    const MeniscusTable& t = meniscus_table[w == KneeMeniscus::kMedial ? 0 : 1];
+    const auto& md = meniscus_dims(w);
+    const double zc = meniscus_centre_z(w);
+    const double dx = p.x() - d.plateau_centre_x, dz = p.z() - zc;
+    const double ai = md.semi_ap - md.rim, bi = md.semi_ml - md.rim;
+    const double ro = std::sqrt(std::pow(dx / md.semi_ap, 2) + std::pow(dz / md.semi_ml, 2));
+    const double ri = std::sqrt(std::pow(dx / ai, 2) + std::pow(dz / bi, 2));
+    double f = std::max((ro - 1.0) * md.semi_ml, (1.0 - ri) * bi);
+    // The C opens towards the intercondylar area (+z for the medial, -z for
+    // the lateral meniscus) between the horns.
+    const double toward = w == KneeMeniscus::kMedial ? dz : -dz;
+    f = std::max(f, std::min(0.5 * md.horn_gap - std::abs(dx), toward));
+    // Wedge: radial position s from the inner (0) to the outer (1) outline.
+    double s = 0.0;
+    if (ri > 1e-9 && ro > 1e-9) s = (1.0 - 1.0 / ri) / (1.0 / ro - 1.0 / ri);
+    s = std::clamp(s, 0.0, 1.0);
+    const double low = t.at(t.low, p.x(), p.z());
+    const double top = std::min(low + d.meniscus_inner_height + (d.meniscus_peripheral_height - d.meniscus_inner_height) * s,
+                                t.at(t.limit, p.x(), p.z()));
+    return std::max(f, std::max(low - p.y(), p.y() - top));
   }
 
   double implicit(KneeBone b, const Vec3& p) const {
@@ -487,6 +607,9 @@ std::string cartilage_file_stem(KneeCartilage c) {
   }
   return "";
 }
+std::string meniscus_file_stem(KneeMeniscus m) {
+  return m == KneeMeniscus::kMedial ? "medial_meniscus" : "lateral_meniscus";
+}
 KneeBone cartilage_bone(KneeCartilage c) {
   switch (c) {
     case KneeCartilage::kFemur: return KneeBone::kFemur;
@@ -504,6 +627,9 @@ const TriangleMesh& KneeGeometry::bone(KneeBone b) const {
     case KneeBone::kPatella: return patella_bone;
   }
   return femur_bone;
+}
+const TriangleMesh& KneeGeometry::meniscus(KneeMeniscus m) const {
+  return m == KneeMeniscus::kMedial ? medial_meniscus : lateral_meniscus;
 }
 const KneeCartilagePatch& KneeGeometry::patch(KneeCartilage c) const {
   for (const auto& p : cartilage)
@@ -526,6 +652,8 @@ double ParametricKnee::implicit(KneeBone bone, const Vec3& p) const { return imp
 Vec3 ParametricKnee::normal(KneeBone bone, const Vec3& p) const {
   return impl_->gradient(bone, p).normalized();
 }
+double ParametricKnee::meniscus_implicit(KneeMeniscus m, const Vec3& p) const { return impl_->meniscus(m, p); }
+void ParametricKnee::meniscus_bounds(KneeMeniscus m, Vec3* lo, Vec3* hi) const { impl_->meniscus_box(m, lo, hi); }
 double ParametricKnee::region(KneeCartilage c, const Vec3& p, const Vec3& n) const {
   return impl_->region(c, p, n);
 }
@@ -982,6 +1110,18 @@ KneeGeometry ParametricKnee::generate(const KneeGeneratorOptions& options) const
     patch.bone_points = bp;
     g.cartilage.push_back(std::move(patch));
   }
+  for (KneeMeniscus w : {KneeMeniscus::kMedial, KneeMeniscus::kLateral}) {
+    Vec3 lo, hi;
+    m->meniscus_box(w, &lo, &hi);
+    auto f = [&](const Vec3& p) { return m->meniscus(w, p); };
+    // A finer grid than the bones' resolves the 1 mm inner edge.
+    TriangleMesh raw = contour_implicit(f, lo, hi, std::min(h, mm(0.5)), meniscus_file_stem(w));
+    TriangleMesh men = largest_component(common::isotropic_remesh(raw, ro));
+    project_onto_implicit(f, 0.25 * h, &men);
+    men.name = meniscus_file_stem(w);
+    renumber_by_first_use(&men);
+    (w == KneeMeniscus::kMedial ? g.medial_meniscus : g.lateral_meniscus) = std::move(men);
+  }
   g.landmarks = shape.landmarks();
   return g;
 }
@@ -1033,6 +1173,9 @@ void write_knee_geometry(const KneeGeometry& g, const KneeGeneratorOptions& opti
     }
     if (!out) throw common::InputError(csv, 0, "write failed");
   }
+  for (KneeMeniscus w : {KneeMeniscus::kMedial, KneeMeniscus::kLateral})
+    if (g.meniscus(w).num_triangles() > 0)
+      common::write_stl(g.meniscus(w), (fs::path(dir) / (meniscus_file_stem(w) + ".stl")).string());
   const std::string yaml = (fs::path(dir) / "landmarks.yaml").string();
   std::ofstream y(yaml);
   if (!y) throw common::InputError(yaml, 0, "cannot open for writing");

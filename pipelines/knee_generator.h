@@ -42,6 +42,9 @@ namespace arthrosim::pipelines {
 
 /// The three bones of the model.
 enum class KneeBone { kFemur, kTibia, kPatella };
+/// The two menisci: wedge-shaped C-rings of fibrocartilage on the tibial
+/// plateau (dimensions and sources in docs/knee_geometry.md).
+enum class KneeMeniscus { kMedial, kLateral };
 /// The four cartilage patches of the model.
 enum class KneeCartilage { kFemur, kTibiaMedial, kTibiaLateral, kPatella };
 
@@ -52,6 +55,9 @@ std::string bone_file_stem(KneeBone bone);
 std::string cartilage_file_stem(KneeCartilage cartilage);
 /// The bone a cartilage lies on.
 KneeBone cartilage_bone(KneeCartilage cartilage);
+/// File stem of a meniscus ("medial_meniscus", "lateral_meniscus"). A model
+/// folder names a meniscus `<name>_meniscus.{stl,obj,ply}` (closed surface).
+std::string meniscus_file_stem(KneeMeniscus meniscus);
 
 struct KneeGeneratorOptions {
   /// Target edge length of every output mesh [m]. Range 0.5e-3 .. 6e-3
@@ -101,11 +107,14 @@ struct KneeGeometry {
   common::TriangleMesh tibia_bone;    ///< closed, outward oriented [m]
   common::TriangleMesh patella_bone;  ///< closed, outward oriented [m]
   std::vector<KneeCartilagePatch> cartilage;  ///< femur, tibia medial, tibia lateral, patella
+  common::TriangleMesh medial_meniscus;   ///< closed, outward oriented [m]
+  common::TriangleMesh lateral_meniscus;  ///< closed, outward oriented [m]
   std::vector<KneeLandmark> landmarks;
   double contact_overlap = 0.0;  ///< designed overlap the shape was fitted with [m]
 
   const common::TriangleMesh& bone(KneeBone b) const;
   const KneeCartilagePatch& patch(KneeCartilage c) const;
+  const common::TriangleMesh& meniscus(KneeMeniscus m) const;
 };
 
 /// The analytic shape: bone implicit functions, cartilage region and thickness
@@ -134,6 +143,14 @@ class ParametricKnee {
   double thickness(KneeCartilage cartilage, const common::Vec3& p_F, const common::Vec3& n_F) const;
   /// Axis-aligned box [m] enclosing a bone, with a margin of a few mm.
   void bounds(KneeBone bone, common::Vec3* lo, common::Vec3* hi) const;
+  /// Implicit function of a meniscus (negative inside, roughly the signed
+  /// distance near the surface) [m]. Its lower face follows the tibial
+  /// articular surface (cartilage where there is cartilage, bone elsewhere),
+  /// its upper face rises linearly from the thin inner edge to the peripheral
+  /// height and stays clear of the femoral articular surface above.
+  double meniscus_implicit(KneeMeniscus meniscus, const common::Vec3& p_F) const;
+  /// Axis-aligned box [m] enclosing a meniscus, with a margin of a few mm.
+  void meniscus_bounds(KneeMeniscus meniscus, common::Vec3* lo, common::Vec3* hi) const;
   /// Landmarks (femur, tibia, patella, limb) in the model frame.
   std::vector<KneeLandmark> landmarks() const;
 
@@ -178,9 +195,10 @@ SurfaceOverlap surface_overlap(const common::TriangleMesh& a, const common::Tria
                                double search_depth = 3e-3);
 
 /// Writes a generated model to `dir` (created if missing): one binary STL per
-/// surface in millimetres (file stems above), <cartilage>_thickness.csv (one
-/// row per vertex of the STL after welding: x_mm,y_mm,z_mm,thickness_mm) and
-/// landmarks.yaml (metres, model frame).
+/// surface in millimetres (file stems above; the menisci as
+/// medial_meniscus.stl and lateral_meniscus.stl), <cartilage>_thickness.csv
+/// (one row per vertex of the STL after welding: x_mm,y_mm,z_mm,thickness_mm)
+/// and landmarks.yaml (metres, model frame).
 void write_knee_geometry(const KneeGeometry& geometry, const KneeGeneratorOptions& options,
                          const std::string& dir);
 

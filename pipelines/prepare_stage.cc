@@ -20,6 +20,11 @@ void PrepareOptions::declare(common::OptionVisitor& v) {
   v.number("max_cast_distance_mm", max_cast_distance, Unit::kMillimetre, {1, 50},
            "longest ray cast from cartilage to bone when measuring thickness");
   v.integer("remesh_iterations", remesh_iterations, {1, 20}, "isotropic remeshing iterations");
+  v.number("min_thickness_mm", min_thickness, Unit::kMillimetre, {0, 2},
+           "thickness floor: measured cartilage thickness below it (a rim on the bone, a point inside the bone) is "
+           "raised to it and counted");
+  v.number("max_triangles", max_triangles, Unit::kNone, {100, 1e9},
+           "refuse a cartilage surface whose remesh is estimated to exceed this many triangles");
 }
 
 PrepareOptions prepare_from_scene(const common::Scene& scene) {

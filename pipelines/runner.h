@@ -11,7 +11,7 @@
 // and which scene outputs it provides; a run is planned when the scene asks
 // for one of its outputs or a planned run reads one of its files.
 //
-// Effects: a comak or surface stage whose output's effect ledger holds a term
+// Effects: a comak, surface or biphasic stage whose output's effect ledger holds a term
 // the scene did not ask for fails (and is not stamped), so "only the effects a
 // scene calls for" is checked on every run, not only in tests.
 //

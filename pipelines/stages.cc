@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "common/error.h"
+#include "pipelines/biphasic_stage.h"
 #include "pipelines/comak_stage.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/prepare.h"
@@ -16,6 +17,7 @@ const std::vector<StageDescriptor>& stages() {
       prepare_stage_descriptor(),
       comak_stage_descriptor(),
       surface_stage_descriptor(),
+      biphasic_stage_descriptor(),
       post_stage_descriptor(),
   };
   return kStages;
@@ -57,6 +59,11 @@ void SceneInputs::declare(common::OptionVisitor& v) {
   v.text("description", description, "", "free text shown when the scene runs");
   v.path("model", model, "the knee model: a folder of bone and cartilage surface meshes, or a URDF file").required();
   v.path("trial", trial, "walking trial (folder or file) for the musculoskeletal stage; needed when that stage runs");
+  v.number("trial.start_s", trial_start_s, common::Unit::kSecond, {-1e6, 1e6},
+           "first time of the trial that the musculoskeletal stage solves (the whole trial is still filtered and "
+           "differentiated); absent: the trial's first time");
+  v.number("trial.end_s", trial_end_s, common::Unit::kSecond, {-1e6, 1e6},
+           "last time of the trial that the musculoskeletal stage solves; absent: the trial's last time");
   static const std::string choices = output_choices();
   static const std::string doc = "what to produce: " + output_list() +
                                  " (surface: every scenario); the stages these need run, nothing else";

@@ -127,6 +127,9 @@ struct SceneInputs {
   std::string description;
   std::filesystem::path model;  ///< resolved, absolute
   std::filesystem::path trial;  ///< resolved, absolute; empty = none
+  /// The trial's window that the musculoskeletal stage solves (SI seconds);
+  /// absent: the trial's first / last time.
+  std::optional<double> trial_start_s, trial_end_s;
   std::vector<std::string> outputs;
   void declare(common::OptionVisitor& v);
 };

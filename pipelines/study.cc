@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include "biphasic/output_file.h"
 #include "common/error.h"
 #include "common/hashing.h"
 #include "common/hdf5.h"
@@ -296,6 +297,22 @@ std::vector<Metric> surface_metrics(const fs::path& file, const fs::path& ref_fi
 namespace {
 
 }  // namespace
+
+std::vector<Metric> biphasic_metrics(const fs::path& file, const fs::path& ref_file) {
+  std::vector<Metric> out;
+  for (const biphasic::OutputDifference& d : biphasic::compare_outputs(file.string(), ref_file.string())) {
+    Metric m;
+    m.name = d.metric + "[" + d.layer + "]";
+    m.description = "max over the common steps of |x - x_ref| / max |x_ref|, x the " + d.metric + " series of layer " +
+                    d.layer;
+    m.error = d.relative;
+    m.output = d.metric == "fluid_load_support" ? d.peak : d.metric == "contact_area" ? d.peak * 1e6 : d.peak * 1e-6;
+    m.output_unit = d.metric == "fluid_load_support" ? "" : d.metric == "contact_area" ? "mm^2" : "MPa";
+    m.note = std::to_string(d.common_times) + " common steps; output: the series' peak";
+    out.push_back(m);
+  }
+  return out;
+}
 
 std::vector<Metric> post_metrics(const fs::path& file, const fs::path& ref_file) {
   const std::vector<PostScenarioSummary> a = read_post_summary(file);

@@ -18,6 +18,10 @@
 //                    nodes, per surface; contact force: like stage 1 from
 //                    /contact/tibiofemoral/force of the surface output when
 //                    the file has it
+//   biphasic         per layer the series of the maximum tensile stress on the
+//                    contact surface, the maximum interface shear stress, the
+//                    fluid load support, the contact area and the largest fluid
+//                    pressure: max |x - x_ref| / max |x_ref| at common steps
 //   post             mean direction angle per scenario (summary.json):
 //                    |m - m_ref| / m_ref
 //
@@ -177,6 +181,14 @@ std::vector<Metric> comak_metrics(const std::filesystem::path& file,
 /// /contact/tibiofemoral/force).
 std::vector<Metric> surface_metrics(const std::filesystem::path& file,
                                     const std::filesystem::path& ref_file);
+/// Key outputs of the biphasic stage (biphasic.h5, docs/biphasic.md):
+/// "<series>[<layer>]" for the maximum tensile stress on the contact surface,
+/// the maximum interface shear stress, the fluid load support, the contact
+/// area and the largest fluid pressure of every layer: max over the common
+/// step times of |x - x_ref| divided by max |x_ref|
+/// (biphasic::compare_outputs).
+std::vector<Metric> biphasic_metrics(const std::filesystem::path& file,
+                                     const std::filesystem::path& ref_file);
 /// Key output of post (summary.json, docs/post.md): "mean_angle[<scenario>]"
 /// per scenario of the reference.
 std::vector<Metric> post_metrics(const std::filesystem::path& file,

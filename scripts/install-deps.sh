@@ -8,7 +8,10 @@ PACKAGES=(
   coinor-libipopt-dev libeigen3-dev liburdfdom-dev libtinyxml2-dev libcgal-dev
   libsuitesparse-dev libopenblas-dev libhdf5-dev libyaml-cpp-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  hdf5-tools python3 python3-numpy python3-h5py
+  hdf5-tools python3 python3-numpy python3-h5py python3-matplotlib
+  # Sanitizer suite and fuzzing (scripts/sanitize.sh): clang with libFuzzer
+  # and the sanitizer runtimes, its OpenMP, the lld linker, llvm-symbolizer.
+  clang-14 libclang-rt-14-dev libomp-14-dev lld-14 llvm-14
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -9,8 +9,10 @@
 #include <cstdio>
 #include <exception>
 #include <iostream>
+#include <limits>
 #include <string>
 
+#include "common/error.h"
 #include "common/log.h"
 #include "musculoskeletal/comak.h"
 #include "pipelines/apps/name_value.h"
@@ -46,12 +48,22 @@ int main(int argc, char** argv) {
   app.add_option("--first-frame", first, "first trial frame (0-based)")->capture_default_str();
   app.add_option("--last-frame", last, "last trial frame (-1 = the last)")->capture_default_str();
   app.add_option("--stride", stride, "use every stride-th frame")->capture_default_str();
+  double start_time = std::numeric_limits<double>::quiet_NaN(), end_time = start_time;
+  app.add_option("--start-time", start_time,
+                 "first time of the trial to solve [s] (the frames from the first at or after it; "
+                 "the whole trial is still filtered and differentiated; default: the scene's trial.start_s)");
+  app.add_option("--end-time", end_time,
+                 "last time of the trial to solve [s] (frames at or before it; default: the scene's trial.end_s)");
   app.add_option("--tolerance", o.force_tolerance,
                  "equilibrium tolerance of the force rows [N]; moment rows x length scale 0.03 m")
       ->capture_default_str();
   app.add_option("--ipopt-tolerance", o.ipopt_tolerance, "Ipopt 'tol' (scaled NLP; default: comak.ipopt_tolerance)");
   app.add_option("--max-iterations", o.max_iterations,
                  "Ipopt iteration limit per attempt (default: comak.ipopt_max_iterations)");
+  app.add_option("--acceptable-iterations", o.acceptable_iterations,
+                 "consecutive iterates at Ipopt's acceptable level that end a solve as 'acceptable' "
+                 "(a larger value keeps iterating towards --ipopt-tolerance; default: "
+                 "comak.ipopt_acceptable_iterations)");
   app.add_option("--activation-min", o.activation_min,
                  "lower bound of the activations, 0..1 (default: comak.activation_min)");
   std::vector<std::string> weight_args;
@@ -59,9 +71,13 @@ int main(int argc, char** argv) {
                  "objective weight w_i of a muscle, name=value (> 0; default 1), repeatable");
   app.add_flag("--reserve-actuators", o.reserve_actuators,
                "reserve actuators on the 11 secondary coordinates (heavy weight, reported)");
-  app.add_flag("--ankle-equilibrium", o.ankle_equilibrium,
-               "also balance the ankle moment of the foot (13th row): adds a soleus and a tibialis "
-               "anterior stand-in to the model (docs/comak.md)");
+  CLI::Option* ankle_flag = app.add_flag("--ankle-equilibrium,!--no-ankle-equilibrium", o.ankle_equilibrium,
+               "also balance the ankle moment of the foot (one more row): adds a soleus and a tibialis "
+               "anterior stand-in to the generated knee; a model with its own leg uses its own ankle "
+               "muscles (docs/comak.md)");
+  CLI::Option* hip_flag = app.add_flag("--hip-equilibrium,!--no-hip-equilibrium", o.hip_equilibrium,
+               "also balance the leg about the hip's three axes (3 rows; a model with its own leg and the "
+               "hip muscles: arthrosim import-osim --muscles leg; docs/comak.md)");
   app.add_flag("--body-inertia", o.body_inertia,
                "weight and d'Alembert forces of the tibia and patella bodies from their URDF "
                "inertials, moving with the model (the shank's terms leave the external load; "
@@ -70,6 +86,10 @@ int main(int argc, char** argv) {
                "muscle force a F_max f_L(l~) (Thelen 2003 active force-length; every muscle of the "
                "model must give optimal_fiber_length and tendon_slack_length, docs/model_format.md)");
   bool single_start = false;
+  bool no_damping = false;
+  app.add_flag("--no-coordinate-damping", no_damping,
+               "leave the model's coordinate dampers (SpringGeneralizedForce viscosity on the secondary "
+               "coordinates' frame-to-frame speed) out: each frame static (docs/comak.md)");
   app.add_flag("--single-start", single_start,
                "solve each frame from the previous frame's solution only (no second start from the "
                "passive settle; about half the time, may keep a worse local optimum)");
@@ -102,7 +122,11 @@ int main(int argc, char** argv) {
       "      # ankle moment balanced too (gastrocnemii, soleus, tibialis anterior)\n"
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --no-move-limits \\\n"
       "      --trial data/trials/synthetic_gait --out comak_plain.h5 -v\n"
-      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n");
+      "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n"
+      "  arthrosim-comak --model data/models/lenhart2015 --scene data/scenes/lenhart2015_gait.yaml \\\n"
+      "      --trial data/trials/lenhart2015_overground17 --out lenhart2015.h5 -v\n"
+      "      # the real subject (OpenSim-JAM's lenhart2015, walking window 1.21-2.32 s from the scene);\n"
+      "      # then scripts/compare_opensim_jam.py lenhart2015.h5 --plot lenhart2015.png\n");
   CLI11_PARSE(app, argc, argv);
   common::set_log_program("arthrosim-comak");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
@@ -119,7 +143,9 @@ int main(int argc, char** argv) {
     if (app.count("--max-iterations")) so.max_iterations = o.max_iterations;
     if (app.count("--activation-min")) so.activation_min = o.activation_min;
     if (app.count("--reserve-actuators")) so.reserve_actuators = o.reserve_actuators;
-    if (app.count("--ankle-equilibrium")) so.ankle_equilibrium = o.ankle_equilibrium;
+    if (app.count("--acceptable-iterations")) so.acceptable_iterations = o.acceptable_iterations;
+    if (ankle_flag->count()) so.ankle_equilibrium = o.ankle_equilibrium;
+    if (hip_flag->count()) so.hip_equilibrium = o.hip_equilibrium;
     if (app.count("--body-inertia")) so.body_inertia = o.body_inertia;
     if (app.count("--force-length")) so.forces.force_length = o.forces.force_length;
     if (app.count("--retries")) so.retries = o.retries;
@@ -127,6 +153,16 @@ int main(int argc, char** argv) {
     if (app.count("--lowpass-hz")) c.options.trial.lowpass.cutoff_hz = lowpass_hz;
     if (single_start) so.second_start = false;
     if (no_move_limits) so.move_limits_first = false;
+    if (no_damping) so.coordinate_damping = false;
+    // The trial window: explicit flags win over the scene's trial.start_s/end_s.
+    const bool frame_flags = app.count("--first-frame") || app.count("--last-frame");
+    const bool time_flags = app.count("--start-time") || app.count("--end-time");
+    if (frame_flags && time_flags)
+      throw common::InputError("arthrosim-comak: give --start-time/--end-time or --first-frame/--last-frame, "
+                               "not both");
+    if (frame_flags) c.options.start_time_s = c.options.end_time_s = std::numeric_limits<double>::quiet_NaN();
+    if (app.count("--start-time")) c.options.start_time_s = start_time;
+    if (app.count("--end-time")) c.options.end_time_s = end_time;
     for (const std::string& wa : weight_args) {
       const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
       so.muscle_weights[name] = w;  // name and range checked by ComakProblem

@@ -17,6 +17,7 @@
 #include "common/scene.h"
 #include "common/scene_edit.h"
 #include "common/version.h"
+#include "pipelines/apps/import_osim_command.h"
 #include "pipelines/apps/name_value.h"
 #include "pipelines/runner.h"
 #include "pipelines/stages.h"
@@ -53,6 +54,9 @@ Sample runs (from the repository root, after scripts/build.sh):
       the changed scene is written to OUT/scene_set.yaml and run from there)
   build/bin/arthrosim schema
       every scene key with its type, unit, default and range, and every effect
+  build/bin/arthrosim import-osim data/models/lenhart2015/source/lenhart2015.osim \
+      --geometry data/models/lenhart2015/Geometry --out out/lenhart2015
+      an OpenSim-JAM model into arthrosim's model format (docs/import.md)
   build/bin/arthrosim study accuracy data/studies/surface_edge_length.yaml \
       --vary prepare.edge_length_mm=3,2.5,2,1.5 --out out/study_surface
       what accuracy costs in time (see `arthrosim study accuracy --help`)
@@ -161,8 +165,12 @@ int main(int argc, char** argv) {
       ->allow_extra_args(false);
   accuracy->add_flag("--force", study_options.force, "rerun every stage of every setting");
 
+  pl::ImportOsimCommand import_osim;
+  pl::add_import_osim_command(app, import_osim);
+
   CLI11_PARSE(app, argc, argv);
 
+  if (import_osim.app->parsed()) return pl::run_import_osim_command(import_osim);
   if (accuracy->parsed()) {
     try {
       study_options.scene_file = study_scene;

@@ -14,10 +14,10 @@ namespace arthrosim::common {
 namespace {
 
 TEST(EffectVocabulary, IsTheScenesVocabulary) {
-  std::set<std::string> ms, surface;
+  std::set<std::string> ms, surface, biphasic;
   for (const EffectInfo& e : known_effects()) {
     EXPECT_FALSE(e.description.empty()) << e.name;
-    auto& set = e.stage == EffectStage::kMusculoskeletal ? ms : surface;
+    auto& set = e.stage == EffectStage::kMusculoskeletal ? ms : e.stage == EffectStage::kSurface ? surface : biphasic;
     EXPECT_TRUE(set.insert(std::string(e.name)).second) << "duplicate " << e.name;
     EXPECT_EQ(find_effect(e.name), &e);
   }
@@ -28,6 +28,7 @@ TEST(EffectVocabulary, IsTheScenesVocabulary) {
                                             "imposed_kinematics", "inertia", "mesh_contact",
                                             "fixed_nodes", "point_loads", "pressure",
                                             "prescribed_displacement"}));
+  EXPECT_EQ(biphasic, (std::set<std::string>{"biphasic_layers", "penetration_contact"}));
   EXPECT_EQ(find_effect("foundation_spring"), nullptr);
   EXPECT_EQ(effect_names(EffectStage::kMusculoskeletal),
             "ligaments, muscles, tibiofemoral_contact, patellofemoral_contact");

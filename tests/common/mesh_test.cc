@@ -105,6 +105,31 @@ TEST(Mesh, TopologyOfOpenSquare) {
   EXPECT_EQ(topo.triangle_neighbours(1, 2), 0);  // across (0,2)
 }
 
+TEST(Mesh, ConnectedComponentsAndSubmesh) {
+  // A tetrahedron (4 triangles) and a square (2 triangles) in one mesh, the
+  // square's triangles listed first; plus a triangle touching the square at
+  // one vertex only (not edge-connected: its own component).
+  const TriangleMesh tet = tetrahedron(), sq = unit_square();
+  TriangleMesh m;
+  m.V.resize(tet.num_vertices() + sq.num_vertices() + 2, 3);
+  m.V << sq.V, tet.V, Eigen::RowVector3d(2, 2, 0), Eigen::RowVector3d(2, 1, 0);
+  m.F.resize(sq.num_triangles() + tet.num_triangles() + 1, 3);
+  m.F << sq.F, (tet.F.array() + sq.num_vertices()).matrix(), Eigen::RowVector3i(2, 9, 8);
+  int count = 0;
+  const std::vector<int> c = connected_components(m, &count);
+  EXPECT_EQ(count, 3);
+  EXPECT_EQ(c, (std::vector<int>{0, 0, 1, 1, 1, 1, 2}));
+  const TriangleMesh t = submesh(m, {2, 3, 4, 5});
+  EXPECT_EQ(t.num_vertices(), 4);
+  EXPECT_EQ(t.num_triangles(), 4);
+  EXPECT_NEAR(surface_area(t), surface_area(tet), 1e-15);
+  // Vertices renumbered in order of first use, triangles kept in the order given.
+  const TriangleMesh one = submesh(m, {6});
+  EXPECT_EQ(one.F, (Triangles(1, 3) << 0, 1, 2).finished());
+  EXPECT_EQ(one.V.row(0), m.V.row(2));
+  EXPECT_THROW(submesh(m, {7}), InputError);
+}
+
 TEST(Mesh, TopologyRejectsOutOfRangeIndex) {
   TriangleMesh m = unit_square();
   m.F(1, 2) = 7;

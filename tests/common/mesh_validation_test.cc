@@ -167,6 +167,53 @@ TEST(MeshValidation, RepairWeldsTriangleSoupBackIntoTheClosedMesh) {
   EXPECT_EQ(repair(soup, exact).report.merged_vertices, 0);
 }
 
+// Vertex merging far from the origin (issue 30: coordinates beyond ~1e5 mm
+// overflowed the signed grid-cell arithmetic of the merge, undefined
+// behaviour that UBSan reports). The same soup shifted to 2e3 m (one
+// flipped exponent bit in a millimetre file), to 1e13 m (beyond the int64
+// range of cells of 1 nm), and with one vertex alone at 2e6 m, must weld
+// exactly as at the origin: merging compares true distances, so the cell
+// arithmetic decides only which candidates are compared.
+TEST(MeshValidation, RepairMergesVerticesFarFromTheOrigin) {
+  const TriangleMesh ref = sphere();
+  TriangleMesh soup;
+  soup.V.resize(3 * ref.num_triangles(), 3);
+  soup.F.resize(ref.num_triangles(), 3);
+  for (int t = 0; t < ref.num_triangles(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      soup.V.row(3 * t + k) = ref.V.row(ref.F(t, k));
+      soup.F(t, k) = 3 * t + k;
+    }
+  const int merged = 3 * ref.num_triangles() - ref.num_vertices();
+  for (const double shift : {0.0, 2e3, -2e3, 1e13}) {
+    SCOPED_TRACE("shift " + std::to_string(shift) + " m");
+    TriangleMesh m = soup;
+    m.V.col(0).array() += shift;
+    // Merge tolerance 1 nm is below the double spacing at 1e13 m (2 mm):
+    // only exact duplicates can merge there, which is all a soup has.
+    const RepairResult r = repair(m);
+    EXPECT_EQ(r.report.merged_vertices, merged);
+    EXPECT_EQ(r.mesh.num_vertices(), ref.num_vertices());
+  }
+  // One corrupted vertex far away (a separate triangle): the rest still welds.
+  TriangleMesh far = soup;
+  const int n = far.num_vertices();
+  far.V.conservativeResize(n + 3, 3);
+  far.V.row(n) << 2e6, 0, 0;
+  far.V.row(n + 1) << 2e6, 1e-3, 0;
+  far.V.row(n + 2) << 2e6, 0, 1e-3;
+  far.F.conservativeResize(far.num_triangles() + 1, 3);
+  far.F.row(far.num_triangles() - 1) << n, n + 1, n + 2;
+  const RepairResult r = repair(far);
+  EXPECT_EQ(r.report.merged_vertices, merged);
+  EXPECT_EQ(r.mesh.num_vertices(), ref.num_vertices() + 3);
+  // Coordinates near the largest double: no overflow, nothing merged wrongly.
+  TriangleMesh huge = soup;
+  huge.V.row(0) << 1.7e308, -1.7e308, 1e300;
+  const RepairResult h = repair(huge);
+  EXPECT_EQ(h.report.merged_vertices, merged - 1);  // soup vertex 0 no longer duplicates its twins
+}
+
 TEST(MeshValidation, RepairOrientsClosedComponentsOutward) {
   const TriangleMesh ref = sphere();
   std::mt19937_64 rng(2);

@@ -200,6 +200,28 @@ TEST(Remesh, UnprotectedBoundaryStaysOnTheOutline) {
   EXPECT_LT(worst, 1e-15);
 }
 
+// The triangle-count estimate made before remeshing (prepare refuses beyond
+// a limit): within 0.7-1.6 x the real count on the patch and the sphere at
+// two targets; it grows as 1/L^2.
+TEST(Remesh, TriangleEstimateIsCloseToTheRealCount) {
+  for (const TriangleMesh& in : {coarse_patch(), testing::icosphere(2, 0.03)})
+    for (const double L : {2e-3, 1e-3}) {
+      RemeshOptions opt;
+      opt.target_edge_length = L;
+      const double estimate = estimate_remesh_triangles(in, L);
+      const int real = isotropic_remesh(in, opt).num_triangles();
+      std::printf("[estimate] %d input triangles at %.0f mm: estimate %.0f, real %d (ratio %.2f)\n",
+                  in.num_triangles(), L * 1e3, estimate, real, real / estimate);
+      EXPECT_GT(real, 0.7 * estimate);
+      EXPECT_LT(real, 1.6 * estimate);
+    }
+  // A mesh with one far vertex (2e3 m away): the estimate is beyond the
+  // default limit of prepare (1e6), computed without remeshing.
+  TriangleMesh far = coarse_patch();
+  far.V(0, 0) = 2e3;
+  EXPECT_GT(estimate_remesh_triangles(far, 1e-3), 1e6);
+}
+
 TEST(Remesh, RejectsBadInputWithReasons) {
   RemeshOptions opt;
   opt.target_edge_length = 0.0;

@@ -430,6 +430,35 @@ TEST(Spatial, EmptyAndSingleTriangleMeshes) {
   EXPECT_TRUE(tree.triangles_in_box(Vec3(0.6, 0.6, -0.1), Vec3(0.9, 0.9, 0.1)).empty());  // box beyond the hypotenuse
 }
 
+// Inside/outside of a closed mesh: points on a line through a perturbed
+// sphere against the radial distance, including points whose test ray would
+// pass exactly through vertices (the sphere's own vertices scaled in/out);
+// an open mesh is refused.
+TEST(Spatial, ClosedSurfaceSideMatchesTheSphere) {
+  const TriangleMesh sphere = testing::icosphere(3, 0.02);  // inscribed: facets within 0.5 mm of r
+  const ClosedSurfaceSide side(sphere);
+  for (double r = 0.0; r < 0.03; r += 0.0007) {
+    const Vec3 p(r * 0.6, r * -0.48, r * 0.64);
+    const ClosedSurfaceSide::Side s = side.side(p);
+    if (r < 0.019) EXPECT_EQ(s, ClosedSurfaceSide::Side::kInside) << r;
+    if (r > 0.0201) EXPECT_EQ(s, ClosedSurfaceSide::Side::kOutside) << r;
+  }
+  for (int v = 0; v < sphere.num_vertices(); v += 17) {
+    EXPECT_TRUE(side.inside(0.9 * sphere.vertex(v)));
+    EXPECT_FALSE(side.inside(1.1 * sphere.vertex(v)));
+    EXPECT_EQ(side.side(sphere.vertex(v)), ClosedSurfaceSide::Side::kOnBoundary);
+  }
+  TriangleMesh open = sphere;
+  open.F.conservativeResize(open.num_triangles() - 1, 3);
+  open.name = "open.stl";
+  try {
+    ClosedSurfaceSide bad(open);
+    ADD_FAILURE();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("open.stl"), std::string::npos);
+  }
+}
+
 TEST(Spatial, TreeIsMovable) {
   TriangleTree a(test_sphere());
   TriangleTree b = std::move(a);

@@ -469,9 +469,12 @@ TEST(Comak, SceneKeysAreDeclaredByTheSolverOptions) {
   const msk::ComakOptions o;
   EXPECT_EQ(std::stod(spec("ipopt_tolerance")->default_value), o.ipopt_tolerance);
   EXPECT_EQ(std::stoi(spec("ipopt_max_iterations")->default_value), o.max_iterations);
+  EXPECT_EQ(std::stoi(spec("ipopt_acceptable_iterations")->default_value), o.acceptable_iterations);
   EXPECT_EQ(std::stod(spec("activation_min")->default_value), o.activation_min);
   EXPECT_EQ(spec("reserve_actuators")->default_value == "true", o.reserve_actuators);
   EXPECT_EQ(spec("ankle_equilibrium")->default_value == "true", o.ankle_equilibrium);
+  EXPECT_EQ(spec("hip_equilibrium")->default_value == "true", o.hip_equilibrium);
+  EXPECT_EQ(spec("coordinate_damping")->default_value == "true", o.coordinate_damping);
   EXPECT_EQ(spec("body_inertia")->default_value == "true", o.body_inertia);
   EXPECT_EQ(spec("second_start")->default_value == "true", o.second_start);
 }

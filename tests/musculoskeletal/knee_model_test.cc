@@ -17,6 +17,7 @@
 
 #include "common/error.h"
 #include "common/hdf5.h"
+#include "common/mesh.h"
 #include "musculoskeletal/model_io.h"
 
 namespace msk = arthrosim::musculoskeletal;
@@ -161,4 +162,45 @@ TEST(KneeModel, PreparedSurfacesReplaceTheContactMeshes) {
   const std::string e2 = message_of(moved);
   EXPECT_NE(e2.find("prepared_moved.h5"), std::string::npos) << e2;
   EXPECT_NE(e2.find("5 mm"), std::string::npos) << e2;
+  // A model surface whose mesh prepare split into compartments (two prepared
+  // surfaces from one source file): the union replaces it. Here the femoral
+  // cartilage's triangles are written as two parts split at x = 0, each with
+  // its own vertices; the model gets all triangles back, same area. (Before,
+  // only the part listed last was taken; here the centroid check refused it.)
+  {
+    const auto* femur = &m0.contacts[0].target();
+    const std::string path = (dir / "prepared_split.h5").string();
+    arthrosim::common::H5File f(path, arthrosim::common::H5File::Mode::kTruncate);
+    std::vector<std::string> names;
+    std::set<std::string> done;
+    for (const auto& c : m0.contacts)
+      for (const auto* s : {&c.casting(), &c.target()}) {
+        if (!done.insert(s->name).second) continue;
+        std::vector<std::vector<int>> parts(1);
+        if (s == femur) parts.assign(2, {});
+        for (int t = 0; t < s->mesh.num_triangles(); ++t)
+          parts[s == femur && s->mesh.V(s->mesh.F(t, 0), 0) > 0 ? 1 : 0].push_back(t);
+        for (size_t p = 0; p < parts.size(); ++p) {
+          const std::string n = s->name.substr(0, s->name.find("_cartilage")) + (parts.size() > 1 ? "_part" + std::to_string(p) : "");
+          names.push_back(n);
+          const std::string g = "/surfaces/" + n;
+          arthrosim::common::TriangleMesh sub = arthrosim::common::submesh(s->mesh, parts[p]);
+          for (int i = 0; i < sub.num_vertices(); ++i)
+            sub.V.row(i) = (s->X_BM.inverse() * Eigen::Vector3d(sub.V.row(i).transpose())).transpose();
+          f.create_group(g + "/triangles");
+          f.set_attribute(g, "source_file", fs::path(s->mesh_file).filename().string());
+          f.write(g + "/triangles/vertices", Eigen::MatrixXd(sub.V));
+          f.write(g + "/triangles/faces", Eigen::MatrixXi(sub.F));
+          f.write(g + "/triangles/thickness", Eigen::VectorXd::Constant(sub.num_vertices(), 2e-3));
+        }
+      }
+    std::sort(names.begin(), names.end());
+    f.write("/surfaces/names", names);
+    f.flush();
+    auto ms = msk::load_model(model_path("knee_coarse.urdf"));
+    msk::use_prepared_surfaces(ms, path);
+    const auto& a = ms.contacts[0].target();
+    EXPECT_EQ(a.mesh.num_triangles(), femur->mesh.num_triangles());
+    EXPECT_NEAR(arthrosim::common::surface_area(a.mesh), arthrosim::common::surface_area(femur->mesh), 1e-12);
+  }
 }

@@ -202,7 +202,7 @@ TEST(ModelIo, BadFilesGiveFileLineErrors) {
       {"<arthrosim:ligament name=\"X\" stiffness=\"500\" reference_strain=\"0\">\n"
        "<bundle wrap=\"nope\"><point body=\"femur\" xyz=\"0 0 0\"/><point body=\"tibia\" xyz=\"0 -0.05 0\"/></bundle>\n"
        "</arthrosim:ligament>\n",
-       "unknown wrap cylinder 'nope'"},
+       "unknown wrap object 'nope'"},
   };
   for (const auto& c : cases) {
     const std::string xml = model_xml(c.extra);

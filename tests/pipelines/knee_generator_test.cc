@@ -125,7 +125,7 @@ TEST(KneeGenerator, SameOptionsGiveIdenticalFiles) {
     EXPECT_EQ(slurp(e.path().string()), slurp(other)) << e.path().filename();
     ++files;
   }
-  EXPECT_EQ(files, 12);  // 7 STL + 4 thickness CSV + landmarks.yaml
+  EXPECT_EQ(files, 14);  // 9 STL (with the 2 menisci) + 4 thickness CSV + landmarks.yaml
 }
 
 // Per-cartilage edge length (used by msk_bench for the fine knee with finer

@@ -247,8 +247,9 @@ TEST_F(SceneTest, CanonicalTextIgnoresSpelling) {
   const Scene d = load("model: ../models/knee\noutputs: [prepared_model]\n"
                        "prepare: {edge_length_mm: 2.5}\n");
   EXPECT_EQ(a.block("prepare").canonical_text(),
-            "prepare.edge_length_mm = 3\nprepare.max_cast_distance_mm = 10\n"
-            "prepare.mesh_unit = mm\nprepare.remesh_iterations = 5\nprepare.surface_edge_length_mm = []\n");
+            "prepare.edge_length_mm = 3\nprepare.max_cast_distance_mm = 10\nprepare.max_triangles = 1e+06\n"
+            "prepare.mesh_unit = mm\nprepare.min_thickness_mm = 0.2\nprepare.remesh_iterations = 5\n"
+            "prepare.surface_edge_length_mm = []\n");
   EXPECT_EQ(a.block("prepare").canonical_text(), b.block("prepare").canonical_text());
   EXPECT_EQ(a.block("prepare").canonical_text(), c.block("prepare").canonical_text());
   EXPECT_EQ(d.block("prepare").value("edge_length_mm").canonical, "2.5");
@@ -342,7 +343,7 @@ TEST_F(SceneTest, OutputsNeedTheirBlocks) {
                6, 5, {"scenario 'gait' uses imposed_kinematics", "add 'trial: PATH'"});
   expect_error("model: ../models/knee\noutputs: [prepared_model, bogus]\n", 2, 27,
                {"'outputs': unknown item 'bogus'", "expected any of prepared_model, kinematics, surface, "
-                                                   "report"});
+                                                   "biphasic, report"});
 }
 
 TEST_F(SceneTest, PathsAndDuplicates) {

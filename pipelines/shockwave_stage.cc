@@ -1,0 +1,542 @@
+#include "pipelines/shockwave_stage.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <fstream>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/hdf5.h"
+#include "common/log.h"
+#include "common/mesh_io.h"
+#include "common/progress.h"
+#include "pipelines/shockwave_output.h"
+#include "shockwave/applicator_pulse.h"
+
+namespace arthrosim::pipelines {
+
+namespace fs = std::filesystem;
+using shockwave::KneeTissue;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+std::string number(double v) {
+  std::ostringstream s;
+  s.precision(6);
+  s << v;
+  return s.str();
+}
+
+bool wants(const ShockwaveStageOptions& o, const std::string& effect) {
+  return std::find(o.effects.begin(), o.effects.end(), effect) != o.effects.end();
+}
+
+// The tissue table: one row per knee tissue, replacing Table 1.
+//   name,density_kg_per_m3,shear_modulus_mpa,bulk_modulus_mpa,solid_bulk_modulus_mpa,porosity,permeability_m2
+std::vector<shockwave::Tissue> read_tissue_table(const fs::path& path) {
+  std::vector<shockwave::Tissue> tissues = shockwave::default_knee_tissues();
+  std::ifstream in(path);
+  if (!in) throw common::InputError(path.string(), 0, "cannot open the tissue table");
+  std::string line;
+  int lineno = 0;
+  bool header = false;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#') continue;
+    if (!header) {
+      if (line.rfind("name,density_kg_per_m3,shear_modulus_mpa,bulk_modulus_mpa,solid_bulk_modulus_mpa,porosity,"
+                     "permeability_m2",
+                     0) != 0)
+        throw common::InputError(path.string(), lineno,
+                                 "expected the header 'name,density_kg_per_m3,shear_modulus_mpa,bulk_modulus_mpa,"
+                                 "solid_bulk_modulus_mpa,porosity,permeability_m2', found '" + line + "'");
+      header = true;
+      continue;
+    }
+    std::stringstream ss(line);
+    std::string name;
+    std::getline(ss, name, ',');
+    double v[6];
+    for (double& x : v) {
+      std::string cell;
+      if (!std::getline(ss, cell, ',')) throw common::InputError(path.string(), lineno, "expected 7 comma-separated values, found '" + line + "'");
+      try {
+        size_t used = 0;
+        x = std::stod(cell, &used);
+        if (used != cell.size()) throw std::invalid_argument(cell);
+      } catch (const std::exception&) {
+        throw common::InputError(path.string(), lineno, "expected a number, found '" + cell + "'");
+      }
+    }
+    int t = -1;
+    for (int k = 0; k < shockwave::kKneeTissueCount; ++k)
+      if (name == shockwave::knee_tissue_name(k)) t = k;
+    if (t < 0)
+      throw common::InputError(path.string(), lineno,
+                               "expected a tissue name (cortical, cancellous, cartilage, fibrocartilage, fibrous, "
+                               "capsule_shell, applicator), found '" + name + "'");
+    shockwave::Tissue& ts = tissues[t];
+    ts.density = v[0];
+    ts.shear_modulus = v[1] * 1e6;
+    ts.bulk_modulus = v[2] * 1e6;
+    ts.solid_bulk_modulus = v[3] * 1e6;
+    ts.porosity = v[4];
+    ts.permeability = v[5];
+  }
+  if (!header) throw common::InputError(path.string(), 0, "expected a header line, found an empty file");
+  return tissues;
+}
+
+}  // namespace
+
+const std::vector<std::pair<std::string, std::string>>& shockwave_effects() {
+  static const std::vector<std::pair<std::string, std::string>> k = {
+      {"mca_elastic", "movable cellular automata: linear-elastic pair law with the many-body term (A1-A8)"},
+      {"pore_fluid", "Biot pore fluid of the poroelastic tissues (A9-A10)"},
+      {"filtration", "Darcy filtration of the pore fluid between automata (A11-A12)"},
+      {"applicator_pulse", "the shockwave pulse through the copper applicator, scaled to each EFD (eqs. 1-2)"},
+      {"platen_compression", "slow compression of the knee between its cut faces (convergence, validation)"},
+  };
+  return k;
+}
+
+ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& o, const std::string& source) {
+  for (const std::string& e : o.effects) {
+    bool known = false;
+    for (const auto& [name, doc] : shockwave_effects()) known |= name == e;
+    if (!known) {
+      std::string list;
+      for (const auto& [name, doc] : shockwave_effects()) list += (list.empty() ? "" : ", ") + name;
+      throw common::InputError(source, 0, "expected shockwave effects from " + list + ", found '" + e + "'");
+    }
+  }
+  if (!wants(o, "mca_elastic")) throw common::InputError(source, 0, "expected the effect mca_elastic (the automata themselves)");
+  if (wants(o, "filtration") && !wants(o, "pore_fluid"))
+    throw common::InputError(source, 0, "expected pore_fluid with filtration (Darcy flow needs the pore pressure)");
+  if (o.geometry == "bar" && !wants(o, "applicator_pulse"))
+    throw common::InputError(source, 0, "expected applicator_pulse for the bar (its loading)");
+  if (wants(o, "applicator_pulse") == wants(o, "platen_compression"))
+    throw common::InputError(source, 0, "expected one loading among the effects: applicator_pulse or platen_compression");
+  if (!(o.distortional_strain_min <= o.distortional_strain_max) || !(o.pore_pressure_min_pa <= o.pore_pressure_max_pa))
+    throw common::InputError(source, 0, "expected the regeneration ranges' minimum <= maximum");
+  ShockwaveModel sm;
+  if (o.geometry == "bar") {
+    // A laterally periodic bar (uniaxial strain) of one tissue, loaded on x = 0.
+    sm.bar = true;
+    const shockwave::Lattice lat = shockwave::make_lattice(shockwave::parse_lattice_kind(o.lattice, source),
+                                                           o.automaton_diameter_m);
+    std::vector<shockwave::Tissue> tissues =
+        o.tissue_table.empty() ? shockwave::default_knee_tissues() : read_tissue_table(o.tissue_table);
+    int t = -1;
+    for (int k = 0; k < shockwave::kKneeTissueCount; ++k)
+      if (o.bar_tissue == shockwave::knee_tissue_name(k)) t = k;
+    if (t < 0 || t == shockwave::kApplicator)
+      throw common::InputError(source, 0, "expected a bar tissue of the knee, found '" + o.bar_tissue + "'");
+    shockwave::GridSpec g;
+    g.count = {static_cast<int>(std::lround(o.bar_length_m / lat.spacing)) + 1, 4, 4};
+    g.periodic = {false, true, true};
+    shockwave::PoreFluid fluid;
+    fluid.bulk_modulus = o.fluid_bulk_modulus_pa;
+    fluid.density = o.fluid_density;
+    fluid.viscosity = o.fluid_viscosity;
+    sm.model = shockwave::build_model(lat, g, {tissues[t]}, fluid,
+                                      [](int, int, int, const common::Vec3&) { return 0; }, source);
+    for (int a = 0; a < sm.model.size(); ++a)
+      if (sm.model.cell[a][0] == 0) {
+        sm.model.loaded.automata.push_back(a);
+        sm.model.loaded.area.push_back(common::Vec3(lat.area_per_surface_site(), 0, 0));
+      }
+    sm.model.loaded.normal = common::Vec3(1, 0, 0);
+    sm.info.automata = sm.model.tissue_counts();
+    return sm;
+  }
+  if (o.prepared.empty()) throw common::InputError(source, 0, "expected a prepared model (--prepared)");
+  shockwave::KneeMeshes meshes;
+  const common::H5File h5(o.prepared.string(), common::H5File::Mode::kRead);
+  auto bone = [&](const std::string& name) {
+    common::TriangleMesh m;
+    m.V = h5.read_matrix("/bones/" + name + "/vertices", 3);
+    m.F = h5.read_matrix_int("/bones/" + name + "/faces", 3);
+    m.name = name;
+    return m;
+  };
+  if (!h5.exists("/bones/femur") || !h5.exists("/bones/tibia"))
+    throw common::InputError(o.prepared.string(), 0, "expected the bones /bones/femur and /bones/tibia, found " +
+                                                         std::to_string(h5.list("/bones").size()) + " bones");
+  meshes.femur = bone("femur");
+  meshes.tibia = bone("tibia");
+  for (const std::string& name : h5.read_strings("/surfaces/names")) {
+    const std::string g = "/surfaces/" + name;
+    const std::string b = h5.attribute_string(g, "bone");
+    if (b != "femur" && b != "tibia") continue;  // the patella is left out, as in the seed
+    shockwave::CartilageSurface c;
+    c.name = name;
+    c.bone = b == "femur" ? shockwave::BoneId::kFemur : shockwave::BoneId::kTibia;
+    c.articular.V = h5.read_matrix(g + "/triangles/vertices", 3);
+    c.articular.F = h5.read_matrix_int(g + "/triangles/faces", 3);
+    c.thickness = h5.read_vector(g + "/triangles/thickness");
+    meshes.cartilage.push_back(std::move(c));
+  }
+  // Menisci from the model folder, in the unit the prepare stage read it with.
+  if (!o.model.empty()) {
+    common::MeshReadOptions ro;
+    if (h5.has_attribute("/", "input_unit")) ro.unit = common::parse_length_unit(h5.attribute_string("/", "input_unit"));
+    std::vector<fs::path> files;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(o.model, ec)) files.push_back(e.path());
+    if (ec) throw common::InputError(o.model.string(), 0, "cannot read the model folder: " + ec.message());
+    std::sort(files.begin(), files.end());
+    for (const fs::path& p : files) {
+      std::string ext = p.extension().string();
+      std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+      const std::string stem = p.stem().string();
+      const std::string suffix = "_meniscus";
+      if ((ext != ".stl" && ext != ".obj" && ext != ".ply") || stem.size() <= suffix.size() ||
+          stem.compare(stem.size() - suffix.size(), suffix.size(), suffix) != 0)
+        continue;
+      meshes.menisci.emplace_back(stem.substr(0, stem.size() - suffix.size()), common::read_mesh(p.string(), ro));
+    }
+  }
+  shockwave::KneeModelOptions& k = sm.knee_options;
+  k.lattice = shockwave::parse_lattice_kind(o.lattice, source);
+  k.diameter = o.automaton_diameter_m;
+  k.femur_cut = o.femur_cut_m;
+  k.tibia_cut = o.tibia_cut_m;
+  k.capsule_margin = o.capsule_margin_m;
+  k.shell_thickness = o.shell_thickness_m;
+  k.cortical_thickness = o.cortical_thickness_m;
+  k.applicator.face = shockwave::parse_box_face(o.applicator_face, source);
+  if (o.applicator_centre_m.size() == 3)
+    k.applicator.centre = common::Vec3(o.applicator_centre_m[0], o.applicator_centre_m[1], o.applicator_centre_m[2]);
+  k.applicator.size = o.applicator_size_m;
+  k.applicator.thickness = o.applicator_thickness_m;
+  k.tissues = o.tissue_table.empty() ? shockwave::default_knee_tissues() : read_tissue_table(o.tissue_table);
+  k.fluid.bulk_modulus = o.fluid_bulk_modulus_pa;
+  k.fluid.density = o.fluid_density;
+  k.fluid.viscosity = o.fluid_viscosity;
+  sm.model = shockwave::build_knee_model(meshes, k, &sm.info, source);
+  return sm;
+}
+
+ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const std::vector<std::string>& argv,
+                                         bool progress, bool dry_run) {
+  const std::string source = "arthrosim-shockwave options";
+  ShockwaveStageResult result;
+  const auto t_build = std::chrono::steady_clock::now();
+  const ShockwaveModel sm = build_shockwave_model(o, source);
+  const shockwave::Model& m = sm.model;
+  result.build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_build).count();
+  result.automata = m.size();
+  result.bonds = m.bonds();
+  result.per_tissue = sm.info.automata;
+  std::ostringstream log;
+ log << (sm.bar ? "bar of " : "knee of ") << m.size() << " automata (" << shockwave::to_string(m.lattice.kind) << ", d = "
+      << number(m.lattice.diameter * 1e3) << " mm), " << m.bonds() << " bonds, built in " << number(result.build_s)
+      << " s:";
+  for (size_t t = 0; t < m.tissues.size(); ++t) log << " " << m.tissues[t].name << " " << sm.info.automata[t];
+  common::log_info(log.str());
+
+  shockwave::SimulationOptions so;
+  so.pore_fluid = wants(o, "pore_fluid");
+  so.filtration = wants(o, "filtration");
+  so.time_step_safety = o.time_step_safety;
+  shockwave::RegenerationCriteria crit;
+  crit.compressive_min = o.compressive_stress_min_pa;
+  crit.distortional_min = o.distortional_strain_min;
+  crit.distortional_max = o.distortional_strain_max;
+  crit.pore_min = o.pore_pressure_min_pa;
+  crit.pore_max = o.pore_pressure_max_pa;
+  std::ostringstream opts;
+  for (const std::string& a : argv) opts << a << " ";
+  const std::string options_text = opts.str();
+  const bool compression = wants(o, "platen_compression");
+
+  // One run per EFD (or the compression).
+  std::vector<double> runs = compression ? std::vector<double>{0.0} : o.efd_j_per_m2;
+  for (double efd : runs) {
+    ShockwaveRunResult rr;
+    rr.efd_j_per_m2 = efd;
+    rr.label = compression ? "compression" : "efd" + number(efd * 1e-3);
+    rr.file = fs::path(o.out.string() + "_" + rr.label + ".h5");
+    std::unique_ptr<shockwave::PressurePulse> pulse;
+    shockwave::Model run_model = m;  // constraints differ per run kind
+    std::function<double(double)> load;
+    double end_time = o.end_time_s;
+    std::vector<int> top;
+    shockwave::SimulationOptions ro = so;
+    if (!compression) {
+      shockwave::PulseShape shape;
+      shape.rise_time = o.pulse_rise_time_s;
+      shape.fall_time = o.pulse_fall_time_s;
+      shape.positive_duration = o.pulse_positive_duration_s;
+      shape.tail_duration = o.pulse_tail_duration_s;
+      shape.tail_fraction = o.pulse_tail_fraction;
+      pulse = std::make_unique<shockwave::PressurePulse>(shape, efd, o.efd_impedance);
+      rr.peak_pressure_pa = pulse->peak();
+      load = [p = pulse.get()](double t) { return (*p)(t); };
+    } else {
+      // The femur's cut face (top lattice layer) moves down by the displacement
+      // with a smooth velocity ramp, the tibia's (bottom layer) is fixed; then
+      // the top holds while the knee settles (damped).
+      int kmax = 0, kmin = 1 << 30;
+      for (int a = 0; a < m.size(); ++a) {
+        if (m.tissue[a] == shockwave::kApplicator) continue;
+        kmax = std::max(kmax, m.cell[a][1]);
+        kmin = std::min(kmin, m.cell[a][1]);
+      }
+      for (int a = 0; a < m.size(); ++a) {
+        if (m.tissue[a] == shockwave::kApplicator) continue;
+        if (m.cell[a][1] == kmax) {
+          run_model.constraints.push_back({a, 7, common::Vec3(0, -o.compression_displacement_m, 0)});
+          top.push_back(static_cast<int>(run_model.constraints.size()) - 1);
+        } else if (m.cell[a][1] == kmin) {
+          run_model.constraints.push_back({a, 7, common::Vec3::Zero()});
+        }
+      }
+      const double T = o.compression_time_s;
+      run_model.constraint_scale = [T](double t) {
+        if (t < 0.0 || t > T) return 0.0;
+        const double s = std::sin(kPi * t / T);
+        return 2.0 / T * s * s;
+      };
+      double alpha = o.compression_damping;
+      if (alpha <= 0.0) {
+        // About critical for the lowest axial mode of the box of fibrous tissue.
+        const shockwave::TissueConstants& f = m.constants[shockwave::kFibrous];
+        const double c = so.pore_fluid ? f.undrained_p_speed : f.drained_p_speed;
+        alpha = kPi * c / (2.0 * (sm.info.box_hi.y() - sm.info.box_lo.y()));
+      }
+      ro.damping = alpha;
+      end_time = 1.5 * T;
+    }
+    shockwave::Simulation sim(run_model, ro, load);
+    sim.track_energy(true);
+    result.time_step_s = sim.time_step();
+    result.critical_time_step_s = sim.critical_time_step();
+    result.critical_tissue = sim.critical_tissue();
+    result.fastest_p_wave = sim.fastest_p_wave();
+    result.fastest_p_wave_tissue = sim.fastest_p_wave_tissue();
+    result.filtration_substeps = sim.filtration() ? sim.filtration()->substeps() : 0;
+    const std::int64_t steps = static_cast<std::int64_t>(std::ceil(end_time / sim.time_step())) + 1;
+    const std::int64_t every = std::max<std::int64_t>(1, std::llround(o.output_interval_s / sim.time_step()));
+    {
+      std::ostringstream s;
+      s << rr.label << ": time step " << number(sim.time_step() * 1e9) << " ns (stability limit "
+        << number(sim.critical_time_step() * 1e9) << " ns, " << sim.critical_tissue() << "; d/c_p of the fastest p-wave ("
+        << sim.fastest_p_wave_tissue() << ", " << number(sim.fastest_p_wave()) << " m/s) "
+        << number(m.lattice.diameter / sim.fastest_p_wave() * 1e9) << " ns), " << steps << " steps";
+      if (sim.filtration()) s << ", filtration sub-steps " << sim.filtration()->substeps();
+      if (pulse) s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa (T_p " << number(pulse->time_to_90_percent() * 1e6) << " us)";
+      common::log_info(s.str());
+    }
+    if (dry_run) {
+      rr.steps = steps;
+      result.runs.push_back(std::move(rr));
+      continue;
+    }
+    ShockwaveWriter writer(rr.file, run_model, rr.label, o.write_frames, sim.pore_fluid(), options_text, argv);
+    // The effect ledger: what this run built.
+    std::vector<ShockwaveEffect> effects;
+    effects.push_back({"mca_elastic", "knee", static_cast<std::int64_t>(m.bonds())});
+    if (sim.pore_fluid()) {
+      std::int64_t poro = 0;
+      for (int a = 0; a < m.size(); ++a) poro += m.constants[m.tissue[a]].poroelastic ? 1 : 0;
+      effects.push_back({"pore_fluid", "knee", poro});
+    }
+    if (sim.filtration()) effects.push_back({"filtration", "knee", sim.filtration()->bonds()});
+    if (pulse) effects.push_back({"applicator_pulse", "applicator", static_cast<std::int64_t>(m.loaded.automata.size())});
+    if (compression) effects.push_back({"platen_compression", "cut faces", static_cast<std::int64_t>(run_model.constraints.size())});
+
+    common::ProgressOptions po;
+    if (!progress) po.mode = common::ProgressOptions::Mode::kOff;
+    common::Progress bar("shockwave " + rr.label, steps, po);
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::clock_t c0 = std::clock();
+    // The bar: mean pressure of two lattice layers each step (peak arrival times).
+    std::vector<int> st1, st2;
+    std::vector<double> p1, p2;
+    if (sm.bar) {
+      const int nx = m.grid.count[0];
+      st1 = shockwave::layer(m, 0, nx / 4);
+      st2 = shockwave::layer(m, 0, 3 * nx / 4);
+    }
+    auto top_force = [&]() {
+      double f = 0.0;
+      for (int k : top) f += sim.constraint_forces()[k].y();
+      return f;  // the pairs push the platen up: compressive force > 0
+    };
+    for (std::int64_t s = 0; s < steps; ++s) {
+      sim.step();
+      if (sm.bar) {
+        double a = 0, b = 0;
+        for (int i : st1) a += sim.pressure()[i];
+        for (int i : st2) b += sim.pressure()[i];
+        p1.push_back(a / st1.size());
+        p2.push_back(b / st2.size());
+      }
+      if (s % every == 0 || s + 1 == steps) {
+        double disp = 0.0;
+        if (compression && !top.empty()) disp = -sim.displacement(run_model.constraints[top[0]].automaton).y();
+        writer.append_frame(sim, load ? load(sim.time()) : 0.0, crit, compression ? top_force() : 0.0, disp);
+        ++rr.frames;
+      }
+      if ((s & 15) == 0) bar.update(s + 1);
+    }
+    bar.finish();
+    rr.steps = steps;
+    rr.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    rr.cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
+    const shockwave::EnergyBalance e = sim.energy();
+    rr.energy_residual = e.external_work != 0.0 ? std::abs(e.residual()) / std::abs(e.external_work) : 0.0;
+    if (sm.bar) {
+      // Arrival of the front: the first time a station reaches half its
+      // largest pressure (linear interpolation between steps); robust against
+      // the dispersive ringing behind a sharp front.
+      auto arrival = [&](const std::vector<double>& v) {
+        const double half = 0.5 * *std::max_element(v.begin(), v.end());
+        for (size_t i = 1; i < v.size(); ++i)
+          if (v[i] >= half) return (static_cast<double>(i) - 1.0 + (half - v[i - 1]) / (v[i] - v[i - 1])) * sim.time_step();
+        return 0.0;
+      };
+      rr.bar_speed = (m.x[st2[0]] - m.x[st1[0]]) / (arrival(p2) - arrival(p1));
+      rr.bar_drained_speed = m.constants[0].drained_p_speed;
+      rr.bar_undrained_speed = m.constants[0].undrained_p_speed;
+    }
+    if (compression) {
+      rr.force_n = top_force();
+      rr.displacement_m = -sim.displacement(run_model.constraints[top[0]].automaton).y();
+      rr.stiffness_n_per_m = rr.displacement_m > 0 ? rr.force_n / rr.displacement_m : 0.0;
+    }
+    std::vector<std::pair<std::string, double>> attrs = {
+        {"time_step_s", sim.time_step()},
+        {"critical_time_step_s", sim.critical_time_step()},
+        {"fastest_p_wave_m_per_s", sim.fastest_p_wave()},
+        {"steps", static_cast<double>(steps)},
+        {"wall_s", rr.wall_s},
+        {"automaton_steps_per_s", m.size() * static_cast<double>(steps) / rr.wall_s},
+        {"filtration_substeps", static_cast<double>(result.filtration_substeps)},
+        {"efd_j_per_m2", efd},
+        {"pulse_peak_pa", rr.peak_pressure_pa},
+        {"pulse_t_p_s", pulse ? pulse->time_to_90_percent() : 0.0},
+        {"efd_positive_integral_j_per_m2", pulse ? pulse->efd_positive_integral() : 0.0},
+        {"efd_total_integral_j_per_m2", pulse ? pulse->efd_total_integral() : 0.0},
+        {"efd_impedance", o.efd_impedance},
+        {"energy_residual", rr.energy_residual},
+        {"compression_force_n", rr.force_n},
+        {"compression_displacement_m", rr.displacement_m},
+        {"stiffness_n_per_m", rr.stiffness_n_per_m},
+        {"bar_speed_m_per_s", rr.bar_speed},
+        {"bar_drained_speed_m_per_s", rr.bar_drained_speed},
+        {"bar_undrained_speed_m_per_s", rr.bar_undrained_speed},
+    };
+    rr.all_at_once_m3 = writer.finish(sim, crit, effects, attrs);
+    for (int t = 0; t < static_cast<int>(m.tissues.size()); ++t) {
+      rr.volumes.push_back(shockwave::regeneration_volumes(m, t, sim.peak_pressure(), sim.peak_distortional_strain(),
+                                                           sim.peak_pore_pressure(), crit));
+      std::array<double, 3> mx{0, 0, 0};
+      for (int a = 0; a < m.size(); ++a) {
+        if (m.tissue[a] != t) continue;
+        mx[0] = std::max(mx[0], sim.peak_pressure()[a]);
+        mx[1] = std::max(mx[1], sim.peak_distortional_strain()[a]);
+        mx[2] = std::max(mx[2], sim.peak_pore_pressure()[a]);
+      }
+      rr.max_peaks.push_back(mx);
+    }
+    std::ostringstream s;
+    s << rr.label << ": " << steps << " steps in " << number(rr.wall_s) << " s (" << number(m.size() * double(steps) / rr.wall_s)
+      << " automaton-steps/s), wrote " << rr.file.string();
+    common::log_info(s.str());
+    result.runs.push_back(std::move(rr));
+  }
+  if (dry_run) return result;
+  // Summary: JSON and the volumes-vs-EFD plot.
+  result.summary_json = fs::path(o.out.string() + "_summary.json");
+  {
+    std::ofstream js(result.summary_json);
+    js << "{\n  \"automata\": " << result.automata << ",\n  \"bonds\": " << result.bonds
+       << ",\n  \"diameter_mm\": " << number(m.lattice.diameter * 1e3) << ",\n  \"lattice\": \""
+       << shockwave::to_string(m.lattice.kind) << "\",\n  \"time_step_s\": " << number(result.time_step_s)
+       << ",\n  \"runs\": [\n";
+    for (size_t r = 0; r < result.runs.size(); ++r) {
+      const ShockwaveRunResult& rr = result.runs[r];
+      js << "    {\"label\": \"" << rr.label << "\", \"efd_mj_per_mm2\": " << number(rr.efd_j_per_m2 * 1e-3)
+         << ", \"pulse_peak_mpa\": " << number(rr.peak_pressure_pa * 1e-6) << ", \"steps\": " << rr.steps
+         << ", \"wall_s\": " << number(rr.wall_s) << ", \"stiffness_n_per_mm\": " << number(rr.stiffness_n_per_m * 1e-3)
+         << ", \"bar_speed_m_per_s\": " << number(rr.bar_speed) << ", \"bar_drained_speed_m_per_s\": "
+         << number(rr.bar_drained_speed) << ", \"bar_undrained_speed_m_per_s\": " << number(rr.bar_undrained_speed)
+         << ", \"tissues\": {";
+      for (size_t t = 0; t < rr.volumes.size(); ++t) {
+        const shockwave::RegenerationVolumes& v = rr.volumes[t];
+        js << (t ? ", " : "") << "\"" << m.tissues[t].name << "\": {\"volume_mm3\": " << number(v.tissue * 1e9)
+           << ", \"compressive_mm3\": " << number(v.compressive * 1e9) << ", \"distortional_mm3\": "
+           << number(v.distortional * 1e9) << ", \"pore_mm3\": " << number(v.pore * 1e9) << ", \"all_mm3\": "
+           << number(v.all * 1e9) << ", \"all_at_once_mm3\": " << number(rr.all_at_once_m3[t] * 1e9)
+           << ", \"max_peak_pressure_mpa\": " << number(rr.max_peaks[t][0] * 1e-6)
+           << ", \"max_peak_distortional_strain\": " << number(rr.max_peaks[t][1])
+           << ", \"max_peak_pore_pressure_mpa\": " << number(rr.max_peaks[t][2] * 1e-6) << "}";
+      }
+      js << "}}" << (r + 1 < result.runs.size() ? "," : "") << "\n";
+    }
+    js << "  ]\n}\n";
+    if (!js) throw common::InputError(result.summary_json.string(), 0, "write failed");
+  }
+  if (!compression) {
+    // Volumes (all three criteria, and each criterion) of cartilage and
+    // menisci against the EFD, as an SVG plot.
+    result.volumes_svg = fs::path(o.out.string() + "_volumes.svg");
+    std::ofstream svg(result.volumes_svg);
+    const double W = 640, H = 420, L = 70, R = 20, T = 30, B = 60;
+    if (sm.bar) return result;
+    double vmax = 1e-12, emax = 0.0;
+    for (const ShockwaveRunResult& rr : result.runs) {
+      emax = std::max(emax, rr.efd_j_per_m2 * 1e-3);
+      for (int t : {shockwave::kCartilage, shockwave::kFibrocartilage})
+        for (double v : {rr.volumes[t].compressive, rr.volumes[t].distortional, rr.volumes[t].pore, rr.volumes[t].all})
+          vmax = std::max(vmax, v * 1e9);
+    }
+    emax = std::max(emax * 1.1, 1e-3);
+    vmax *= 1.1;
+    auto X = [&](double e) { return L + (W - L - R) * e / emax; };
+    auto Y = [&](double v) { return H - B - (H - T - B) * v / vmax; };
+    svg << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << W << "\" height=\"" << H
+        << "\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+    svg << "<text x=\"" << W / 2 << "\" y=\"18\" text-anchor=\"middle\">Regeneration volumes (peaks in range) vs energy flux density</text>\n";
+    svg << "<line x1=\"" << L << "\" y1=\"" << H - B << "\" x2=\"" << W - R << "\" y2=\"" << H - B << "\" stroke=\"black\"/>\n";
+    svg << "<line x1=\"" << L << "\" y1=\"" << T << "\" x2=\"" << L << "\" y2=\"" << H - B << "\" stroke=\"black\"/>\n";
+    for (int k = 0; k <= 5; ++k) {
+      const double e = emax * k / 5, v = vmax * k / 5;
+      svg << "<text x=\"" << X(e) << "\" y=\"" << H - B + 16 << "\" text-anchor=\"middle\">" << number(e) << "</text>\n";
+      svg << "<text x=\"" << L - 6 << "\" y=\"" << Y(v) + 4 << "\" text-anchor=\"end\">" << number(v) << "</text>\n";
+    }
+    svg << "<text x=\"" << W / 2 << "\" y=\"" << H - B + 34 << "\" text-anchor=\"middle\">EFD [mJ/mm^2] (seed eq. 2)</text>\n";
+    svg << "<text x=\"16\" y=\"" << H / 2 << "\" transform=\"rotate(-90 16 " << H / 2 << ")\" text-anchor=\"middle\">volume [mm^3]</text>\n";
+    // The seed's threshold: large volumes only above 0.3 mJ/mm^2.
+    svg << "<line x1=\"" << X(0.3) << "\" y1=\"" << T << "\" x2=\"" << X(0.3) << "\" y2=\"" << H - B
+        << "\" stroke=\"gray\" stroke-dasharray=\"4 3\"/>\n";
+    const char* colours[] = {"#d62728", "#1f77b4", "#2ca02c", "#000000"};
+    const char* names[] = {"compressive > 0.15 MPa", "distortional 0.05-1.1 %", "pore 20 kPa-2 MPa", "all three"};
+    int legend = 0;
+    for (int t : {shockwave::kCartilage, shockwave::kFibrocartilage}) {
+      for (int c = 0; c < 4; ++c) {
+        std::ostringstream pts;
+        for (const ShockwaveRunResult& rr : result.runs) {
+          const shockwave::RegenerationVolumes& v = rr.volumes[t];
+          const double val = (c == 0 ? v.compressive : c == 1 ? v.distortional : c == 2 ? v.pore : v.all) * 1e9;
+          pts << X(rr.efd_j_per_m2 * 1e-3) << "," << Y(val) << " ";
+        }
+        svg << "<polyline fill=\"none\" stroke=\"" << colours[c] << "\" stroke-width=\"2\""
+            << (t == shockwave::kFibrocartilage ? " stroke-dasharray=\"6 3\"" : "") << " points=\"" << pts.str() << "\"/>\n";
+        svg << "<text x=\"" << L + 10 << "\" y=\"" << T + 14 + 14 * legend++ << "\" fill=\"" << colours[c] << "\">"
+            << (t == shockwave::kCartilage ? "cartilage: " : "menisci (dashed): ") << names[c] << "</text>\n";
+      }
+    }
+    svg << "</svg>\n";
+  }
+  return result;
+}
+
+}  // namespace arthrosim::pipelines

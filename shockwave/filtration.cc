@@ -1,0 +1,201 @@
+#include "shockwave/filtration.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "shockwave/reduce.h"
+
+namespace arthrosim::shockwave {
+
+FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model_(m), dt_(dt) {
+  if (!(dt > 0.0) || !(safety > 0.0 && safety <= 1.0))
+    throw std::invalid_argument("FiltrationTerm: expected dt > 0 and safety in (0, 1]");
+  ntissue_ = static_cast<int>(m.tissues.size());
+  a_.resize(ntissue_);
+  biot_modulus_.resize(ntissue_);
+  for (int t = 0; t < ntissue_; ++t) {
+    a_[t] = m.constants[t].a;
+    biot_modulus_[t] = m.constants[t].biot_modulus;
+  }
+  const double S = m.lattice.contact_area, d = m.lattice.diameter, V = m.lattice.cell_volume;
+  const double eta = m.fluid.viscosity;
+  conductance_.assign(static_cast<size_t>(ntissue_) * ntissue_, 0.0);
+  pair_fast_.assign(conductance_.size(), 0);
+  const int K = m.lattice.directions;
+  for (int t1 = 0; t1 < ntissue_; ++t1)
+    for (int t2 = 0; t2 < ntissue_; ++t2) {
+      const TissueConstants &c1 = m.constants[t1], &c2 = m.constants[t2];
+      if (!c1.poroelastic || !c2.poroelastic) continue;
+      const double k1 = c1.permeability, k2 = c2.permeability;
+      const double k = (k1 > 0.0 && k2 > 0.0) ? 2.0 * k1 * k2 / (k1 + k2) : 0.0;
+      const double C = k * S / (eta * d);
+      conductance_[t1 * ntissue_ + t2] = C;
+      // Worst case for an automaton of either tissue with all K bonds of this pair.
+      const double rate = std::max(c1.biot_modulus, c2.biot_modulus) * K * C / V;
+      pair_fast_[t1 * ntissue_ + t2] = rate * dt > safety ? 1 : 0;
+    }
+  const int n = m.size();
+  std::vector<double> fast_rate(n, 0.0);
+  std::vector<std::uint8_t> in_fast(n, 0), drained(n, 0);
+  for (int a : m.drained) drained[a] = 1;
+  for (int i = 0; i < n; ++i) {
+    const int ti = m.tissue[i];
+    // Drained automata are reservoirs at P = 0: neighbours of the others,
+    // never updated themselves.
+    if (!m.constants[ti].poroelastic || drained[i]) continue;
+    fluid_.push_back(i);
+    double rate = 0.0, frate = 0.0;
+    for (int s = 0; s < K; ++s) {
+      const int j = m.neighbour(s, i);
+      if (j < 0) continue;
+      const int tj = m.tissue[j];
+      const double C = conductance_[ti * ntissue_ + tj];
+      if (C <= 0.0) continue;
+      if (s < K / 2) ++bonds_;
+      rate += C;
+      if (pair_fast_[ti * ntissue_ + tj]) {
+        frate += C;
+        in_fast[i] = 1;
+        if (s < K / 2) ++fast_bonds_;
+      }
+    }
+    const double M = m.constants[ti].biot_modulus;
+    max_rate_ = std::max(max_rate_, M * rate / V);
+    fast_rate[i] = M * frate / V;
+  }
+  double max_fast = 0.0;
+  std::vector<std::int32_t> local(n, -1);
+  for (int i = 0; i < n; ++i)
+    if (in_fast[i]) {
+      local[i] = static_cast<std::int32_t>(fast_list_.size());
+      fast_list_.push_back(i);
+      max_fast = std::max(max_fast, fast_rate[i]);
+    }
+  substeps_ = fast_list_.empty() ? 1 : std::max(1, static_cast<int>(std::ceil(dt * max_fast / safety)));
+  // Compressed rows of the slow and the fast bonds; conductances by index
+  // into the (few) distinct values of the tissue pairs.
+  auto conductance_index = [this](double C) {
+    for (size_t q = 0; q < ctab_.size(); ++q)
+      if (ctab_[q] == C) return static_cast<std::uint8_t>(q);
+    if (ctab_.size() >= 255) throw std::logic_error("FiltrationTerm: more than 255 conductances");
+    ctab_.push_back(C);
+    return static_cast<std::uint8_t>(ctab_.size() - 1);
+  };
+  slow_row_.push_back(0);
+  for (int i : fluid_) {
+    const int ti = m.tissue[i];
+    for (int s = 0; s < K; ++s) {
+      const int j = m.neighbour(s, i);
+      if (j < 0) continue;
+      const int tj = m.tissue[j];
+      const double C = conductance_[ti * ntissue_ + tj];
+      if (C <= 0.0 || pair_fast_[ti * ntissue_ + tj]) continue;
+      slow_col_.push_back(j);
+      slow_c_.push_back(conductance_index(C));
+    }
+    slow_row_.push_back(static_cast<std::int64_t>(slow_col_.size()));
+  }
+  fast_row_.push_back(0);
+  for (int i : fast_list_) {
+    const int ti = m.tissue[i];
+    for (int s = 0; s < K; ++s) {
+      const int j = m.neighbour(s, i);
+      if (j < 0) continue;
+      const int tj = m.tissue[j];
+      const double C = conductance_[ti * ntissue_ + tj];
+      if (C <= 0.0 || !pair_fast_[ti * ntissue_ + tj]) continue;
+      // A drained neighbour is a reservoir at P = 0: the extra slot at the
+      // end of fast_p_, which stays 0.
+      if (local[j] < 0 && !drained[j]) throw std::logic_error("FiltrationTerm: a fast bond leaves the fast set");
+      fast_col_.push_back(local[j] >= 0 ? local[j] : static_cast<std::int32_t>(fast_list_.size()));
+      fast_c_.push_back(conductance_index(C));
+    }
+    fast_row_.push_back(static_cast<std::int64_t>(fast_col_.size()));
+    fast_m_.push_back(m.constants[ti].biot_modulus);
+    fast_a_.push_back(m.constants[ti].a);
+  }
+  p_.assign(n, 0.0);
+  delta_.assign(fast_list_.size(), 0.0);
+  fast_zeta_.assign(fast_list_.size(), 0.0);
+  fast_theta_.assign(fast_list_.size(), 0.0);
+  fast_p_.assign(fast_list_.size() + 1, 0.0);
+  slow_delta_.assign(fluid_.size(), 0.0);
+  dissip_.assign(n, 0.0);
+}
+
+void FiltrationTerm::pressures(const std::vector<int>& list, const double* theta, const double* zeta) {
+  const std::int64_t n = static_cast<std::int64_t>(list.size());
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (std::int64_t k = 0; k < n; ++k) {
+    const int i = list[k];
+    p_[i] = pressure(i, zeta[i], theta[i]);
+  }
+}
+
+void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipation) {
+  const Model& m = model_;
+  const double V = m.lattice.cell_volume;
+  const bool track = dissipation != nullptr;
+  if (track) std::fill(dissip_.begin(), dissip_.end(), 0.0);
+  // Flux sum over one automaton's bonds of one class, Jacobi (all fluxes
+  // from the same pressures); "no transfer where rho <= rho_0": a pair with
+  // both pressures <= 0 exchanges nothing.
+  const double* ctab = ctab_.data();
+  auto flux = [&](const std::int64_t* row, const std::int32_t* col, const std::uint8_t* cond, std::int64_t k,
+                  const double* p, double pi, double h, double* dis) {
+    double sum = 0.0, e = 0.0;
+    for (std::int64_t q = row[k]; q < row[k + 1]; ++q) {
+      const double pj = p[col[q]];
+      const double dp = (pi > 0.0 || pj > 0.0) ? pj - pi : 0.0;
+      const double C = ctab[cond[q]];
+      sum += C * dp;
+      e += C * dp * dp;
+    }
+    if (dis) *dis += 0.5 * h * e;  // each pair is seen from both sides
+    return sum;
+  };
+  // Slow bonds: one step of dt.
+  pressures(fluid_, theta, zeta);
+  const std::int64_t nf = static_cast<std::int64_t>(fluid_.size());
+#pragma omp parallel for schedule(static) if (nf >= kParallelMin)
+  for (std::int64_t k = 0; k < nf; ++k) {
+    const int i = fluid_[k];
+    slow_delta_[k] = dt_ / V * flux(slow_row_.data(), slow_col_.data(), slow_c_.data(), k, p_.data(), p_[i], dt_,
+                                    track ? &dissip_[i] : nullptr);
+  }
+#pragma omp parallel for schedule(static) if (nf >= kParallelMin)
+  for (std::int64_t k = 0; k < nf; ++k) zeta[fluid_[k]] += slow_delta_[k];
+  // Fast bonds: sub-cycled on a compact copy of the fast set (one parallel
+  // region for all sub-steps).
+  if (!fast_list_.empty()) {
+    const double h = dt_ / substeps_;
+    const std::int64_t nfast = static_cast<std::int64_t>(fast_list_.size());
+#pragma omp parallel if (nfast >= kParallelMin)
+    {
+#pragma omp for schedule(static)
+      for (std::int64_t k = 0; k < nfast; ++k) {
+        const int i = fast_list_[k];
+        fast_zeta_[k] = zeta[i];
+        fast_theta_[k] = theta[i];
+        fast_p_[k] = fast_m_[k] * (fast_zeta_[k] - fast_a_[k] * fast_theta_[k]);
+      }
+      for (int sub = 0; sub < substeps_; ++sub) {
+#pragma omp for schedule(static)
+        for (std::int64_t k = 0; k < nfast; ++k)
+          delta_[k] = h / V * flux(fast_row_.data(), fast_col_.data(), fast_c_.data(), k, fast_p_.data(), fast_p_[k], h,
+                                   track ? &dissip_[fast_list_[k]] : nullptr);
+#pragma omp for schedule(static)
+        for (std::int64_t k = 0; k < nfast; ++k) {
+          fast_zeta_[k] += delta_[k];
+          fast_p_[k] = fast_m_[k] * (fast_zeta_[k] - fast_a_[k] * fast_theta_[k]);
+        }
+      }
+#pragma omp for schedule(static)
+      for (std::int64_t k = 0; k < nfast; ++k) zeta[fast_list_[k]] = fast_zeta_[k];
+    }
+  }
+  if (track) *dissipation += deterministic_sum(m.size(), [&](std::int64_t i) { return dissip_[i]; });
+}
+
+}  // namespace arthrosim::shockwave

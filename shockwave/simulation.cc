@@ -1,0 +1,1090 @@
+#include "shockwave/simulation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/finite.h"
+#include "shockwave/reduce.h"
+
+namespace arthrosim::shockwave {
+
+namespace {
+inline double wrap(double d, double period, double inv_period) {
+  return period > 0.0 ? d - period * std::nearbyint(d * inv_period) : d;
+}
+}  // namespace
+
+double free_surface_factor(const Model& model, int i, bool undrained, bool loaded) {
+  const int K = model.lattice.directions;
+  Eigen::Matrix3d T = Eigen::Matrix3d::Zero();
+  common::Vec3 sum = common::Vec3::Zero();
+  int missing = 0;
+  for (int s = 0; s < K; ++s) {
+    if (model.neighbour(s, i) >= 0) continue;
+    const common::Vec3& n = model.lattice.unit[s];
+    T += n * n.transpose();
+    sum += n;
+    ++missing;
+  }
+  if (missing == 0) return 1.0;
+  const int t = model.tissue[i];
+  const Tissue& ts = model.tissues[t];
+  const double G = ts.shear_modulus;
+  const double Kb = undrained ? model.constants[t].undrained_bulk : ts.bulk_modulus;
+  const double lambda = Kb - 2.0 * G / 3.0;
+  const double c = 3.0 / K;  // S q / V per pair
+  // Fallback (no mean outward direction, or a degenerate result): every
+  // missing pair traction-free, as in LIGGGHTS-MCA's mean stress predictor.
+  const double D = 3.0 * lambda / (3.0 * lambda + 2.0 * G);
+  const double fallback = (D > 0.0 && D < 1.0) ? 1.0 / (1.0 + static_cast<double>(missing) / K * D / (1.0 - D)) : 1.0;
+  if (sum.norm() < 1e-9) return fallback;
+  const common::Vec3 e = sum.normalized();
+  if (loaded) {
+    // A face pressed by a load: uniaxial strain along its normal (a plane
+    // wave entering), eps = beta e e^T: theta_e = beta (1 - c e.T.e).
+    const double x = 1.0 - c * e.dot(T * e);
+    return x > 0.1 ? 1.0 / x : fallback;
+  }
+  const double alpha = 1.0, beta = -2.0 * lambda * alpha / (lambda + 2.0 * G);
+  const double theta = 2.0 * alpha + beta;
+  const double eTe = e.dot(T * e);
+  const double theta_e = theta - c * (alpha * (T.trace() - eTe) + beta * eTe);
+  const double f = theta / theta_e;
+  if (!(theta > 0.0 && theta_e > 0.0 && f > 0.0 && f < 10.0)) return fallback;
+  return f;
+}
+
+Simulation::Simulation(const Model& model, const SimulationOptions& options, std::function<double(double)> load)
+    : model_(model), options_(options), load_(std::move(load)) {
+  const std::string src = "shockwave simulation";
+  if (!(options.time_step_safety > 0.0 && options.time_step_safety <= 1.0))
+    throw common::InputError(src, 0, "expected a time step safety in (0, 1], found " + std::to_string(options.time_step_safety));
+  if (!(options.damping >= 0.0))
+    throw common::InputError(src, 0, "expected a damping >= 0 1/s, found " + std::to_string(options.damping));
+  if (options.filtration && !options.pore_fluid)
+    throw common::InputError(src, 0, "expected pore_fluid with filtration (Darcy flow needs the pore pressure)");
+  n_ = model.size();
+  K_ = model.lattice.directions;
+  if (n_ == 0) throw common::InputError(src, 0, "expected at least one automaton, found none");
+  period_ = model.period();
+  periodic_ = period_.x() > 0.0 || period_.y() > 0.0 || period_.z() > 0.0;
+
+  // Tissue tables.
+  const int nt = static_cast<int>(model.tissues.size());
+  const std::vector<std::int64_t> counts = model.tissue_counts();
+  bool any_poro = false;
+  for (int t = 0; t < nt; ++t) any_poro |= counts[t] > 0 && model.constants[t].poroelastic;
+  fluid_on_ = options.pore_fluid && any_poro;
+  const double R = model.lattice.radius, V = model.lattice.cell_volume;
+  for (int t = 0; t < nt; ++t) {
+    const Tissue& ts = model.tissues[t];
+    const TissueConstants& c = model.constants[t];
+    const bool poro = fluid_on_ && c.poroelastic;
+    w_.push_back(R / (2.0 * ts.shear_modulus));
+    D_.push_back(many_body_coefficient(ts.shear_modulus, ts.bulk_modulus, options.d_form));
+    K_bulk_.push_back(ts.bulk_modulus);
+    a_.push_back(poro ? c.a : 0.0);
+    M_.push_back(poro ? c.biot_modulus : 0.0);
+    pore_coef_.push_back(pore_coefficient(ts.shear_modulus, ts.bulk_modulus, options.d_form));
+    inv3G_.push_back(1.0 / (3.0 * ts.shear_modulus));
+    const double m = c.total_density * V;
+    mass_.push_back(m);
+    inv_mass_.push_back(1.0 / m);
+    inv_inertia_.push_back(1.0 / (0.4 * m * R * R));
+    poro_.push_back(poro ? 1 : 0);
+    if (counts[t] > 0) {
+      const double cp = poro ? c.undrained_p_speed : c.drained_p_speed;
+      if (cp > c_max_) {
+        c_max_ = cp;
+        c_max_tissue_ = ts.name;
+      }
+    }
+  }
+  if (options.fixed_time_step > 0.0) {
+    dt_ = options.fixed_time_step;
+    if (!options.skip_stability_check) {
+      dt_crit_ = shockwave::critical_time_step(model, options, &dt_crit_tissue_);
+      if (dt_ > dt_crit_)
+        throw common::InputError(src, 0, "expected a time step <= the stability limit " + std::to_string(dt_crit_) +
+                                             " s (" + dt_crit_tissue_ + "), found " + std::to_string(dt_));
+    }
+  } else {
+    dt_crit_ = shockwave::critical_time_step(model, options, &dt_crit_tissue_);
+    dt_ = options.time_step_safety * dt_crit_;
+  }
+  if (!(options.damping * dt_ <= 0.5))
+    throw common::InputError(src, 0, "expected damping * dt <= 0.5, found " + std::to_string(options.damping * dt_));
+
+  wa_.resize(n_);
+  inv3G_a_.resize(n_);
+  inv_mass_a_.resize(n_);
+  inv_inertia_a_.resize(n_);
+  for (int i = 0; i < n_; ++i) {
+    const int t = model.tissue[i];
+    wa_[i] = w_[t];
+    inv3G_a_[i] = inv3G_[t];
+    inv_mass_a_[i] = inv_mass_[t];
+    inv_inertia_a_[i] = inv_inertia_[t];
+  }
+  for (auto& a : acc_) a.assign(n_, 0.0);
+  strain_scale_.resize(n_);
+  for (int i = 0; i < n_; ++i)
+    strain_scale_[i] = model.neighbour_count[i] > 0 ? 3.0 / model.neighbour_count[i] : 0.0;
+  // Free-surface factor of the volumetric strain (see simulation.h).
+  f_.resize(n_);
+  {
+    std::vector<char> loaded(n_, 0);
+    for (int a : model.loaded.automata)
+      if (a >= 0 && a < n_) loaded[a] = 1;
+    for (int i = 0; i < n_; ++i) f_[i] = free_surface_factor(model, i, poro_[model.tissue[i]] != 0, loaded[i] != 0);
+  }
+  constraint_of_.assign(n_, -1);
+  for (size_t k = 0; k < model.constraints.size(); ++k) {
+    const int a = model.constraints[k].automaton;
+    if (a < 0 || a >= n_) throw common::InputError(src, 0, "constraint on a non-existent automaton " + std::to_string(a));
+    constraint_of_[a] = static_cast<std::int32_t>(k);
+  }
+  constraint_force_.assign(model.constraints.size(), common::Vec3::Zero());
+  if (load_) {
+    std::vector<char> seen(n_, 0);
+    for (size_t k = 0; k < model.loaded.automata.size(); ++k) {
+      const int a = model.loaded.automata[k];
+      if (a < 0 || a >= n_) throw common::InputError(src, 0, "load on a non-existent automaton " + std::to_string(a));
+      if (seen[a]++) throw common::InputError(src, 0, "automaton " + std::to_string(a) + " loaded twice");
+      if (!(model.loaded.area[k].norm() > 0.0)) throw common::InputError(src, 0, "a loaded automaton with zero area");
+    }
+    loaded_peaks_.assign(2 * model.loaded.automata.size(), 0.0);
+  }
+  build_rows();
+  drained_.assign(n_, 0);
+  for (int a : model.drained) {
+    if (a < 0 || a >= n_) throw common::InputError(src, 0, "drained boundary on a non-existent automaton " + std::to_string(a));
+    drained_[a] = 1;
+  }
+  for (int b = 0; b < 2; ++b)
+    for (int a = 0; a < 3; ++a) {
+      pos_[b][a].assign(n_, 0.0);
+      vel_[b][a].assign(n_, 0.0);
+      omg_[b][a].assign(n_, 0.0);
+    }
+  for (int i = 0; i < n_; ++i) {
+    pos_[0][0][i] = model.x[i];
+    pos_[0][1][i] = model.y[i];
+    pos_[0][2][i] = model.z[i];
+  }
+  pos_[1][0] = pos_[0][0];
+  pos_[1][1] = pos_[0][1];
+  pos_[1][2] = pos_[0][2];
+  const size_t nb = static_cast<size_t>(K_ / 2) * n_;
+  for (int b = 0; b < 2; ++b) {
+    sn_[b].assign(nb, 0.0);
+    tx_[b].assign(nb, 0.0);
+    ty_[b].assign(nb, 0.0);
+    tz_[b].assign(nb, 0.0);
+  }
+  theta_.assign(n_, 0.0);
+  b_.assign(n_, 0.0);
+  pore_.assign(n_, 0.0);
+  if (fluid_on_) zeta_.assign(n_, 0.0);
+  pressure_.assign(n_, 0.0);
+  distortional_.assign(n_, 0.0);
+  peak_pressure_.assign(n_, 0.0);
+  peak_distortional_.assign(n_, 0.0);
+  peak_pore_.assign(n_, 0.0);
+  kinetic_.assign(n_, 0.0);
+  work_.assign(n_, 0.0);
+  damp_.assign(n_, 0.0);
+  if (fluid_on_ && options.filtration)
+    filtration_ = std::make_unique<FiltrationTerm>(model, dt_, options.filtration_safety);
+}
+
+Simulation::~Simulation() = default;
+
+void Simulation::set_velocity(int i, const common::Vec3& v) {
+  for (int a = 0; a < 3; ++a) vel_[cur_][a][i] = v[a];
+}
+void Simulation::set_angular_velocity(int i, const common::Vec3& w) {
+  for (int a = 0; a < 3; ++a) omg_[cur_][a][i] = w[a];
+}
+
+// ---------------------------------------------------------------------------
+// The three passes work on lattice rows (consecutive automata with the same
+// grid j, k). Along a row the neighbour in a given direction is, for most
+// automata, at a constant index offset (Run): those pair halves are computed
+// in `omp simd` loops with contiguous loads; the rest of the row (row ends,
+// holes, periodic models) takes the general path through the neighbour table.
+// Both paths do the same floating-point operations in the same order (no FMA
+// contraction, -ffp-contract=off), so the results do not depend on which path
+// or vector width computed them. Every automaton accumulates its pair halves
+// in direction order.
+
+#define SW_INLINE inline __attribute__((always_inline))
+// The row kernels are also compiled for AVX2 (4 doubles per vector) and the
+// variant is chosen at run time; without FMA contraction both give the same
+// bits.
+#define SW_CLONES __attribute__((target_clones("avx2", "default")))
+
+namespace {
+
+// Pair geometry in the owner's frame from d = x_other - x_owner: the unit
+// vector n, the distance r and the lever arm q of the contact point.
+//  - geometrically nonlinear (Geometry::kNonlinear): the current direction,
+//    r = |d|, q = r/2 (the MCA form of the seed: large rotations exact);
+//  - small strain (Geometry::kLinear): n the pair's rest direction u, r = u . d
+//    (the rest distance plus the normal displacement), q = d0/2. The forces
+//    then follow from a quadratic energy and carry no geometric stiffness:
+//    a large pressure carried by the pairs (the pore fluid of a nearly
+//    incompressible tissue) cannot buckle the lattice (simulation.h).
+template <bool kLinear>
+struct PairGeo {
+  double nx, ny, nz, r, inv_r, q;
+};
+template <bool kLinear>
+SW_INLINE PairGeo<kLinear> pair_geometry(double dx, double dy, double dz, double ux, double uy, double uz, double d0) {
+  PairGeo<kLinear> g;
+  if constexpr (kLinear) {
+    g.nx = ux;
+    g.ny = uy;
+    g.nz = uz;
+    g.r = ux * dx + uy * dy + uz * dz;
+    g.inv_r = 1.0;  // unused
+    g.q = 0.5 * d0;
+  } else {
+    g.r = std::sqrt(dx * dx + dy * dy + dz * dz);
+    g.inv_r = 1.0 / g.r;
+    g.nx = dx * g.inv_r;
+    g.ny = dy * g.inv_r;
+    g.nz = dz * g.inv_r;
+    g.q = 0.5 * g.r;
+  }
+  return g;
+}
+
+// d r of a pair (A8's distance increment) times i's share w_i / (w_i + w_j).
+template <bool kLinear>
+SW_INLINE double predictor_side(double dx, double dy, double dz, double dvx, double dvy, double dvz, double wi,
+                                double wj, double dt, double ux, double uy, double uz) {
+  double dr;
+  if constexpr (kLinear) {
+    dr = (ux * dvx + uy * dvy + uz * dvz) * dt;
+  } else {
+    const double inv_r = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
+    dr = (dx * dvx + dy * dvy + dz * dvz) * inv_r * dt;
+  }
+  return dr * (wi / (wi + wj));
+}
+
+struct PairIn {
+  double dvx, dvy, dvz;  // v_other - v_owner (half step)
+  double osx, osy, osz;  // omega_owner + omega_other
+  double wo, wt, bo, bt;
+  double sn, tx, ty, tz;  // old pair state
+};
+struct PairOut {
+  double sn, tx, ty, tz;                    // new pair state
+  double fx, fy, fz, mx, my, mz;            // force on the owner, moment (both)
+  double s11, s22, s33, s12, s23, s13;      // q n (x) F (both)
+  double e11, e22, e33, e12, e23, e13;      // sym(g (x) n), g the pair's strain vector (both)
+};
+
+// The pair's strain vector g = e_n n + l / d: normal strain (r - d)/d and the
+// accumulated relative shear displacement l = tau (w_o + w_t) over the rest
+// length d; for a homogeneous strain eps, g = eps n, and
+// (3/K) sum_j sym(g_j (x) n_j) = eps (the averaged strain, simulation.h).
+// Each automaton takes its own share 2 w_i / (w_i + w_j) of it (A8's split
+// by compliance: 1 between equal tissues, ~0 for bone next to soft tissue).
+SW_INLINE void pair_strain(PairOut& out, double r, double nx, double ny, double nz, double tX, double tY, double tZ,
+                           double wsum, double inv_d) {
+  const double en = (r * inv_d - 1.0);
+  const double gx = en * nx + tX * wsum * inv_d, gy = en * ny + tY * wsum * inv_d, gz = en * nz + tZ * wsum * inv_d;
+  out.e11 = gx * nx;
+  out.e22 = gy * ny;
+  out.e33 = gz * nz;
+  out.e12 = 0.5 * (gx * ny + gy * nx);
+  out.e23 = 0.5 * (gy * nz + gz * ny);
+  out.e13 = 0.5 * (gx * nz + gz * nx);
+}
+
+// Force, moment, A4 term and strain of a pair from its (new) state.
+template <bool kLinear>
+SW_INLINE void pair_loads(PairOut& out, const PairGeo<kLinear>& g, double sig, double tX, double tY, double tZ, double S,
+                          double wsum, double inv_d) {
+  const double nx = g.nx, ny = g.ny, nz = g.nz, q = g.q;
+  // A3: force on the owner; A1: moment q n x F^tau, the same on both;
+  // A4: q n (x) F, the same for both automata.
+  out.fx = S * (sig * nx + tX);
+  out.fy = S * (sig * ny + tY);
+  out.fz = S * (sig * nz + tZ);
+  const double qS = q * S;
+  out.mx = qS * (ny * tZ - nz * tY);
+  out.my = qS * (nz * tX - nx * tZ);
+  out.mz = qS * (nx * tY - ny * tX);
+  out.s11 = q * nx * out.fx;
+  out.s22 = q * ny * out.fy;
+  out.s33 = q * nz * out.fz;
+  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
+  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
+  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  pair_strain(out, g.r, nx, ny, nz, tX, tY, tZ, wsum, inv_d);
+}
+
+// A7-A8 for one pair in its owner's frame.
+template <bool kLinear>
+SW_INLINE PairOut pair_update(const PairIn& in, const PairGeo<kLinear>& g, double dx, double dy, double dz, double S,
+                              double dt, double inv_d) {
+  PairOut out;
+  const double nx = g.nx, ny = g.ny, nz = g.nz, q = g.q;
+  double dr;
+  if constexpr (kLinear) {
+    dr = (nx * in.dvx + ny * in.dvy + nz * in.dvz) * dt;
+  } else {
+    dr = (dx * in.dvx + dy * in.dvy + dz * in.dvz) * g.inv_r * dt;
+  }
+  const double inv_w = 1.0 / (in.wo + in.wt);
+  // A8: normal specific force.
+  const double sig = in.sn + (dr + (in.wo * in.bo + in.wt * in.bt)) * inv_w;
+  // Relative shear displacement at the contact point, (v_t - v_o) -
+  // q (omega_o + omega_t) x n, tangential part, times dt.
+  double lx = (in.dvx - q * (in.osy * nz - in.osz * ny)) * dt;
+  double ly = (in.dvy - q * (in.osz * nx - in.osx * nz)) * dt;
+  double lz = (in.dvz - q * (in.osx * ny - in.osy * nx)) * dt;
+  const double ln = lx * nx + ly * ny + lz * nz;
+  lx -= ln * nx;
+  ly -= ln * ny;
+  lz -= ln * nz;
+  // Stored tangential force turned into the current contact plane, plus the
+  // A8 increment.
+  double tX = in.tx, tY = in.ty, tZ = in.tz;
+  const double tn = tX * nx + tY * ny + tZ * nz;
+  tX += lx * inv_w - tn * nx;
+  tY += ly * inv_w - tn * ny;
+  tZ += lz * inv_w - tn * nz;
+  out.sn = sig;
+  out.tx = tX;
+  out.ty = tY;
+  out.tz = tZ;
+  pair_loads(out, g, sig, tX, tY, tZ, S, in.wo + in.wt, inv_d);
+  return out;
+}
+
+}  // namespace
+
+void Simulation::build_rows() {
+  rows_.clear();
+  runs_.clear();
+  const int n = n_, K = K_;
+  int start = 0;
+  for (int i = 1; i <= n; ++i) {
+    if (i < n && model_.cell[i][1] == model_.cell[start][1] && model_.cell[i][2] == model_.cell[start][2]) continue;
+    rows_.push_back({start, i - start});
+    start = i;
+  }
+  max_row_ = 0;
+  for (const Row& r : rows_) max_row_ = std::max(max_row_, r.len);
+  runs_.assign(rows_.size() * K, Run{0, 0, 0});
+  if (periodic_) return;  // minimum images: the general path only
+  for (size_t r = 0; r < rows_.size(); ++r) {
+    const int a0 = rows_[r].start, a1 = a0 + rows_[r].len;
+    for (int s = 0; s < K; ++s) {
+      // The longest stretch of the row with a constant, valid offset.
+      Run best{a0, a0, 0};
+      int i = a0;
+      while (i < a1) {
+        const int j = model_.neighbour(s, i);
+        if (j < 0) { ++i; continue; }
+        const int off = j - i;
+        int e = i + 1;
+        while (e < a1 && model_.neighbour(s, e) == e + off) ++e;
+        if (e - i > best.b - best.a) best = Run{i, e, off};
+        i = e;
+      }
+      runs_[r * K + s] = best;
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// A. Stress predictor.
+template <bool kPeriodic, bool kFluid, bool kLinear>
+SW_CLONES void Simulation::predictor() {
+  const int n = n_, K = K_;
+  const double dt = dt_;
+  const double* __restrict px = pos_[cur_][0].data();
+  const double* __restrict py = pos_[cur_][1].data();
+  const double* __restrict pz = pos_[cur_][2].data();
+  const double* __restrict vx = vel_[cur_][0].data();
+  const double* __restrict vy = vel_[cur_][1].data();
+  const double* __restrict vz = vel_[cur_][2].data();
+  const std::int32_t* __restrict nb = model_.neighbours.data();
+  const double* __restrict w = wa_.data();
+  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
+  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
+  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
+  const int nrows = static_cast<int>(rows_.size());
+#pragma omp parallel if (n >= kParallelMin)
+  {
+    std::vector<double> sum_buf(static_cast<size_t>(max_row_));
+    double* __restrict sum = sum_buf.data();
+#pragma omp for schedule(static)
+    for (int row = 0; row < nrows; ++row) {
+      const int a0 = rows_[row].start, len = rows_[row].len, a1 = a0 + len;
+      for (int k = 0; k < len; ++k) sum[k] = 0.0;
+      for (int s = 0; s < K; ++s) {
+        const Run run = runs_[static_cast<size_t>(row) * K + s];
+        const int off = run.off;
+        const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
+#pragma omp simd
+        for (int i = run.a; i < run.b; ++i) {
+          const int j = i + off;
+          sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
+                                                 vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ux, uy, uz);
+        }
+        for (int i = a0; i < a1; ++i) {
+          if (i >= run.a && i < run.b) continue;
+          const int j = nb[static_cast<size_t>(s) * n + i];
+          if (j < 0) continue;
+          double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+          if constexpr (kPeriodic) {
+            dx = wrap(dx, Lx, iLx);
+            dy = wrap(dy, Ly, iLy);
+            dz = wrap(dz, Lz, iLz);
+          }
+          sum[i - a0] += predictor_side<kLinear>(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j],
+                                                 dt, ux, uy, uz);
+        }
+      }
+      for (int i = a0; i < a1; ++i) {
+        const int ti = model_.tissue[i];
+        const double dtheta = f_[i] * sv * sum[i - a0];
+        theta_[i] += dtheta;
+        double dp = 0.0;
+        if constexpr (kFluid) {
+          if (poro_[ti]) {
+            if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
+            const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
+            dp = p - pore_[i];
+            pore_[i] = p;
+          }
+        }
+        // Predicted mean stress increment (equation of state), then A7/A9's b.
+        const double fa_dp = f_[i] * a_[ti] * dp;
+        const double dsm = K_bulk_[ti] * dtheta - fa_dp;
+        b_[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// B1. Pair forces (A3, A7-A9) of the pairs each automaton owns (its forward
+// directions): new pair state, and the owner's share of force, moment and
+// averaged stress (into acc_).
+template <bool kPeriodic, bool kLinear>
+SW_CLONES void Simulation::pair_forces() {
+  const int n = n_, K = K_, H = K_ / 2;
+  const double dt = dt_;
+  const int c = cur_, o = 1 - cur_;
+  const double* __restrict px = pos_[c][0].data();
+  const double* __restrict py = pos_[c][1].data();
+  const double* __restrict pz = pos_[c][2].data();
+  const double* __restrict vx = vel_[c][0].data();
+  const double* __restrict vy = vel_[c][1].data();
+  const double* __restrict vz = vel_[c][2].data();
+  const double* __restrict wx = omg_[c][0].data();
+  const double* __restrict wy = omg_[c][1].data();
+  const double* __restrict wz = omg_[c][2].data();
+  const double* __restrict sn0 = sn_[c].data();
+  const double* __restrict tx0 = tx_[c].data();
+  const double* __restrict ty0 = ty_[c].data();
+  const double* __restrict tz0 = tz_[c].data();
+  double* __restrict sn1 = sn_[o].data();
+  double* __restrict tx1 = tx_[o].data();
+  double* __restrict ty1 = ty_[o].data();
+  double* __restrict tz1 = tz_[o].data();
+  const std::int32_t* __restrict nb = model_.neighbours.data();
+  const double* __restrict w = wa_.data();
+  const double* __restrict b = b_.data();
+  const double S = model_.lattice.contact_area;
+  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
+  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
+  double* __restrict A0 = acc_[0].data();
+  double* __restrict A1 = acc_[1].data();
+  double* __restrict A2 = acc_[2].data();
+  double* __restrict A3 = acc_[3].data();
+  double* __restrict A4 = acc_[4].data();
+  double* __restrict A5 = acc_[5].data();
+  double* __restrict A6 = acc_[6].data();
+  double* __restrict A7 = acc_[7].data();
+  double* __restrict A8 = acc_[8].data();
+  double* __restrict A9 = acc_[9].data();
+  double* __restrict A10 = acc_[10].data();
+  double* __restrict A11 = acc_[11].data();
+  double* __restrict E0 = acc_[12].data();
+  double* __restrict E1 = acc_[13].data();
+  double* __restrict E2 = acc_[14].data();
+  double* __restrict E3 = acc_[15].data();
+  double* __restrict E4 = acc_[16].data();
+  double* __restrict E5 = acc_[17].data();
+  const double inv_d = 1.0 / model_.lattice.diameter;
+  const double d0 = model_.lattice.diameter;
+  auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
+                  __attribute__((always_inline)) {
+    const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
+    PairIn in;
+    in.dvx = vx[j] - vx[i];
+    in.dvy = vy[j] - vy[i];
+    in.dvz = vz[j] - vz[i];
+    in.osx = wx[i] + wx[j];
+    in.osy = wy[i] + wy[j];
+    in.osz = wz[i] + wz[j];
+    in.wo = w[i];
+    in.wt = w[j];
+    in.bo = b[i];
+    in.bt = b[j];
+    in.sn = sn0[bi];
+    in.tx = tx0[bi];
+    in.ty = ty0[bi];
+    in.tz = tz0[bi];
+    const PairOut out = pair_update<kLinear>(in, g, dx, dy, dz, S, dt, inv_d);
+    sn1[bi] = out.sn;
+    tx1[bi] = out.tx;
+    ty1[bi] = out.ty;
+    tz1[bi] = out.tz;
+    A0[i] += out.fx;
+    A1[i] += out.fy;
+    A2[i] += out.fz;
+    A3[i] += out.mx;
+    A4[i] += out.my;
+    A5[i] += out.mz;
+    A6[i] += out.s11;
+    A7[i] += out.s22;
+    A8[i] += out.s33;
+    A9[i] += out.s12;
+    A10[i] += out.s23;
+    A11[i] += out.s13;
+    // The automaton's own share of the pair's strain (A8's split by compliance).
+    const double share = 2.0 * w[i] / (w[i] + w[j]);
+    E0[i] += share * out.e11;
+    E1[i] += share * out.e22;
+    E2[i] += share * out.e33;
+    E3[i] += share * out.e12;
+    E4[i] += share * out.e23;
+    E5[i] += share * out.e13;
+  };
+  const int nrows = static_cast<int>(rows_.size());
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (int row = 0; row < nrows; ++row) {
+    const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
+    for (int i = a0; i < a1; ++i) {
+      A0[i] = A1[i] = A2[i] = A3[i] = A4[i] = A5[i] = 0.0;
+      A6[i] = A7[i] = A8[i] = A9[i] = A10[i] = A11[i] = 0.0;
+      E0[i] = E1[i] = E2[i] = E3[i] = E4[i] = E5[i] = 0.0;
+    }
+    for (int s = 0; s < H; ++s) {
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const size_t base = static_cast<size_t>(s) * n;
+      const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;
+        side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i], ux, uy, uz);
+      }
+      for (int i = a0; i < a1; ++i) {
+        if (i >= run.a && i < run.b) continue;
+        const int j = nb[base + i];
+        if (j < 0) continue;
+        double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        side(i, j, base + i, dx, dy, dz, ux, uy, uz);
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------
+// B2. The other half of every pair (from the new pair state of its owner),
+// the load, averaged stress (A4-A6), kick (A1) and drift.
+template <bool kPeriodic, bool kFluid, bool kLinear>
+SW_CLONES void Simulation::integrate() {
+  const int n = n_, K = K_, H = K_ / 2;
+  const double dt = dt_;
+  const int c = cur_, o = 1 - cur_;
+  const double* __restrict px = pos_[c][0].data();
+  const double* __restrict py = pos_[c][1].data();
+  const double* __restrict pz = pos_[c][2].data();
+  const double* __restrict vx = vel_[c][0].data();
+  const double* __restrict vy = vel_[c][1].data();
+  const double* __restrict vz = vel_[c][2].data();
+  const double* __restrict wx = omg_[c][0].data();
+  const double* __restrict wy = omg_[c][1].data();
+  const double* __restrict wz = omg_[c][2].data();
+  double* __restrict qx = pos_[o][0].data();
+  double* __restrict qy = pos_[o][1].data();
+  double* __restrict qz = pos_[o][2].data();
+  double* __restrict ux = vel_[o][0].data();
+  double* __restrict uy = vel_[o][1].data();
+  double* __restrict uz = vel_[o][2].data();
+  double* __restrict ox = omg_[o][0].data();
+  double* __restrict oy = omg_[o][1].data();
+  double* __restrict oz = omg_[o][2].data();
+  const double* __restrict sn1 = sn_[o].data();
+  const double* __restrict tx1 = tx_[o].data();
+  const double* __restrict ty1 = ty_[o].data();
+  const double* __restrict tz1 = tz_[o].data();
+  const std::int32_t* __restrict nb = model_.neighbours.data();
+  const double S = model_.lattice.contact_area;
+  const double R = model_.lattice.radius;
+  const double invV = 1.0 / model_.lattice.cell_volume;
+  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
+  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
+  const double t = static_cast<double>(steps_) * dt;
+  const double p_load = load_ ? load_(t) : 0.0;
+  const double p_prev = load_ ? load_(t - dt) : 0.0;
+  const double damp = 1.0 - options_.damping * dt;
+  const bool track = track_energy_;
+  double* __restrict A0 = acc_[0].data();
+  double* __restrict A1 = acc_[1].data();
+  double* __restrict A2 = acc_[2].data();
+  double* __restrict A3 = acc_[3].data();
+  double* __restrict A4 = acc_[4].data();
+  double* __restrict A5 = acc_[5].data();
+  double* __restrict A6 = acc_[6].data();
+  double* __restrict A7 = acc_[7].data();
+  double* __restrict A8 = acc_[8].data();
+  double* __restrict A9 = acc_[9].data();
+  double* __restrict A10 = acc_[10].data();
+  double* __restrict A11 = acc_[11].data();
+  double* __restrict E0 = acc_[12].data();
+  double* __restrict E1 = acc_[13].data();
+  double* __restrict E2 = acc_[14].data();
+  double* __restrict E3 = acc_[15].data();
+  double* __restrict E4 = acc_[16].data();
+  double* __restrict E5 = acc_[17].data();
+  const double* __restrict w = wa_.data();
+  const double* __restrict escale = strain_scale_.data();
+  const double inv_d = 1.0 / model_.lattice.diameter;
+  const double* __restrict im_a = inv_mass_a_.data();
+  const double* __restrict iJ_a = inv_inertia_a_.data();
+  double* __restrict Pout = pressure_.data();
+  double* __restrict Eout = distortional_.data();
+  double* __restrict Ppk = peak_pressure_.data();
+  double* __restrict Epk = peak_distortional_.data();
+  const double d0 = model_.lattice.diameter;
+  auto other = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
+                   __attribute__((always_inline)) {
+    const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
+    PairOut out;
+    pair_loads(out, g, sn1[bi], tx1[bi], ty1[bi], tz1[bi], S, w[j] + w[i], inv_d);
+    A0[i] -= out.fx;
+    A1[i] -= out.fy;
+    A2[i] -= out.fz;
+    A3[i] += out.mx;
+    A4[i] += out.my;
+    A5[i] += out.mz;
+    A6[i] += out.s11;
+    A7[i] += out.s22;
+    A8[i] += out.s33;
+    A9[i] += out.s12;
+    A10[i] += out.s23;
+    A11[i] += out.s13;
+    // The automaton's own share of the pair's strain (A8's split by compliance).
+    const double share = 2.0 * w[i] / (w[i] + w[j]);
+    E0[i] += share * out.e11;
+    E1[i] += share * out.e22;
+    E2[i] += share * out.e33;
+    E3[i] += share * out.e12;
+    E4[i] += share * out.e23;
+    E5[i] += share * out.e13;
+  };
+  const int nrows = static_cast<int>(rows_.size());
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+  for (int row = 0; row < nrows; ++row) {
+    const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
+    for (int s = H; s < K; ++s) {
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const size_t base = static_cast<size_t>(s - H) * n;
+      // The owner's forward direction (from the owner j to i).
+      const common::Vec3& u = model_.lattice.unit[s - H];
+      const double ux = u.x(), uy = u.y(), uz = u.z();
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;  // the owner of this pair
+        // The owner's frame, as in pair_forces: the same bits.
+        other(i, j, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j], ux, uy, uz);
+      }
+      for (int i = a0; i < a1; ++i) {
+        if (i >= run.a && i < run.b) continue;
+        const int j = nb[static_cast<size_t>(s) * n + i];
+        if (j < 0) continue;
+        double dx = px[i] - px[j], dy = py[i] - py[j], dz = pz[i] - pz[j];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        other(i, j, base + j, dx, dy, dz, ux, uy, uz);
+      }
+    }
+#pragma omp simd
+    for (int i = a0; i < a1; ++i) {
+      const double s11 = A6[i] * invV, s22 = A7[i] * invV, s33 = A8[i] * invV;
+      const double s12 = A9[i] * invV, s23 = A10[i] * invV, s13 = A11[i] * invV;
+      const double P = -(s11 + s22 + s33) / 3.0;  // A5
+      // Averaged strain tensor from the pairs' strains, its deviatoric part
+      // and the equivalent (von Mises) strain sqrt(2/3 e:e).
+      const double c = escale[i];
+      const double e11 = E0[i] * c, e22 = E1[i] * c, e33 = E2[i] * c;
+      const double e12 = E3[i] * c, e23 = E4[i] * c, e13 = E5[i] * c;
+      const double em = (e11 + e22 + e33) / 3.0;
+      const double d1 = e11 - em, d2 = e22 - em, d3 = e33 - em;
+      const double eps = std::sqrt(2.0 / 3.0 * (d1 * d1 + d2 * d2 + d3 * d3 + 2.0 * (e12 * e12 + e23 * e23 + e13 * e13)));
+      Pout[i] = P;
+      Eout[i] = eps;
+      (void)s12;
+      (void)s23;
+      (void)s13;
+      Ppk[i] = P > Ppk[i] ? P : Ppk[i];
+      Epk[i] = eps > Epk[i] ? eps : Epk[i];
+      // Kick (A1) and drift.
+      const double im = im_a[i], iJ = iJ_a[i];
+      const double nvx = vx[i] * damp + A0[i] * im * dt;
+      const double nvy = vy[i] * damp + A1[i] * im * dt;
+      const double nvz = vz[i] * damp + A2[i] * im * dt;
+      ux[i] = nvx;
+      uy[i] = nvy;
+      uz[i] = nvz;
+      qx[i] = px[i] + nvx * dt;
+      qy[i] = py[i] + nvy * dt;
+      qz[i] = pz[i] + nvz * dt;
+      ox[i] = wx[i] * damp + A3[i] * iJ * dt;
+      oy[i] = wy[i] * damp + A4[i] * iJ * dt;
+      oz[i] = wz[i] * damp + A5[i] * iJ * dt;
+    }
+    if constexpr (kFluid) {
+      for (int i = a0; i < a1; ++i)
+        if (pore_[i] > peak_pore_[i]) peak_pore_[i] = pore_[i];
+    }
+    if (track) {
+      for (int i = a0; i < a1; ++i) {
+        const double m = 1.0 / im_a[i], J = 1.0 / iJ_a[i];
+        const double vxi = vx[i], vyi = vy[i], vzi = vz[i], wxi = wx[i], wyi = wy[i], wzi = wz[i];
+        const double nvx = ux[i], nvy = uy[i], nvz = uz[i], nwx = ox[i], nwy = oy[i], nwz = oz[i];
+        const double sx = 0.5 * (vxi + nvx), sy = 0.5 * (vyi + nvy), sz = 0.5 * (vzi + nvz);
+        const double gx = 0.5 * (wxi + nwx), gy = 0.5 * (wyi + nwy), gz = 0.5 * (wzi + nwz);
+        // Leapfrog's exact discrete energy uses the product of the half-step
+        // velocities: E = 1/2 m v^{n-1/2} . v^{n+1/2} + U(x^n).
+        kinetic_[i] = 0.5 * m * (vxi * nvx + vyi * nvy + vzi * nvz) + 0.5 * J * (wxi * nwx + wyi * nwy + wzi * nwz);
+        // Work over the last drift, (f^{n-1} + f^n)/2 . (x^n - x^{n-1}): with
+        // the kinetic energy above the balance is exact for a linear system.
+        work_[i] = 0.0;
+        damp_[i] = options_.damping * dt * (m * (sx * sx + sy * sy + sz * sz) + J * (gx * gx + gy * gy + gz * gz));
+      }
+    }
+  }
+  // The loaded automata (the applicator's outer face, few): redo their
+  // stress and kick with the pressure on the outer face (q = R, n outward).
+  if (load_) {
+    const std::vector<int>& la = model_.loaded.automata;
+    for (size_t k = 0; k < la.size(); ++k) {
+      const int i = la[k];
+      const common::Vec3& A = model_.loaded.area[k];
+      const double fex = p_load * A.x(), fey = p_load * A.y(), fez = p_load * A.z();
+      const double inv_a = 1.0 / A.norm();
+      const double nx = -A.x() * inv_a, ny = -A.y() * inv_a, nz = -A.z() * inv_a;
+      const double s11 = (A6[i] + R * nx * fex) * invV;
+      const double s22 = (A7[i] + R * ny * fey) * invV;
+      const double s33 = (A8[i] + R * nz * fez) * invV;
+      const double s12 = (A9[i] + 0.5 * R * (nx * fey + ny * fex)) * invV;
+      const double s23 = (A10[i] + 0.5 * R * (ny * fez + nz * fey)) * invV;
+      const double s13 = (A11[i] + 0.5 * R * (nx * fez + nz * fex)) * invV;
+      const double P = -(s11 + s22 + s33) / 3.0;
+      (void)s12;
+      (void)s23;
+      (void)s13;
+      Pout[i] = P;
+      Ppk[i] = std::max(loaded_peaks_[2 * k], P);
+      const double im = im_a[i];
+      ux[i] = vx[i] * damp + (A0[i] + fex) * im * dt;
+      uy[i] = vy[i] * damp + (A1[i] + fey) * im * dt;
+      uz[i] = vz[i] * damp + (A2[i] + fez) * im * dt;
+      qx[i] = px[i] + ux[i] * dt;
+      qy[i] = py[i] + uy[i] * dt;
+      qz[i] = pz[i] + uz[i] * dt;
+      if (track) {
+        const double m = 1.0 / im;
+        kinetic_[i] = 0.5 * m * (vx[i] * ux[i] + vy[i] * uy[i] + vz[i] * uz[i]) +
+                      0.5 / iJ_a[i] * (wx[i] * ox[i] + wy[i] * oy[i] + wz[i] * oz[i]);
+        // Work over the last drift, (f^{n-1} + f^n)/2 . (x^n - x^{n-1}):
+        // with the kinetic energy above the balance is exact for a linear system.
+        work_[i] = 0.5 * (p_prev + p_load) * (A.x() * vx[i] + A.y() * vy[i] + A.z() * vz[i]) * dt;
+      }
+    }
+  }
+  // Prescribed velocities (few automata): override the kick on the fixed axes.
+  if (!model_.constraints.empty()) {
+    const double cscale = model_.constraint_scale ? model_.constraint_scale(t + 0.5 * dt) : 1.0;
+    for (size_t k = 0; k < model_.constraints.size(); ++k) {
+      const VelocityConstraint& con = model_.constraints[k];
+      const int i = con.automaton;
+      if (con.axes & 1) ux[i] = con.velocity.x() * cscale;
+      if (con.axes & 2) uy[i] = con.velocity.y() * cscale;
+      if (con.axes & 4) uz[i] = con.velocity.z() * cscale;
+      qx[i] = px[i] + ux[i] * dt;
+      qy[i] = py[i] + uy[i] * dt;
+      qz[i] = pz[i] + uz[i] * dt;
+      constraint_force_[k] = common::Vec3(A0[i], A1[i], A2[i]);
+    }
+  }
+}
+
+void Simulation::step() {
+  const bool fluid = fluid_on_;
+  if (load_) {
+    const std::vector<int>& la = model_.loaded.automata;
+    for (size_t k = 0; k < la.size(); ++k) {
+      loaded_peaks_[2 * k] = peak_pressure_[la[k]];
+      loaded_peaks_[2 * k + 1] = 0.0;
+    }
+  }
+  const bool linear = options_.geometry == Geometry::kLinear;
+#define SW_STEP(P, F, L)        \
+  {                             \
+    predictor<P, F, L>();       \
+    pair_forces<P, L>();        \
+    integrate<P, F, L>();       \
+  }
+  if (periodic_) {
+    if (fluid) { if (linear) SW_STEP(true, true, true) else SW_STEP(true, true, false) }
+    else { if (linear) SW_STEP(true, false, true) else SW_STEP(true, false, false) }
+  } else {
+    if (fluid) { if (linear) SW_STEP(false, true, true) else SW_STEP(false, true, false) }
+    else { if (linear) SW_STEP(false, false, true) else SW_STEP(false, false, false) }
+  }
+#undef SW_STEP
+  if (track_energy_) {
+    kinetic_now_ = deterministic_sum(n_, [&](std::int64_t i) { return kinetic_[i]; });
+    work_total_ += deterministic_sum(n_, [&](std::int64_t i) { return work_[i]; });
+    damping_total_ += deterministic_sum(n_, [&](std::int64_t i) { return damp_[i]; });
+  }
+  if (filtration_) filtration_->advance(theta_.data(), zeta_.data(), track_energy_ ? &dissipation_total_ : nullptr);
+  cur_ = 1 - cur_;
+  ++steps_;
+  // NaN/Inf stop the run naming where (checked on the cheap global sums).
+  if ((steps_ & 63) == 1) {
+    for (int a = 0; a < 3; ++a) {
+      const std::vector<double>& v = vel_[cur_][a];
+      const double s = deterministic_sum(n_, [&](std::int64_t i) { return v[i]; });
+      if (!std::isfinite(s)) {
+        for (int i = 0; i < n_; ++i)
+          if (!std::isfinite(v[i])) {
+            std::ostringstream m;
+            m << "shockwave: step " << steps_ << " (t = " << time() << " s): non-finite velocity of automaton " << i
+              << " (" << model_.tissues[model_.tissue[i]].name << ") at (" << model_.x[i] << ", " << model_.y[i]
+              << ", " << model_.z[i] << ") m";
+            throw common::NumericalError(m.str());
+          }
+      }
+    }
+  }
+}
+
+void Simulation::run(std::int64_t steps) {
+  for (std::int64_t k = 0; k < steps; ++k) step();
+}
+
+common::Vec3 Simulation::position(int i) const {
+  // After a step the other buffer still holds the positions of the fields' level.
+  const int o = 1 - cur_;
+  return {pos_[o][0][i], pos_[o][1][i], pos_[o][2][i]};
+}
+
+common::Vec3 Simulation::half_step_velocity(int i) const {
+  return {vel_[cur_][0][i], vel_[cur_][1][i], vel_[cur_][2][i]};
+}
+common::Vec3 Simulation::half_step_angular_velocity(int i) const {
+  return {omg_[cur_][0][i], omg_[cur_][1][i], omg_[cur_][2][i]};
+}
+
+double critical_time_step(const Model& model, const SimulationOptions& options, std::string* limiting) {
+  const std::vector<std::int64_t> counts = model.tissue_counts();
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t t = 0; t < model.tissues.size(); ++t) {
+    if (counts[t] == 0) continue;
+    GridSpec g;
+    g.count = {4, 4, 4};
+    g.periodic = {true, true, true};
+    const Model block = build_model(model.lattice, g, {model.tissues[t]}, model.fluid,
+                                    [](int, int, int, const common::Vec3&) { return 0; });
+    SimulationOptions po = options;
+    po.filtration = false;
+    po.damping = 0.0;
+    const TissueConstants& c = block.constants[0];
+    // Tiny steps: the increments stay linear; the value cancels below.
+    po.fixed_time_step = 1e-3 * model.lattice.diameter / c.undrained_p_speed;
+    po.skip_stability_check = true;
+    const int n = block.size();
+    const double R = model.lattice.radius;
+    // Deterministic start vector (translations and rotations times R).
+    std::vector<common::Vec3> u(n), phi(n);
+    std::uint64_t state = 0x9E3779B97F4A7C15ull;
+    auto rnd = [&state]() {
+      state = state * 6364136223846793005ull + 1442695040888963407ull;
+      return static_cast<double>(state >> 11) * (1.0 / 9007199254740992.0) - 0.5;
+    };
+    for (int i = 0; i < n; ++i) {
+      u[i] = common::Vec3(rnd(), rnd(), rnd());
+      phi[i] = common::Vec3(rnd(), rnd(), rnd()) / R;
+    }
+    const double m = c.total_density * model.lattice.cell_volume, J = 0.4 * m * R * R;
+    double lambda = 0.0;
+    for (int it = 0; it < 60; ++it) {
+      Simulation sim(block, po);
+      const double h = sim.time_step();
+      for (int i = 0; i < n; ++i) {
+        sim.set_velocity(i, u[i] / h);
+        sim.set_angular_velocity(i, phi[i] / h);
+      }
+      sim.step();
+      // One step from rest with displacement u: v changes by -M^-1 K u h.
+      double num = 0.0, den = 0.0, norm = 0.0;
+      std::vector<common::Vec3> au(n), aphi(n);
+      for (int i = 0; i < n; ++i) {
+        au[i] = -(sim.half_step_velocity(i) - u[i] / h) / h;
+        aphi[i] = -(sim.half_step_angular_velocity(i) - phi[i] / h) / h;
+        num += m * u[i].dot(au[i]) + J * phi[i].dot(aphi[i]);
+        den += m * u[i].squaredNorm() + J * phi[i].squaredNorm();
+      }
+      lambda = num / den;  // Rayleigh quotient u.K u / u.M u
+      for (int i = 0; i < n; ++i) norm += m * au[i].squaredNorm() + J * aphi[i].squaredNorm();
+      norm = std::sqrt(norm / den);
+      for (int i = 0; i < n; ++i) {
+        u[i] = au[i] / norm;
+        phi[i] = aphi[i] / norm;
+      }
+    }
+    const double dt = 2.0 / std::sqrt(lambda);
+    if (dt < best) {
+      best = dt;
+      if (limiting) *limiting = model.tissues[t].name;
+    }
+  }
+  return best;
+}
+
+common::Vec3 Simulation::velocity(int i) const {
+  return 0.5 * common::Vec3(vel_[0][0][i] + vel_[1][0][i], vel_[0][1][i] + vel_[1][1][i], vel_[0][2][i] + vel_[1][2][i]);
+}
+
+double Simulation::von_mises(int i) const {
+  const std::array<double, 6> s = stress(i);
+  const double d12 = s[0] - s[1], d23 = s[1] - s[2], d31 = s[2] - s[0];
+  return std::sqrt(0.5 * (d12 * d12 + d23 * d23 + d31 * d31) + 3.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));  // A6
+}
+
+std::array<double, 6> Simulation::stress(int i) const {
+  // Recomputed from the pair state of the fields' level (after the step the
+  // new pair state is in cur_, the positions of that level in 1 - cur_).
+  const int c = cur_, o = 1 - cur_;
+  const int K = K_, H = K_ / 2, n = n_;
+  const bool linear = options_.geometry == Geometry::kLinear;
+  std::array<double, 6> s{0, 0, 0, 0, 0, 0};
+  for (int d = 0; d < K; ++d) {
+    const int j = model_.neighbour(d, i);
+    if (j < 0) continue;
+    const bool own = d < H;
+    const int io = own ? i : j, it = own ? j : i;
+    const size_t bi = static_cast<size_t>(own ? d : d - H) * n + io;
+    common::Vec3 dv(pos_[o][0][it] - pos_[o][0][io], pos_[o][1][it] - pos_[o][1][io], pos_[o][2][it] - pos_[o][2][io]);
+    for (int a = 0; a < 3; ++a)
+      if (period_[a] > 0) dv[a] = wrap(dv[a], period_[a], 1.0 / period_[a]);
+    const common::Vec3 nv = linear ? model_.lattice.unit[own ? d : d - H] : common::Vec3(dv / dv.norm());
+    const double q = linear ? 0.5 * model_.lattice.diameter : 0.5 * dv.norm();
+    const common::Vec3 F = model_.lattice.contact_area * (sn_[c][bi] * nv + common::Vec3(tx_[c][bi], ty_[c][bi], tz_[c][bi]));
+    s[0] += q * nv.x() * F.x();
+    s[1] += q * nv.y() * F.y();
+    s[2] += q * nv.z() * F.z();
+    s[3] += 0.5 * q * (nv.x() * F.y() + nv.y() * F.x());
+    s[4] += 0.5 * q * (nv.y() * F.z() + nv.z() * F.y());
+    s[5] += 0.5 * q * (nv.x() * F.z() + nv.z() * F.x());
+  }
+  for (double& v : s) v /= model_.lattice.cell_volume;
+  return s;
+}
+
+double Simulation::potential_energy() const {
+  // E = sum_pairs S (w_i + w_j)/2 [(sigma - beta)^2 + |tau|^2]
+  //   + sum_i V [D_i K_i theta_i^2 / (2 f_i) + P_i^2 / (2 M_i)],
+  // beta = (w_i B_i + w_j B_j)/(w_i + w_j), B_i = D_i (K_i theta_i - a_i f_i P_i) - c_i a_i f_i P_i
+  // (the accumulated many-body and pore parts of the pair force).
+  const int c = cur_, n = n_, H = K_ / 2;
+  const double S = model_.lattice.contact_area, V = model_.lattice.cell_volume;
+  auto B = [&](int i) {
+    const int t = model_.tissue[i];
+    const double fap = f_[i] * a_[t] * pore_[i];
+    return D_[t] * (K_bulk_[t] * theta_[i] - fap) - pore_coef_[t] * fap;
+  };
+  return deterministic_sum(n, [&](std::int64_t ii) {
+    const int i = static_cast<int>(ii);
+    const int ti = model_.tissue[i];
+    double e = 0.0;
+    for (int s = 0; s < H; ++s) {
+      const int j = model_.neighbour(s, i);
+      if (j < 0) continue;
+      const size_t bi = static_cast<size_t>(s) * n + i;
+      const double wi = w_[ti], wj = w_[model_.tissue[j]];
+      const double beta = (wi * B(i) + wj * B(j)) / (wi + wj);
+      const double d = sn_[c][bi] - beta;
+      const double t2 = tx_[c][bi] * tx_[c][bi] + ty_[c][bi] * ty_[c][bi] + tz_[c][bi] * tz_[c][bi];
+      e += 0.5 * S * (wi + wj) * (d * d + t2);
+    }
+    e += V * D_[ti] * K_bulk_[ti] * theta_[i] * theta_[i] / (2.0 * f_[i]);
+    if (poro_[ti]) e += V * pore_[i] * pore_[i] / (2.0 * M_[ti]);
+    return e;
+  });
+}
+
+EnergyBalance Simulation::energy() const {
+  EnergyBalance e;
+  e.kinetic = kinetic_now_;
+  e.potential = potential_energy();
+  e.external_work = work_total_;
+  e.dissipation = dissipation_total_;
+  e.damping = damping_total_;
+  return e;
+}
+
+common::Vec3 Simulation::linear_momentum() const {
+  common::Vec3 p;
+  for (int a = 0; a < 3; ++a) {
+    const std::vector<double>& v = vel_[cur_][a];
+    p[a] = deterministic_sum(n_, [&](std::int64_t i) { return mass_[model_.tissue[i]] * v[i]; });
+  }
+  return p;
+}
+
+common::Vec3 Simulation::angular_momentum() const {
+  // Positions and velocities at the same time: x^{n+1/2} = (x^n + x^{n+1})/2.
+  common::Vec3 L;
+  for (int a = 0; a < 3; ++a) {
+    const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
+    L[a] = deterministic_sum(n_, [&](std::int64_t ii) {
+      const int i = static_cast<int>(ii);
+      const int t = model_.tissue[i];
+      const double m = mass_[t];
+      const double x1 = 0.5 * (pos_[0][b1][i] + pos_[1][b1][i]), x2 = 0.5 * (pos_[0][b2][i] + pos_[1][b2][i]);
+      return m * (x1 * vel_[cur_][b2][i] - x2 * vel_[cur_][b1][i]) + omg_[cur_][a][i] / inv_inertia_[t];
+    });
+  }
+  return L;
+}
+
+}  // namespace arthrosim::shockwave
