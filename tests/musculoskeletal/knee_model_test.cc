@@ -105,6 +105,7 @@ TEST(KneeModel, PreparedSurfacesReplaceTheContactMeshes) {
   auto write_prepared = [&](const std::string& path, const std::string& skip,
                             const std::string& shifted, double shift) {
     arthrosim::common::H5File f(path, arthrosim::common::H5File::Mode::kTruncate);
+    f.set_attribute("/", "schema", "arthrosim prepared model 1");  // the version the reader takes (common/file_check.h)
     std::vector<std::string> names;
     std::set<std::string> done;
     for (const auto& c : m0.contacts) {
@@ -171,6 +172,7 @@ TEST(KneeModel, PreparedSurfacesReplaceTheContactMeshes) {
     const auto* femur = &m0.contacts[0].target();
     const std::string path = (dir / "prepared_split.h5").string();
     arthrosim::common::H5File f(path, arthrosim::common::H5File::Mode::kTruncate);
+    f.set_attribute("/", "schema", "arthrosim prepared model 1");
     std::vector<std::string> names;
     std::set<std::string> done;
     for (const auto& c : m0.contacts)

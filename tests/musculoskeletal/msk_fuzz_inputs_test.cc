@@ -76,6 +76,7 @@ PreparedSurface one_triangle(const msk::Model& m, const std::string& surface, co
 std::string write_prepared(const std::string& file, const std::vector<PreparedSurface>& surfaces) {
   const std::string path = scratch(file).string();
   common::H5File f(path, common::H5File::Mode::kTruncate);
+  f.set_attribute("/", "schema", "arthrosim prepared model 1");  // the version the reader takes (common/file_check.h)
   std::vector<std::string> names;
   for (const auto& s : surfaces) names.push_back(s.name);
   f.write("/surfaces/names", names);
