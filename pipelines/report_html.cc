@@ -98,13 +98,13 @@ std::vector<double> col(const Eigen::MatrixXd& m, int c) {
   return v;
 }
 
-void spec_time(Json& j, const TimePlot& p) {
+void spec_lines(Json& j, const LinePlot& p) {
   j.value("kind", "2d");
   j.begin_array("data");
   std::set<std::string> groups_seen;
   for (const auto& l : p.lines) {
     require(l.x.size() == l.y.size(), p.id + ": series '" + l.label + "' has x and y of different lengths");
-    j.begin_object().value("type", "scatter").value("mode", "lines").value("name", l.label);
+    j.begin_object().value("type", "scatter").value("mode", l.markers ? "lines+markers" : "lines").value("name", l.label);
     j.array("x", l.x).array("y", l.y);
     j.begin_object("line").value("color", colour(l.colour)).value("dash", dash_name(l.dash)).value("width", 2).end_object();
     if (!l.group.empty()) {
@@ -461,10 +461,10 @@ std::string render(const Report& r) {
       }
       figs.begin_object();
       std::string caption, id, cls = "plot";
-      if (const auto* p = std::get_if<TimePlot>(&b)) {
+      if (const auto* p = std::get_if<LinePlot>(&b)) {
         id = p->id, caption = p->caption;
         figs.value("id", id);
-        spec_time(figs, *p);
+        spec_lines(figs, *p);
       } else if (const auto* p = std::get_if<MapPlot>(&b)) {
         id = p->id, caption = p->caption, cls = "map";
         figs.value("id", id);

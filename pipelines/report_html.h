@@ -31,10 +31,11 @@ struct Line {
   std::vector<double> x, y;
   Dash dash = Dash::kSolid;
   int colour = 0;      ///< index into the report's qualitative palette
+  bool markers = false;  ///< a marker at every point (few points)
 };
 
-/// Zoomable time series (x and y labels carry their unit: "time [s]").
-struct TimePlot {
+/// Zoomable line plot, e.g. a time series (x and y labels carry their unit: "time [s]").
+struct LinePlot {
   std::string id, title, caption, x_label, y_label;
   std::vector<Line> lines;
 };
@@ -102,7 +103,7 @@ struct Text {
   bool warning = false;  ///< drawn as a warning (missing inputs)
 };
 
-using Block = std::variant<Text, TimePlot, MapPlot, SurfacePlot, Table>;
+using Block = std::variant<Text, LinePlot, MapPlot, SurfacePlot, Table>;
 
 struct Section {
   std::string id, title;

@@ -37,7 +37,7 @@ Report every_kind() {
   r.title = "arthrosim test report";
   r.header = {"Scene: test"};
   r.banner = "Test data <&> only";
-  TimePlot tp;
+  LinePlot tp;
   tp.id = "fig-force", tp.title = "Tibiofemoral contact force", tp.caption = "two stages";
   tp.x_label = "time [s]", tp.y_label = "force [BW]";
   Line s1, s2, lim;
@@ -159,7 +159,7 @@ TEST(ReportHtml, PageStructure) {
 
 TEST(ReportHtml, RefusesModelsItCannotDrawHonestly) {
   Report r = every_kind();
-  std::get<TimePlot>(r.sections[0].blocks[1]).y_label.clear();
+  std::get<LinePlot>(r.sections[0].blocks[1]).y_label.clear();
   EXPECT_THROW(render(r), std::invalid_argument);  // an axis without a label
   r = every_kind();
   r.summary[0].figure = "fig-none";
