@@ -419,7 +419,7 @@ std::vector<std::string> figure_ids(const Report& r) {
   std::vector<std::string> ids;
   for (const auto& s : r.sections)
     for (const auto& b : s.blocks)
-      if (const std::string id = block_id(b); !id.empty()) ids.push_back(id);
+      if (!std::holds_alternative<Text>(b) && !std::holds_alternative<Table>(b)) ids.push_back(block_id(b));
   return ids;
 }
 

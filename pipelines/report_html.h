@@ -133,7 +133,7 @@ struct Report {
 /// NaN/Inf -> "-".
 std::string significant(double v, int digits = 3);
 
-/// Ids of every figure and table of the report, in order.
+/// Ids of every plot (line, map, surface; not the tables) of the report, in order.
 std::vector<std::string> figure_ids(const Report& report);
 
 /// The page (report.html's text). Throws std::invalid_argument on a model

@@ -131,7 +131,7 @@ TEST(ReportHtml, SignificantDigits) {
 TEST(ReportHtml, PageStructure) {
   const Report r = every_kind();
   const std::string h = render(r);
-  EXPECT_EQ(figure_ids(r), (std::vector<std::string>{"fig-force", "fig-map", "fig-surface", "tab-rule"}));
+  EXPECT_EQ(figure_ids(r), (std::vector<std::string>{"fig-force", "fig-map", "fig-surface"}));
   // Axis titles carry units; stage 2 dashed, stage 1 solid; legend right of the axes.
   for (const char* s : {"\"text\": \"time [s]\"", "\"text\": \"force [BW]\"", "\"text\": \"view right [mm]\"",
                         "\"text\": \"model z [mm]\"", "\"dash\": \"dash\"", "\"dash\": \"solid\"", "\"dash\": \"dot\"",
