@@ -357,15 +357,17 @@ constexpr const char* kPageScript = R"JS(
 constexpr const char* kStyle =
     "body{font-family:system-ui,sans-serif;max-width:1150px;margin:auto;padding:1em;color:#222}"
     "h1{margin-bottom:0.2em}h2{border-bottom:1px solid #ccc;padding-bottom:0.2em;margin-top:1.6em}"
-    "figure{margin:1em 0;border:1px solid #e3e3e3;border-radius:4px;padding:0.5em}"
-    "figure.map{display:inline-block;width:calc(50% - 1.3em);min-width:420px;vertical-align:top;margin-right:0.6em}"
+    "figure{box-sizing:border-box;margin:1em 0;border:1px solid #e3e3e3;border-radius:4px;padding:0.5em}"
+    "figure.map{display:inline-block;width:calc(50% - 0.8em);vertical-align:top;margin-right:0.5em}"
+    "div.figure{width:100%}"
     "figcaption{font-size:0.9em;color:#444;margin-top:0.3em}"
     "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:0.9em}"
     "th{background:#f4f4f4;text-align:left}td.num{text-align:right;font-variant-numeric:tabular-nums}"
     ".banner{background:#fff3cd;border:1px solid #e0c36c;padding:0.5em 1em;border-radius:4px}"
     ".problem{background:#f8d7da;border:1px solid #d88;padding:0.5em 1em;border-radius:4px}"
     ".warning{color:#a00}.pass{color:#1a7f37;font-weight:bold}.fail{color:#c62828;font-weight:bold}"
-    ".info{color:#666}table.summary td{font-size:0.95em}nav ol{columns:2;font-size:0.9em}";
+    ".info{color:#666}table.summary td{font-size:0.95em}nav{font-size:0.9em}"
+    "nav ol ol{display:inline;padding:0}nav ol ol li{display:inline}nav ol ol li:before{content:' \\00b7  '}";
 
 }  // namespace
 
