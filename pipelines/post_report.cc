@@ -45,7 +45,11 @@ GaitPeaks gait_peaks(const std::vector<double>& t, const std::vector<double>& y)
   g.trough = g.first;
   for (int i = g.first; i <= g.second; ++i)
     if (y[i] < y[g.trough]) g.trough = i;
-  g.found = true;
+  // A peak is a local maximum inside the series and the trough lies below
+  // both: a window's edge (a run that covers only part of stance) is no peak.
+  const int n = static_cast<int>(y.size());
+  auto local_max = [&](int i) { return i > 0 && i < n - 1 && y[i] >= y[i - 1] && y[i] >= y[i + 1]; };
+  g.found = local_max(g.first) && local_max(g.second) && y[g.trough] < std::min(y[g.first], y[g.second]);
   return g;
 }
 

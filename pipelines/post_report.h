@@ -17,8 +17,9 @@ inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 /// The key instants of a stance-phase contact force y(t): the first peak (max
 /// in the first 30 % of the time span), the second peak (max in 30-65 %) and
-/// the trough between them (min). Indices into t; found = false when the span
-/// has no sample in one of the windows.
+/// the trough between them (min). Indices into t; found = false unless both
+/// peaks are local maxima inside the series with the trough below them (a run
+/// covering only part of stance has no key instants).
 struct GaitPeaks {
   bool found = false;
   int first = -1, trough = -1, second = -1;

@@ -67,7 +67,7 @@ Scale scale_for(const std::vector<double>& v, double lo_fixed = 0, double hi_fix
   const auto [lo, hi] = finite_range(v);
   if (lo < 0 && hi > 0) {
     const double m = std::max(-lo, hi);
-    s.name = "RdBu", s.reverse = true, s.lo = -m, s.hi = m;  // positive red, negative blue
+    s.name = "RdBu", s.reverse = false, s.lo = -m, s.hi = m;  // plotly's RdBu: negative blue, positive red
   } else {
     s.name = "Viridis", s.lo = lo, s.hi = hi;
   }
@@ -172,6 +172,7 @@ void spec_map(Json& j, const MapPlot& p) {
     j.begin_object().value("type", "scatter").value("mode", "markers").value("name", pt.label).array("x", x).array("y", y);
     j.begin_object("marker").array("color", v).value("colorscale", sc.name).value("reversescale", sc.reverse);
     j.value("cmin", sc.lo).value("cmax", sc.hi).value("size", pt.marker_px).value("showscale", !scale_shown);
+    j.begin_object("line").value("width", 0).end_object();
     if (!scale_shown) colourbar(j, pt.unit);
     j.end_object();
     j.value("hovertemplate", "%{marker.color:.3~g} " + pt.unit + "<extra>" + pt.label + "</extra>").end_object();
@@ -191,9 +192,10 @@ void spec_map(Json& j, const MapPlot& p) {
   axis(j, "yaxis", p.y_label);
   j.value("constrain", "domain").end_object();
   // Legend below the axes (the colour bar takes the right side).
-  j.begin_object("legend").value("orientation", "h").value("x", 0.0).value("y", -0.2).value("yanchor", "top").end_object();
-  j.value("hovermode", "closest").value("height", 460);
-  j.begin_object("margin").value("l", 60).value("r", 10).value("t", 50).value("b", 40).end_object();
+  j.begin_object("legend").value("orientation", "h").value("x", 0.0).value("y", -0.2).value("yanchor", "top");
+  j.value("entrywidthmode", "fraction").value("entrywidth", 0.5).end_object();
+  j.value("hovermode", "closest").value("height", 480);
+  j.begin_object("margin").value("l", 60).value("r", 90).value("t", 50).value("b", 40).end_object();
   j.end_object();
 }
 
@@ -358,8 +360,8 @@ constexpr const char* kStyle =
     "body{font-family:system-ui,sans-serif;max-width:1150px;margin:auto;padding:1em;color:#222}"
     "h1{margin-bottom:0.2em}h2{border-bottom:1px solid #ccc;padding-bottom:0.2em;margin-top:1.6em}"
     "figure{box-sizing:border-box;margin:1em 0;border:1px solid #e3e3e3;border-radius:4px;padding:0.5em}"
-    "figure.map{display:inline-block;width:calc(50% - 0.8em);vertical-align:top;margin-right:0.5em}"
-    "div.figure{width:100%}"
+    "div.maps{display:grid;grid-template-columns:repeat(auto-fill,minmax(460px,1fr));gap:0 0.8em}"
+    "div.maps>figure{margin:0.4em 0;min-width:0}"
     "figcaption{font-size:0.9em;color:#444;margin-top:0.3em}"
     "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:0.9em}"
     "th{background:#f4f4f4;text-align:left}td.num{text-align:right;font-variant-numeric:tabular-nums}"
@@ -442,7 +444,12 @@ std::string render(const Report& r) {
   std::string body;
   for (const auto& s : r.sections) {
     body += "<section id=\"" + esc(s.id) + "\"><h2>" + esc(s.title) + "</h2>\n";
+    bool in_grid = false;  // consecutive 2D maps share a grid (two or more per row)
     for (const auto& b : s.blocks) {
+      const bool is_map = std::holds_alternative<MapPlot>(b);
+      if (is_map && !in_grid) body += "<div class=\"maps\">\n";
+      if (!is_map && in_grid) body += "</div>\n";
+      in_grid = is_map;
       if (const auto* t = std::get_if<Text>(&b)) {
         const std::string cls = t->warning ? " class=\"warning\"" : "";
         if (!t->paragraph.empty()) body += "<p" + cls + ">" + esc(t->paragraph) + "</p>\n";
@@ -481,6 +488,7 @@ std::string render(const Report& r) {
       if (!caption.empty()) body += "<figcaption>" + esc(caption) + "</figcaption>";
       body += "</figure>\n";
     }
+    if (in_grid) body += "</div>\n";
     body += "</section>\n";
   }
   figs.end_array();

@@ -21,6 +21,8 @@ TEST(PostReport, GaitPeaksOfADoubleHump) {
   EXPECT_EQ(g.second, 50);
   EXPECT_NEAR(t[g.trough], 0.33, 0.02);  // the sum's minimum between the humps
   EXPECT_FALSE(gait_peaks({}, {}).found);
+  // Part of stance only (a rising force): the windows' maxima are their edges, no peaks.
+  EXPECT_FALSE(gait_peaks({0.10, 0.11, 0.12, 0.13, 0.14}, {2.3, 2.4, 2.5, 2.7, 2.9}).found);
 }
 
 TEST(PostReport, SummaryVerdicts) {
