@@ -20,8 +20,9 @@
 // Explicit forward Euler, stable when dt * M_i sum_j C_ij / V_i <= 1 for all
 // i (Gershgorin). Bonds whose tissue pair would break that bound at the
 // mechanical step (cancellous bone: k = 1e-11 m^2) are sub-cycled with
-// n = ceil(dt * max rate / safety) steps; the others take one step of dt
-// (multirate, each part stable on its own). The sum over i of V_i zeta_i is
+// n = ceil(dt lambda_max / (2 safety)) steps, lambda_max the largest
+// eigenvalue of their operator (power iteration); the others take one step of
+// dt (multirate, each part stable on its own). The sum over i of V_i zeta_i is
 // conserved to round-off (drained automata, model.drained, are reservoirs at
 // P = 0 outside that sum).
 #include <cstdint>
@@ -53,6 +54,9 @@ class FiltrationTerm {
   std::int64_t fast_automata() const { return static_cast<std::int64_t>(fast_list_.size()); }
   /// The largest rate M sum C / V over all automata [1/s] (stability).
   double max_rate() const { return max_rate_; }
+  /// lambda_max of the fast bonds' operator M/V L by power iteration, the
+  /// estimate the sub-step count is taken from [1/s] (0 without fast bonds).
+  double fast_eigenvalue() const { return fast_eigenvalue_; }
 
  private:
   void pressures(const std::vector<int>& list, const double* theta, const double* zeta);
@@ -60,7 +64,7 @@ class FiltrationTerm {
   double dt_;
   int substeps_ = 1;
   std::int64_t bonds_ = 0, fast_bonds_ = 0;
-  double max_rate_ = 0.0;
+  double max_rate_ = 0.0, fast_eigenvalue_ = 0.0;
   int ntissue_ = 0;
   std::vector<double> a_, biot_modulus_;
   std::vector<double> conductance_;  ///< [t1 * ntissue + t2], 0 = impermeable
