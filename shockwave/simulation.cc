@@ -222,10 +222,10 @@ void Simulation::set_angular_velocity(int i, const common::Vec3& w) {
 // in direction order.
 
 #define SW_INLINE inline __attribute__((always_inline))
-// The row kernels are also compiled for AVX2 (4 doubles per vector) and the
-// variant is chosen at run time; without FMA contraction both give the same
-// bits.
-#define SW_CLONES __attribute__((target_clones("avx2", "default")))
+// The row kernels are also compiled for AVX-512 and AVX2 (8 and 4 doubles per
+// vector) and the variant is chosen at run time; without FMA contraction all
+// give the same bits.
+#define SW_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 
 namespace {
 
@@ -286,7 +286,7 @@ struct PairIn {
 struct PairOut {
   double sn, tx, ty, tz;                    // new pair state
   double fx, fy, fz, mx, my, mz;            // force on the owner, moment (both)
-  double s11, s22, s33, s12, s23, s13;      // q n (x) F (both)
+  double tr;                                // q n . F, the trace of A4's q n (x) F (both)
   double e11, e22, e33, e12, e23, e13;      // sym(g (x) n), g the pair's strain vector (both)
 };
 
@@ -322,12 +322,7 @@ SW_INLINE void pair_loads(PairOut& out, const PairGeo<kLinear>& g, double sig, d
   out.mx = qS * (ny * tZ - nz * tY);
   out.my = qS * (nz * tX - nx * tZ);
   out.mz = qS * (nx * tY - ny * tX);
-  out.s11 = q * nx * out.fx;
-  out.s22 = q * ny * out.fy;
-  out.s33 = q * nz * out.fz;
-  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
-  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
-  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  out.tr = q * (nx * out.fx + ny * out.fy + nz * out.fz);
   pair_strain(out, g.r, nx, ny, nz, tX, tY, tZ, wsum, inv_d);
 }
 
@@ -517,17 +512,12 @@ SW_CLONES void Simulation::pair_forces() {
   double* __restrict A4 = acc_[4].data();
   double* __restrict A5 = acc_[5].data();
   double* __restrict A6 = acc_[6].data();
-  double* __restrict A7 = acc_[7].data();
-  double* __restrict A8 = acc_[8].data();
-  double* __restrict A9 = acc_[9].data();
-  double* __restrict A10 = acc_[10].data();
-  double* __restrict A11 = acc_[11].data();
-  double* __restrict E0 = acc_[12].data();
-  double* __restrict E1 = acc_[13].data();
-  double* __restrict E2 = acc_[14].data();
-  double* __restrict E3 = acc_[15].data();
-  double* __restrict E4 = acc_[16].data();
-  double* __restrict E5 = acc_[17].data();
+  double* __restrict E0 = acc_[7].data();
+  double* __restrict E1 = acc_[8].data();
+  double* __restrict E2 = acc_[9].data();
+  double* __restrict E3 = acc_[10].data();
+  double* __restrict E4 = acc_[11].data();
+  double* __restrict E5 = acc_[12].data();
   const double inv_d = 1.0 / model_.lattice.diameter;
   const double d0 = model_.lattice.diameter;
   auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
@@ -559,12 +549,7 @@ SW_CLONES void Simulation::pair_forces() {
     A3[i] += out.mx;
     A4[i] += out.my;
     A5[i] += out.mz;
-    A6[i] += out.s11;
-    A7[i] += out.s22;
-    A8[i] += out.s33;
-    A9[i] += out.s12;
-    A10[i] += out.s23;
-    A11[i] += out.s13;
+    A6[i] += out.tr;
     // The automaton's own share of the pair's strain (A8's split by compliance).
     const double share = 2.0 * w[i] / (w[i] + w[j]);
     E0[i] += share * out.e11;
@@ -580,7 +565,7 @@ SW_CLONES void Simulation::pair_forces() {
     const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
     for (int i = a0; i < a1; ++i) {
       A0[i] = A1[i] = A2[i] = A3[i] = A4[i] = A5[i] = 0.0;
-      A6[i] = A7[i] = A8[i] = A9[i] = A10[i] = A11[i] = 0.0;
+      A6[i] = 0.0;
       E0[i] = E1[i] = E2[i] = E3[i] = E4[i] = E5[i] = 0.0;
     }
     for (int s = 0; s < H; ++s) {
@@ -657,17 +642,12 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict A4 = acc_[4].data();
   double* __restrict A5 = acc_[5].data();
   double* __restrict A6 = acc_[6].data();
-  double* __restrict A7 = acc_[7].data();
-  double* __restrict A8 = acc_[8].data();
-  double* __restrict A9 = acc_[9].data();
-  double* __restrict A10 = acc_[10].data();
-  double* __restrict A11 = acc_[11].data();
-  double* __restrict E0 = acc_[12].data();
-  double* __restrict E1 = acc_[13].data();
-  double* __restrict E2 = acc_[14].data();
-  double* __restrict E3 = acc_[15].data();
-  double* __restrict E4 = acc_[16].data();
-  double* __restrict E5 = acc_[17].data();
+  double* __restrict E0 = acc_[7].data();
+  double* __restrict E1 = acc_[8].data();
+  double* __restrict E2 = acc_[9].data();
+  double* __restrict E3 = acc_[10].data();
+  double* __restrict E4 = acc_[11].data();
+  double* __restrict E5 = acc_[12].data();
   const double* __restrict w = wa_.data();
   const double* __restrict escale = strain_scale_.data();
   const double inv_d = 1.0 / model_.lattice.diameter;
@@ -689,12 +669,7 @@ SW_CLONES void Simulation::integrate() {
     A3[i] += out.mx;
     A4[i] += out.my;
     A5[i] += out.mz;
-    A6[i] += out.s11;
-    A7[i] += out.s22;
-    A8[i] += out.s33;
-    A9[i] += out.s12;
-    A10[i] += out.s23;
-    A11[i] += out.s13;
+    A6[i] += out.tr;
     // The automaton's own share of the pair's strain (A8's split by compliance).
     const double share = 2.0 * w[i] / (w[i] + w[j]);
     E0[i] += share * out.e11;
@@ -736,9 +711,8 @@ SW_CLONES void Simulation::integrate() {
     }
 #pragma omp simd
     for (int i = a0; i < a1; ++i) {
-      const double s11 = A6[i] * invV, s22 = A7[i] * invV, s33 = A8[i] * invV;
-      const double s12 = A9[i] * invV, s23 = A10[i] * invV, s13 = A11[i] * invV;
-      const double P = -(s11 + s22 + s33) / 3.0;  // A5
+      // A5 from the trace of A4's averaged stress (the full tensor: stress()).
+      const double P = -(A6[i] * invV) / 3.0;
       // Averaged strain tensor from the pairs' strains, its deviatoric part
       // and the equivalent (von Mises) strain sqrt(2/3 e:e).
       const double c = escale[i];
@@ -749,9 +723,6 @@ SW_CLONES void Simulation::integrate() {
       const double eps = std::sqrt(2.0 / 3.0 * (d1 * d1 + d2 * d2 + d3 * d3 + 2.0 * (e12 * e12 + e23 * e23 + e13 * e13)));
       Pout[i] = P;
       Eout[i] = eps;
-      (void)s12;
-      (void)s23;
-      (void)s13;
       Ppk[i] = P > Ppk[i] ? P : Ppk[i];
       Epk[i] = eps > Epk[i] ? eps : Epk[i];
       // Kick (A1) and drift.
@@ -800,16 +771,7 @@ SW_CLONES void Simulation::integrate() {
       const double fex = p_load * A.x(), fey = p_load * A.y(), fez = p_load * A.z();
       const double inv_a = 1.0 / A.norm();
       const double nx = -A.x() * inv_a, ny = -A.y() * inv_a, nz = -A.z() * inv_a;
-      const double s11 = (A6[i] + R * nx * fex) * invV;
-      const double s22 = (A7[i] + R * ny * fey) * invV;
-      const double s33 = (A8[i] + R * nz * fez) * invV;
-      const double s12 = (A9[i] + 0.5 * R * (nx * fey + ny * fex)) * invV;
-      const double s23 = (A10[i] + 0.5 * R * (ny * fez + nz * fey)) * invV;
-      const double s13 = (A11[i] + 0.5 * R * (nx * fez + nz * fex)) * invV;
-      const double P = -(s11 + s22 + s33) / 3.0;
-      (void)s12;
-      (void)s23;
-      (void)s13;
+      const double P = -((A6[i] + R * (nx * fex + ny * fey + nz * fez)) * invV) / 3.0;
       Pout[i] = P;
       Ppk[i] = std::max(loaded_peaks_[2 * k], P);
       const double im = im_a[i];

@@ -247,7 +247,7 @@ class Simulation {
   std::vector<std::uint8_t> poro_;
   // Per automaton.
   std::vector<double> f_, wa_;  ///< free-surface factor, compliance R/(2G) per automaton
-  std::array<std::vector<double>, 18> acc_;  ///< F (3), M (3), A4 sum (6), strain sum (6)
+  std::array<std::vector<double>, 13> acc_;  ///< F (3), M (3), trace of the A4 sum (1), strain sum (6)
   std::vector<double> strain_scale_;  ///< 3 / (number of pairs)
   std::vector<std::int32_t> constraint_of_;
   std::vector<double> loaded_peaks_;  ///< peaks of the loaded automata before the step
