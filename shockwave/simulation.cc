@@ -179,12 +179,10 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
   pos_[1][1] = pos_[0][1];
   pos_[1][2] = pos_[0][2];
   const size_t nb = static_cast<size_t>(K_ / 2) * n_;
-  for (int b = 0; b < 2; ++b) {
-    sn_[b].assign(nb, 0.0);
-    tx_[b].assign(nb, 0.0);
-    ty_[b].assign(nb, 0.0);
-    tz_[b].assign(nb, 0.0);
-  }
+  sn_.assign(nb, 0.0);
+  tx_.assign(nb, 0.0);
+  ty_.assign(nb, 0.0);
+  tz_.assign(nb, 0.0);
   theta_.assign(n_, 0.0);
   b_.assign(n_, 0.0);
   pore_.assign(n_, 0.0);
@@ -481,7 +479,7 @@ template <bool kPeriodic, bool kLinear>
 SW_CLONES void Simulation::pair_forces() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
-  const int c = cur_, o = 1 - cur_;
+  const int c = cur_;
   const double* __restrict px = pos_[c][0].data();
   const double* __restrict py = pos_[c][1].data();
   const double* __restrict pz = pos_[c][2].data();
@@ -491,14 +489,11 @@ SW_CLONES void Simulation::pair_forces() {
   const double* __restrict wx = omg_[c][0].data();
   const double* __restrict wy = omg_[c][1].data();
   const double* __restrict wz = omg_[c][2].data();
-  const double* __restrict sn0 = sn_[c].data();
-  const double* __restrict tx0 = tx_[c].data();
-  const double* __restrict ty0 = ty_[c].data();
-  const double* __restrict tz0 = tz_[c].data();
-  double* __restrict sn1 = sn_[o].data();
-  double* __restrict tx1 = tx_[o].data();
-  double* __restrict ty1 = ty_[o].data();
-  double* __restrict tz1 = tz_[o].data();
+  // Pair state, updated in place (each pair read and written once, by its owner).
+  double* __restrict snp = sn_.data();
+  double* __restrict txp = tx_.data();
+  double* __restrict typ = ty_.data();
+  double* __restrict tzp = tz_.data();
   const std::int32_t* __restrict nb = model_.neighbours.data();
   const double* __restrict w = wa_.data();
   const double* __restrict b = b_.data();
@@ -534,15 +529,15 @@ SW_CLONES void Simulation::pair_forces() {
     in.wt = w[j];
     in.bo = b[i];
     in.bt = b[j];
-    in.sn = sn0[bi];
-    in.tx = tx0[bi];
-    in.ty = ty0[bi];
-    in.tz = tz0[bi];
+    in.sn = snp[bi];
+    in.tx = txp[bi];
+    in.ty = typ[bi];
+    in.tz = tzp[bi];
     const PairOut out = pair_update<kLinear>(in, g, dx, dy, dz, S, dt, inv_d);
-    sn1[bi] = out.sn;
-    tx1[bi] = out.tx;
-    ty1[bi] = out.ty;
-    tz1[bi] = out.tz;
+    snp[bi] = out.sn;
+    txp[bi] = out.tx;
+    typ[bi] = out.ty;
+    tzp[bi] = out.tz;
     A0[i] += out.fx;
     A1[i] += out.fy;
     A2[i] += out.fz;
@@ -620,10 +615,10 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict ox = omg_[o][0].data();
   double* __restrict oy = omg_[o][1].data();
   double* __restrict oz = omg_[o][2].data();
-  const double* __restrict sn1 = sn_[o].data();
-  const double* __restrict tx1 = tx_[o].data();
-  const double* __restrict ty1 = ty_[o].data();
-  const double* __restrict tz1 = tz_[o].data();
+  const double* __restrict sn1 = sn_.data();
+  const double* __restrict tx1 = tx_.data();
+  const double* __restrict ty1 = ty_.data();
+  const double* __restrict tz1 = tz_.data();
   const std::int32_t* __restrict nb = model_.neighbours.data();
   const double S = model_.lattice.contact_area;
   const double R = model_.lattice.radius;
@@ -953,9 +948,9 @@ double Simulation::von_mises(int i) const {
 }
 
 std::array<double, 6> Simulation::stress(int i) const {
-  // Recomputed from the pair state of the fields' level (after the step the
-  // new pair state is in cur_, the positions of that level in 1 - cur_).
-  const int c = cur_, o = 1 - cur_;
+  // Recomputed from the pair state of the fields' level (the positions of
+  // that level are in 1 - cur_ after the step).
+  const int o = 1 - cur_;
   const int K = K_, H = K_ / 2, n = n_;
   const bool linear = options_.geometry == Geometry::kLinear;
   std::array<double, 6> s{0, 0, 0, 0, 0, 0};
@@ -970,7 +965,7 @@ std::array<double, 6> Simulation::stress(int i) const {
       if (period_[a] > 0) dv[a] = wrap(dv[a], period_[a], 1.0 / period_[a]);
     const common::Vec3 nv = linear ? model_.lattice.unit[own ? d : d - H] : common::Vec3(dv / dv.norm());
     const double q = linear ? 0.5 * model_.lattice.diameter : 0.5 * dv.norm();
-    const common::Vec3 F = model_.lattice.contact_area * (sn_[c][bi] * nv + common::Vec3(tx_[c][bi], ty_[c][bi], tz_[c][bi]));
+    const common::Vec3 F = model_.lattice.contact_area * (sn_[bi] * nv + common::Vec3(tx_[bi], ty_[bi], tz_[bi]));
     s[0] += q * nv.x() * F.x();
     s[1] += q * nv.y() * F.y();
     s[2] += q * nv.z() * F.z();
@@ -987,7 +982,7 @@ double Simulation::potential_energy() const {
   //   + sum_i V [D_i K_i theta_i^2 / (2 f_i) + P_i^2 / (2 M_i)],
   // beta = (w_i B_i + w_j B_j)/(w_i + w_j), B_i = D_i (K_i theta_i - a_i f_i P_i) - c_i a_i f_i P_i
   // (the accumulated many-body and pore parts of the pair force).
-  const int c = cur_, n = n_, H = K_ / 2;
+  const int n = n_, H = K_ / 2;
   const double S = model_.lattice.contact_area, V = model_.lattice.cell_volume;
   auto B = [&](int i) {
     const int t = model_.tissue[i];
@@ -1004,8 +999,8 @@ double Simulation::potential_energy() const {
       const size_t bi = static_cast<size_t>(s) * n + i;
       const double wi = w_[ti], wj = w_[model_.tissue[j]];
       const double beta = (wi * B(i) + wj * B(j)) / (wi + wj);
-      const double d = sn_[c][bi] - beta;
-      const double t2 = tx_[c][bi] * tx_[c][bi] + ty_[c][bi] * ty_[c][bi] + tz_[c][bi] * tz_[c][bi];
+      const double d = sn_[bi] - beta;
+      const double t2 = tx_[bi] * tx_[bi] + ty_[bi] * ty_[bi] + tz_[bi] * tz_[bi];
       e += 0.5 * S * (wi + wj) * (d * d + t2);
     }
     e += V * D_[ti] * K_bulk_[ti] * theta_[i] * theta_[i] / (2.0 * f_[i]);
