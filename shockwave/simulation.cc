@@ -378,8 +378,8 @@ void Simulation::build_rows() {
   max_row_ = 0;
   for (const Row& r : rows_) max_row_ = std::max(max_row_, r.len);
   runs_.assign(rows_.size() * K, Run{0, 0, 0});
-  if (periodic_) return;  // minimum images: the general path only
   for (size_t r = 0; r < rows_.size(); ++r) {
+    if (periodic_) break;  // minimum images: the general path only
     const int a0 = rows_[r].start, a1 = a0 + rows_[r].len;
     for (int s = 0; s < K; ++s) {
       // The longest stretch of the row with a constant, valid offset.
@@ -395,6 +395,19 @@ void Simulation::build_rows() {
         i = e;
       }
       runs_[r * K + s] = best;
+    }
+  }
+  // The pairs outside the runs (row ends, holes, periodic models), per row
+  // and direction in automaton order: the general path.
+  extra_.clear();
+  extra_start_.assign(rows_.size() * K + 1, 0);
+  for (size_t r = 0; r < rows_.size(); ++r) {
+    const int a0 = rows_[r].start, a1 = a0 + rows_[r].len;
+    for (int s = 0; s < K; ++s) {
+      const Run run = runs_[r * K + s];
+      for (int i = a0; i < a1; ++i)
+        if ((i < run.a || i >= run.b) && model_.neighbour(s, i) >= 0) extra_.push_back(i);
+      extra_start_[r * K + s + 1] = static_cast<std::int32_t>(extra_.size());
     }
   }
 }
@@ -435,10 +448,10 @@ SW_CLONES void Simulation::predictor() {
           sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
                                                  vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ux, uy, uz);
         }
-        for (int i = a0; i < a1; ++i) {
-          if (i >= run.a && i < run.b) continue;
+        const size_t rs = static_cast<size_t>(row) * K + s;
+        for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+          const int i = extra_[e];
           const int j = nb[static_cast<size_t>(s) * n + i];
-          if (j < 0) continue;
           double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
           if constexpr (kPeriodic) {
             dx = wrap(dx, Lx, iLx);
@@ -573,10 +586,10 @@ SW_CLONES void Simulation::pair_forces() {
         const int j = i + off;
         side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i], ux, uy, uz);
       }
-      for (int i = a0; i < a1; ++i) {
-        if (i >= run.a && i < run.b) continue;
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
         const int j = nb[base + i];
-        if (j < 0) continue;
         double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
         if constexpr (kPeriodic) {
           dx = wrap(dx, Lx, iLx);
@@ -691,10 +704,10 @@ SW_CLONES void Simulation::integrate() {
         // The owner's frame, as in pair_forces: the same bits.
         other(i, j, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j], ux, uy, uz);
       }
-      for (int i = a0; i < a1; ++i) {
-        if (i >= run.a && i < run.b) continue;
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
         const int j = nb[static_cast<size_t>(s) * n + i];
-        if (j < 0) continue;
         double dx = px[i] - px[j], dy = py[i] - py[j], dz = pz[i] - pz[j];
         if constexpr (kPeriodic) {
           dx = wrap(dx, Lx, iLx);

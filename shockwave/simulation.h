@@ -253,6 +253,8 @@ class Simulation {
   std::vector<double> loaded_peaks_;  ///< peaks of the loaded automata before the step
   std::vector<Row> rows_;
   std::vector<Run> runs_;  ///< [row * K + direction]
+  std::vector<std::int32_t> extra_;        ///< automata of the general path, by row and direction
+  std::vector<std::int32_t> extra_start_;  ///< [row * K + direction] -> first index into extra_
   int max_row_ = 0;
   std::vector<double> inv3G_a_, inv_mass_a_, inv_inertia_a_;  ///< per automaton
   std::vector<std::uint8_t> drained_;
