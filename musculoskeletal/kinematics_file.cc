@@ -4,6 +4,7 @@
 #include <map>
 
 #include "common/effects.h"
+#include "common/finite.h"
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
@@ -264,6 +265,62 @@ void KinematicsFileWriter::finish(const ComakRunSummary& s, const common::Effect
                         "tibiofemoral_lateral_force", "patellofemoral_force"})
     for (const char* x : {"_x", "_y", "_z"}) cl.push_back(std::string(g) + x);
   table("contact_forces", cl, w.sto_contact, false);
+}
+
+// ---------------------------------------------------------------------------
+// Reader
+// ---------------------------------------------------------------------------
+KinematicsFileReader::KinematicsFileReader(const std::string& path)
+    : f_(std::make_unique<common::H5File>(path, common::H5File::Mode::kRead)) {}
+KinematicsFileReader::~KinematicsFileReader() = default;
+const std::string& KinematicsFileReader::path() const { return f_->path(); }
+const common::H5File& KinematicsFileReader::file() const { return *f_; }
+
+Eigen::VectorXd KinematicsFileReader::time() const { return f_->read_vector("/time"); }
+
+std::string KinematicsFileReader::body_poses_dataset(const std::string& body) { return "/bodies/" + body + "/X_W"; }
+
+std::vector<Eigen::Isometry3d> KinematicsFileReader::body_poses(const std::string& body) const {
+  const std::string& path = f_->path();
+  const std::size_t frames = static_cast<std::size_t>(time().size());
+  const std::string ds = body_poses_dataset(body);
+  const common::Tensor3d X = f_->read_tensor3(ds);
+  if (X.dims[0] != static_cast<std::int64_t>(frames) || X.dims[1] != 4 || X.dims[2] != 4)
+    throw common::InputError(path + ": error: dataset " + ds + ": expected dims (" + std::to_string(frames) +
+                             ", 4, 4), found (" + std::to_string(X.dims[0]) + ", " + std::to_string(X.dims[1]) + ", " +
+                             std::to_string(X.dims[2]) + ")");
+  std::vector<Eigen::Isometry3d> poses(frames);
+  for (std::int64_t k = 0; k < X.dims[0]; ++k) {
+    Eigen::Matrix4d M;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) M(i, j) = X(k, i, j);
+    common::check_finite(M, path + ": dataset " + ds + ", frame " + std::to_string(k));
+    if ((M.topLeftCorner<3, 3>().transpose() * M.topLeftCorner<3, 3>() - Eigen::Matrix3d::Identity()).norm() > 1e-6)
+      throw common::InputError(path + ": error: dataset " + ds + ", frame " + std::to_string(k) +
+                               ": expected a rotation in the top-left 3 x 3 block");
+    poses[static_cast<std::size_t>(k)].matrix() = M;
+  }
+  return poses;
+}
+
+std::optional<Eigen::MatrixXd> KinematicsFileReader::tibiofemoral_force() const {
+  if (!f_->exists(kTibiofemoralForce)) return std::nullopt;
+  return f_->read_matrix(kTibiofemoralForce, 3);
+}
+
+std::vector<bool> KinematicsFileReader::converged(Eigen::Index n) const {
+  std::vector<bool> valid(static_cast<std::size_t>(n), true);
+  if (!f_->exists("/solver/status")) return valid;
+  const Eigen::VectorXi status = f_->read_vector_int("/solver/status");
+  for (Eigen::Index k = 0; k < std::min<Eigen::Index>(n, status.size()); ++k) {
+    valid[static_cast<std::size_t>(k)] = status(k) == 0;
+  }
+  return valid;
+}
+
+std::optional<std::pair<std::vector<std::string>, Eigen::MatrixXd>> KinematicsFileReader::activations() const {
+  if (!f_->exists(kActivations)) return std::nullopt;
+  return std::make_pair(f_->read_strings("/muscles/names"), f_->read_matrix(kActivations));
 }
 
 }  // namespace arthrosim::musculoskeletal

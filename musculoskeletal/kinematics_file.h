@@ -1,6 +1,8 @@
 #pragma once
 // The kinematics file: the COMAK stage's HDF5 output and the contract with
 // the surface stage. Schema (every dataset, unit and frame): docs/kinematics_file.md.
+// Its one writer (KinematicsFileWriter) and one reader (KinematicsFileReader):
+// no other file names a dataset of it.
 //
 // Frames are appended one by one (common::H5File::Appender with the expected
 // frame count, flushed per frame), so a killed run keeps every frame written
@@ -8,7 +10,9 @@
 // ledger (/effects), the XDMF sidecar (per-triangle contact pressure for
 // ParaView) and the OpenSim .sto exports.
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,6 +20,7 @@
 
 namespace arthrosim::common {
 class EffectLedger;
+class H5File;
 struct RunMetadata;
 }  // namespace arthrosim::common
 
@@ -56,6 +61,43 @@ class KinematicsFileWriter {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+};
+
+/// Reads a kinematics file (its consumers: the surface stage's imposed
+/// kinematics, the post stage's force curves, the accuracy study).
+class KinematicsFileReader {
+ public:
+  /// Opens `path` (InputError naming it when it cannot be read).
+  explicit KinematicsFileReader(const std::string& path);
+  ~KinematicsFileReader();
+  const std::string& path() const;
+  /// /time [s], one entry per frame written.
+  Eigen::VectorXd time() const;
+  /// X_WB of `body` at every frame (frames x 4 x 4 in the file), each
+  /// checked finite with a rotation block; InputError naming the dataset and
+  /// frame otherwise, or when the frame count differs from time().
+  std::vector<Eigen::Isometry3d> body_poses(const std::string& body) const;
+  /// The dataset name of a body's poses (for messages).
+  static std::string body_poses_dataset(const std::string& body);
+  /// The tibiofemoral contact force (frames x 3, tibia frame [N]), or
+  /// nullopt when the run simulated no contact.
+  std::optional<Eigen::MatrixXd> tibiofemoral_force() const;
+  /// Per frame: true when COMAK converged there (/solver/status 0); all true
+  /// for a file without status.
+  std::vector<bool> converged(Eigen::Index frames) const;
+  /// Muscle names and activations (frames x muscles), or nullopt.
+  std::optional<std::pair<std::vector<std::string>, Eigen::MatrixXd>> activations() const;
+  /// The file (for generic listings: attributes, the force datasets under
+  /// kContactGroup).
+  const common::H5File& file() const;
+
+  /// Group of the tibiofemoral contact datasets.
+  static constexpr const char* kContactGroup = "/contact/tibiofemoral";
+  static constexpr const char* kTibiofemoralForce = "/contact/tibiofemoral/force";
+  static constexpr const char* kActivations = "/muscles/activation";
+
+ private:
+  std::unique_ptr<common::H5File> f_;
 };
 
 /// Contact quantities of one frame as written to the file (tests use it).

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "common/prepared_model_file.h"
 #include "common/hdf5.h"
 #include "common/mesh_io.h"
 
@@ -811,17 +812,13 @@ PreparedSurfacesReport replace_contact_surfaces(
 }  // namespace
 
 PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& prepared_path) {
-  common::H5File f(prepared_path, common::H5File::Mode::kRead);
-  const std::vector<std::string> names = f.read_strings("/surfaces/names");
+  const common::PreparedModelReader f(prepared_path);
+  const std::vector<std::string> names = f.surface_names();
   // Prepared surfaces by the file name of their source mesh; several for one
   // file when prepare split it into compartments (a tibial cartilage mesh
   // holding both plateaus): the model's surface is then their union.
   std::map<std::string, std::vector<std::string>> by_file;
-  for (const auto& n : names)
-    by_file[std::filesystem::path(f.attribute_string("/surfaces/" + n, "source_file"))
-                .filename()
-                .string()]
-        .push_back(n);
+  for (const auto& n : names) by_file[std::filesystem::path(f.source_file(n)).filename().string()].push_back(n);
   auto make = [&](const ContactSurface& s, const std::string& pair) -> ContactSurface {
     const std::string file = std::filesystem::path(s.mesh_file).filename().string();
     auto it = by_file.find(file);
@@ -836,33 +833,16 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
     Eigen::VectorXd tv;
     std::string groups;
     for (const std::string& part : it->second) {
-      const std::string g = "/surfaces/" + part + "/triangles/";
-      const Eigen::MatrixXd V = f.read_matrix(g + "vertices", 3);
-      const Eigen::MatrixXi F = f.read_matrix_int(g + "faces", 3);
-      const Eigen::VectorXd t = f.read_vector(g + "thickness");
-      if (t.size() != V.rows() || F.rows() == 0)
-        throw InputError(prepared_path, 0, g + ": expected one thickness per vertex and triangles, found " +
-                                               std::to_string(t.size()) + " values for " +
-                                               std::to_string(V.rows()) + " vertices");
-      // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
-      for (int r = 0; r < F.rows(); ++r)
-        for (int k = 0; k < 3; ++k)
-          if (F(r, k) < 0 || F(r, k) >= V.rows())
-            throw InputError(prepared_path, 0, g + "faces: expected vertex indices in [0, " +
-                                                   std::to_string(V.rows()) + "), found " +
-                                                   std::to_string(F(r, k)) + " in triangle " + std::to_string(r));
-      if (!V.allFinite())
-        throw InputError(prepared_path, 0, g + "vertices: expected finite coordinates, found NaN or Inf");
-      if (!t.allFinite() || (t.array() < 0).any())
-        throw InputError(prepared_path, 0, g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
+      // Checked by the reader (indices in range, finite, thickness >= 0).
+      const common::PreparedModelReader::TriangleSurface p = f.triangles(part);
       const int n0 = mesh.num_vertices(), t0 = mesh.num_triangles();
-      mesh.V.conservativeResize(n0 + V.rows(), 3);
-      mesh.V.bottomRows(V.rows()) = V;
-      mesh.F.conservativeResize(t0 + F.rows(), 3);
-      mesh.F.bottomRows(F.rows()) = F.array() + n0;
-      tv.conservativeResize(n0 + t.size());
-      tv.tail(t.size()) = t;
-      groups += (groups.empty() ? "" : "+") + g;
+      mesh.V.conservativeResize(n0 + p.mesh.V.rows(), 3);
+      mesh.V.bottomRows(p.mesh.V.rows()) = p.mesh.V;
+      mesh.F.conservativeResize(t0 + p.mesh.F.rows(), 3);
+      mesh.F.bottomRows(p.mesh.F.rows()) = p.mesh.F.array() + n0;
+      tv.conservativeResize(n0 + p.thickness.size());
+      tv.tail(p.thickness.size()) = p.thickness;
+      groups += (groups.empty() ? "" : "+") + p.group;
     }
     // Same place as the model's own mesh (in the file frame): the centroids
     // of the two surfaces must agree to within 2 mm, else the prepared file

@@ -18,6 +18,7 @@
 #include "common/progress.h"
 #include "pipelines/prepare.h"
 #include "pipelines/stages.h"
+#include "pipelines/study.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -211,6 +212,34 @@ StageDescriptor biphasic_stage_descriptor() {
                                      needed);
       }
     }
+  };
+  d.no_runs = "a 'biphasic' block with its effects";
+  d.runs = [](const common::Scene& scene, const std::filesystem::path& out) {
+    std::vector<StageStep> runs;
+    if (!scene.has_block("biphasic")) return runs;
+    const common::OptionBlock& block = scene.block("biphasic");
+    const std::filesystem::path prepared = out / "prepared.h5", kinematics = out / "kinematics.h5",
+                                file = out / "biphasic.h5";
+    StageStep s;
+    s.name = "biphasic";
+    s.executable = "arthrosim-biphasic";
+    s.provides = {"biphasic"};
+    s.origin = "the biphasic block";
+    s.line = scene.block_line("biphasic");
+    s.inputs.emplace_back("prepared.h5", prepared);
+    s.inputs.emplace_back("kinematics.h5", kinematics);
+    s.input_reasons["kinematics.h5"] = "reads the bone poses and contact forces of stage 1";
+    s.options = block.canonical();
+    s.effects = block.list("effects");
+    add_path_inputs(block, s);
+    s.outputs = {file, out / "biphasic.xdmf"};
+    s.arguments = {"--prepared", prepared.string(), "--kinematics", kinematics.string(),
+                   "--scene",    scene.file.string(), "--out",       file.string()};
+    runs.push_back(std::move(s));
+    return runs;
+  };
+  d.key_outputs = [](const std::string&, const std::filesystem::path& dir, const std::filesystem::path& ref) {
+    return study::biphasic_metrics(dir / "biphasic.h5", ref / "biphasic.h5");
   };
   return d;
 }

@@ -1,9 +1,49 @@
 #include "pipelines/comak_stage.h"
 
+#include <algorithm>
+#include <cmath>
+#include <tuple>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+
 #include "common/effects.h"
+#include "common/error.h"
+#include "common/log.h"
+#include "common/metadata.h"
+#include "common/progress.h"
+#include "common/scene.h"
+#include "common/storage.h"
+#include "musculoskeletal/ankle_muscles.h"
+#include "musculoskeletal/kinematics_file.h"
+#include "musculoskeletal/knee_loads.h"
+#include "musculoskeletal/model_io.h"
 #include "pipelines/stages.h"
+#include "pipelines/study.h"
 
 namespace arthrosim::pipelines {
+namespace fs = std::filesystem;
+
+fs::path comak_model_file(const fs::path& model) {
+  if (!fs::is_directory(model)) return model;
+  std::vector<fs::path> inside, beside;
+  for (const auto& e : fs::directory_iterator(model))
+    if (e.path().extension() == ".urdf") inside.push_back(e.path());
+  if (inside.size() == 1) return inside[0];
+  const fs::path dir = fs::weakly_canonical(model);
+  const std::string needle = "\"" + dir.filename().string() + "/";
+  for (const auto& e : fs::directory_iterator(dir.parent_path())) {
+    if (e.path().extension() != ".urdf") continue;
+    std::ifstream in(e.path());
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (text.find(needle) != std::string::npos) beside.push_back(e.path());
+  }
+  std::sort(beside.begin(), beside.end());
+  if (inside.empty() && beside.size() == 1) return beside[0];
+  throw common::InputError(model.string() + ": error: model folder: expected one URDF in it or one URDF next to it "
+                           "referencing its meshes, found " + std::to_string(inside.size()) + " and " +
+                           std::to_string(beside.size()));
+}
 
 void ComakStageOptions::declare(common::OptionVisitor& v) {
   using common::Unit;
@@ -13,6 +53,189 @@ void ComakStageOptions::declare(common::OptionVisitor& v) {
            "low-pass filter of trial kinematics and ground reactions");
 }
 
+void check_comak_effects(const std::vector<std::string>& effects, const std::string& where) {
+  auto wants = [&](const char* e) { return std::find(effects.begin(), effects.end(), e) != effects.end(); };
+  if (!wants("muscles"))
+    throw common::InputError(where + ": error: comak effects must include muscles (they balance the flexion "
+                             "equation)");
+  if (wants("tibiofemoral_contact") != wants("patellofemoral_contact"))
+    throw common::InputError(where + ": error: comak effects: tibiofemoral_contact and patellofemoral_contact can "
+                             "only be simulated together (the model evaluates all contact pairs as one term)");
+}
+
+ComakStageOptions comak_from_scene(const common::Scene& scene) {
+  ComakStageOptions o = common::read_options<ComakStageOptions>(scene.block("comak"));
+  if (!scene.has_block("comak")) {
+    o.effects = {"ligaments", "muscles", "tibiofemoral_contact", "patellofemoral_contact"};
+  }
+  check_comak_effects(o.effects, scene.file.string());
+  const SceneInputs in = scene_inputs(scene);
+  if (in.trial_start_s) o.start_time_s = *in.trial_start_s;
+  if (in.trial_end_s) o.end_time_s = *in.trial_end_s;
+  return o;
+}
+
+namespace {
+namespace msk = musculoskeletal;
+
+// The stage's text of the options it runs with (log and run metadata).
+std::string options_text(const ComakStageConfig& c, const std::string& model_path, int first_frame,
+                         int last_frame, bool model_dynamics) {
+  const msk::ComakOptions& o = c.options.solver;
+  std::ostringstream opts;
+  opts << "model: " << model_path << "\nprepared: " << (c.prepared.empty() ? "none" : c.prepared.string())
+       << "\ntrial: " << c.trial.string() << "\nfirst_frame: " << first_frame << "\nlast_frame: " << last_frame
+       << "\nstride: " << c.stride << "\nforce_tolerance_n: " << o.force_tolerance
+       << "\nlength_scale_m: " << o.length_scale << "\nipopt_tolerance: " << o.ipopt_tolerance
+       << "\nmax_iterations: " << o.max_iterations << "\nactivation_min: " << o.activation_min
+       << "\nacceptable_iterations: " << o.acceptable_iterations
+       << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
+       << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
+       << "\nhip_equilibrium: " << (o.hip_equilibrium ? "true" : "false")
+       << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
+       << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
+       << "\nsecond_start: " << (o.second_start ? "true" : "false") << "\nretries: " << o.retries
+       << "\nmove_limits_first: " << (o.move_limits_first ? "true" : "false")
+       << "\nmove_limit_m: " << o.move_limit_m << "\nmove_limit_rad: " << o.move_limit_rad
+       << "\nsecond_start_move_limit_scale: " << o.second_start_move_limit_scale
+       << "\ncoordinate_damping: " << (o.coordinate_damping ? "true" : "false")
+       << "\nloads: " << (model_dynamics ? "model dynamics (the model's own leg)" : "generic leg chain (knee_loads.h)")
+       << "\nlowpass_cutoff_hz: " << c.options.trial.lowpass.cutoff_hz << "\nhessian: limited-memory\n";
+  for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
+  std::string effect_text;
+  for (const auto& e : c.options.effects) effect_text += (effect_text.empty() ? "" : ", ") + e;
+  opts << "effects: [" << effect_text << "]\n";
+  return opts.str();
+}
+
+}  // namespace
+
+ComakStageResult run_comak_stage(const ComakStageConfig& config) {
+  // ---- build --------------------------------------------------------------
+  check_comak_effects(config.options.effects, config.scene.empty() ? std::string("arthrosim-comak")
+                                                                  : config.scene.string());
+  const auto wants = [&](const char* e) {
+    return std::find(config.options.effects.begin(), config.options.effects.end(), e) != config.options.effects.end();
+  };
+  msk::ComakOptions o = config.options.solver;
+  o.forces.ligaments = wants("ligaments");
+  o.forces.contact = wants("tibiofemoral_contact");
+  const std::string model_path = comak_model_file(config.model).string();
+  msk::Model model = msk::load_model(model_path);
+  // A model with its own leg to the ground (an imported OpenSim model)
+  // takes the trial's coordinates by name and its forces on its bodies.
+  const bool model_dynamics = model.role_body("ground") >= 0;
+  if (o.ankle_equilibrium && !model_dynamics) {
+    // Uniarticular ankle muscles so that the ankle row can be balanced in
+    // both directions (musculoskeletal/ankle_muscles.h).
+    msk::add_ankle_muscles(model);
+    common::log_info("ankle equilibrium: added the ankle muscles soleus and tibant");
+  }
+  if (!config.prepared.empty()) {
+    // The prepare stage's cartilage (its edge length sets the contact
+    // resolution of this stage too).
+    const auto rep = msk::use_prepared_surfaces(model, config.prepared.string());
+    std::string text;
+    for (const auto& l : rep.lines) text += "\n  " + l;
+    common::log_info("contact surfaces from " + config.prepared.string() + ":" + text);
+  }
+  msk::GaitTrialOptions to = config.options.trial;
+  // A non-finite trial value: run the frames before it, then stop naming
+  // the frame, file, line and column (exit 1; the file keeps those frames).
+  to.truncate_at_non_finite = true;
+  if (model_dynamics) {
+    // Angles are the model's revolute coordinates (translations by its prismatic ones).
+    to.is_rotational = [&model](const std::string& label) {
+      const int c = model.tree.coordinate_index(label);
+      if (c < 0) return common::default_is_rotational(label);
+      for (const msk::Joint& j : model.tree.joints)
+        if (j.coordinate == c) return j.type == msk::JointType::kRevolute;
+      return false;
+    };
+  }
+  const std::string trial_path = config.trial.string();
+  msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
+  if (!(trial.body_mass_kg > 0)) {
+    trial.body_mass_kg = model.subject_mass_kg;
+    common::log_info("subject mass from the model: " + std::to_string(model.subject_mass_kg) + " kg");
+  }
+  int first = config.first_frame, last = config.last_frame;
+  const double start_s = config.options.start_time_s, end_s = config.options.end_time_s;
+  if (!std::isnan(start_s) || !std::isnan(end_s)) {
+    // The time window: frames of the trial's grid inside [start, end].
+    std::tie(first, last) = msk::frames_in_window(trial, start_s, end_s);
+  }
+  if (trial.side != msk::Side::kRight)
+    throw common::InputError(trial_path + ": error: the bundled knee models are right knees; this trial is of the "
+                             "left leg");
+  std::vector<msk::ComakFrameInput> frames;
+  if (model_dynamics) {
+    std::vector<std::string> ignored;
+    frames = msk::comak_model_frame_inputs(model, trial, first, last, config.stride, &ignored);
+    for (const auto& i : ignored) common::log_info("external force not applied: " + i);
+  } else {
+    const msk::LegModel leg = msk::leg_model_for_trial(trial);
+    const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
+    frames = msk::comak_frame_inputs(loads, first, last, config.stride, &leg);
+  }
+  msk::ComakProblem problem(model, o);
+
+  const std::string opts = options_text(config, model_path, first, last, model_dynamics);
+  common::log_info("options:\n" + opts + (trial.synthetic ? "trial is SYNTHETIC\n" : ""));
+  std::vector<const char*> argv;
+  for (const std::string& a : config.argv) argv.push_back(a.c_str());
+  const auto meta = common::collect_run_metadata("arthrosim-comak", static_cast<int>(argv.size()), argv.data(),
+                                                 config.scene.string(), opts);
+  common::EffectLedger ledger("comak");
+  if (o.forces.ligaments) ledger.record("ligaments", model.num_bundles());
+  ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
+  const int tibia = model.role_body("tibia"), patella = model.role_body("patella");
+  for (const auto& c : model.contacts) {
+    if (!o.forces.contact) break;
+    if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());
+    if (c.casting().body == patella) ledger.record("patellofemoral_contact", c.casting().mesh.F.rows(), c.name());
+  }
+
+  // ---- run ----------------------------------------------------------------
+  msk::KinematicsFileInfo info;
+  info.model_path = model_path;
+  info.trial_path = trial_path;
+  info.body_mass_kg = trial.body_mass_kg;
+  info.synthetic = trial.synthetic;
+  info.expected_frames = static_cast<std::int64_t>(frames.size());
+  info.pressure_fields = config.pressure_fields;
+  const std::string out = config.out.string();
+  msk::KinematicsFileWriter writer(out, problem, info, meta);
+  if (trial.truncated)
+    common::log_warn(trial_path + ": the trial ends early at frame " + std::to_string(trial.truncated->frame) + ": " +
+                     trial.truncated->reason);
+  std::string sto_prefix = config.sto_prefix;
+  if (sto_prefix.empty()) {
+    sto_prefix = out;
+    if (sto_prefix.size() > 3 && sto_prefix.substr(sto_prefix.size() - 3) == ".h5") sto_prefix.resize(sto_prefix.size() - 3);
+  }
+  common::Progress progress("comak", static_cast<std::int64_t>(frames.size()));
+  ComakStageResult result;
+  try {
+    result.summary = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
+      writer.append(f, r, d);
+      progress.step();
+    });
+  } catch (const msk::ComakRunStopped& e) {
+    // Finish the file with the frames before the stop (attribute `stopped`);
+    // run_comak has logged the reason, naming the frame.
+    progress.finish();
+    writer.finish(e.summary, ledger, sto_prefix);
+    result.summary = e.summary;
+    result.stopped = true;
+    result.stopped_frame = e.frame;
+    return result;
+  }
+  progress.finish();
+  writer.finish(result.summary, ledger, sto_prefix);
+  return result;
+}
+
 StageDescriptor comak_stage_descriptor() {
   StageDescriptor d;
   d.name = "comak";
@@ -20,9 +243,52 @@ StageDescriptor comak_stage_descriptor() {
   d.summary = "per frame of the trial, Ipopt on muscle activations and the 11 secondary knee coordinates";
   d.block = block_schema<ComakStageOptions>("comak", "effects and options of the musculoskeletal (COMAK) stage");
   d.outputs = {"kinematics"};
+  d.runs = [](const common::Scene& scene, const fs::path& out) {
+    StageStep s;
+    s.name = "comak";
+    s.executable = "arthrosim-comak";
+    s.provides = {"kinematics"};
+    s.origin = "the comak block";
+    s.line = scene.block_line("comak");
+    const SceneInputs in = scene_inputs(scene);
+    if (!scene.has_block("comak")) {
+      s.unavailable = "the musculoskeletal stage: add a 'comak' block with its effects";
+    } else if (in.trial.empty()) {
+      s.unavailable = "a walking trial: add 'trial: PATH'";
+    }
+    s.inputs.emplace_back("model", in.model);
+    // The URDF the stage loads for a model folder (when it can be found; the
+    // stage itself says why when it cannot).
+    if (scene.has_block("comak") && fs::is_directory(in.model)) {
+      try {
+        s.inputs.emplace_back("model URDF", comak_model_file(in.model));
+      } catch (const common::InputError&) {
+      }
+    }
+    const fs::path prepared = out / "prepared.h5", kinematics = out / "kinematics.h5";
+    if (!in.trial.empty()) s.inputs.emplace_back("trial", in.trial);
+    s.inputs.emplace_back("prepared.h5", prepared);
+    const common::OptionBlock& block = scene.block("comak");
+    s.options = block.canonical();
+    // The trial window (top-level trial.start_s / trial.end_s) decides which
+    // frames the stage solves.
+    for (const auto& kv : scene.top.canonical())
+      if (kv.first.rfind("scene.trial.", 0) == 0) s.options.push_back(kv);
+    std::sort(s.options.begin(), s.options.end());
+    if (block.has("effects")) s.effects = block.list("effects");
+    add_path_inputs(block, s);
+    s.outputs = {kinematics};
+    s.arguments = {"--model",  in.model.string(),    "--prepared", prepared.string(),
+                   "--trial",  in.trial.string(),    "--scene",    scene.file.string(),
+                   "--out",    kinematics.string()};
+    return std::vector<StageStep>{s};
+  };
   for (const common::EffectInfo& e : common::known_effects())
     if (e.stage == common::EffectStage::kMusculoskeletal)
       d.effects.push_back({std::string(e.name), "musculoskeletal", std::string(e.description)});
+  d.key_outputs = [](const std::string&, const fs::path& dir, const fs::path& ref) {
+    return study::comak_metrics(dir / "kinematics.h5", ref / "kinematics.h5");
+  };
   return d;
 }
 

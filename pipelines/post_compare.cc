@@ -15,65 +15,7 @@ namespace arthrosim::pipelines {
 using common::InputError;
 
 SurfaceField read_surface_field(const std::string& path, const std::string& surface) {
-  common::H5File f(path, common::H5File::Mode::kRead);
-  const std::string g = "/surfaces/" + surface;
-  if (!f.is_group(g)) {
-    std::string have;
-    if (f.is_group("/surfaces"))
-      for (const auto& n : f.list("/surfaces")) have += (have.empty() ? "" : ", ") + n;
-    throw InputError(path, 0, "expected group " + g + " (the view's surface), found " +
-                                  (have.empty() ? std::string("no /surfaces group") : "surfaces: " + have));
-  }
-  SurfaceField s;
-  s.file = path;
-  s.surface = surface;
-  s.mesh.name = surface;
-  s.mesh.V = f.read_matrix(g + "/nodes", 3);
-  s.mesh.Q = f.read_matrix_int(g + "/quads", 4);
-  s.e1 = f.read_matrix(g + "/strain/e1");
-  const common::Tensor3d d = f.read_tensor3(g + "/strain/e1_dir");
-  const auto N = s.mesh.V.rows();
-  const auto T = s.e1.rows();
-  if (s.e1.cols() != N) {
-    throw InputError(path, 0, "dataset " + g + "/strain/e1: expected dims (frames, " + std::to_string(N) +
-                                  "), found (" + std::to_string(T) + ", " + std::to_string(s.e1.cols()) + ")");
-  }
-  if (d.dims[0] != T || d.dims[1] != N || d.dims[2] != 3) {
-    throw InputError(path, 0, "dataset " + g + "/strain/e1_dir: expected dims (" + std::to_string(T) + ", " +
-                                  std::to_string(N) + ", 3), found (" + std::to_string(d.dims[0]) + ", " +
-                                  std::to_string(d.dims[1]) + ", " + std::to_string(d.dims[2]) + ")");
-  }
-  if (s.mesh.Q.size() > 0 && (s.mesh.Q.minCoeff() < 0 || s.mesh.Q.maxCoeff() >= N)) {
-    throw InputError(path, 0, "dataset " + g + "/quads: node index out of range [0, " + std::to_string(N) + ")");
-  }
-  s.e1_dir.resize(T);
-  for (Eigen::Index t = 0; t < T; ++t) {
-    s.e1_dir[t].resize(N, 3);
-    for (Eigen::Index i = 0; i < N; ++i)
-      for (int k = 0; k < 3; ++k) s.e1_dir[t](i, k) = d(t, i, k);
-  }
-  // A run with imposed kinematics starts with a seating ramp: /trial_time
-  // puts its frames on the kinematics file's clock, where the report's key
-  // frames (stage-1 force peaks) and force curves live.
-  if (f.exists("/trial_time")) {
-    s.time = f.read_vector("/trial_time");
-    if (s.time.size() != T)
-      throw InputError(path, 0, "dataset /trial_time: expected " + std::to_string(T) + " frames, found " +
-                                    std::to_string(s.time.size()));
-  } else if (f.exists("/time")) {
-    s.time = f.read_vector("/time");
-  } else {
-    s.time = Eigen::VectorXd::LinSpaced(T, 0, T - 1);
-  }
-  if (f.exists(g + "/deflection")) {
-    s.deflection = f.read_matrix(g + "/deflection");
-    if (s.deflection.rows() != T || s.deflection.cols() != N) {
-      throw InputError(path, 0, "dataset " + g + "/deflection: expected dims (" + std::to_string(T) + ", " +
-                                    std::to_string(N) + ")");
-    }
-  }
-  if (!s.e1.allFinite()) throw InputError(path, 0, "dataset " + g + "/strain/e1 contains NaN/Inf");
-  return s;
+  return surface_output::Reader(path).strain_field(surface);
 }
 
 NodeDirections average_node_directions(const SurfaceField& field) {

@@ -24,22 +24,19 @@
 #include "common/mesh.h"
 #include "common/options.h"
 #include "pipelines/splitline.h"
+#include "pipelines/surface_output.h"
 
 namespace arthrosim::pipelines {
 
 /// One surface of a deformable-surface output file (docs/surface_output.md):
 /// /surfaces/<name>/nodes (N x 3, m), quads (Q x 4), strain/e1 (T x N),
 /// strain/e1_dir (T x N x 3), optional deflection (T x N, m); /time (T, s).
-struct SurfaceField {
-  std::string file, surface;
-  common::QuadMesh mesh;
-  Eigen::VectorXd time;
-  Eigen::MatrixXd e1;                   ///< T x N first principal strain
-  std::vector<Eigen::MatrixXd> e1_dir;  ///< T entries of N x 3
-  Eigen::MatrixXd deflection;           ///< T x N, empty when the file has none
-};
+/// A surface's strain field over the frames of a surface output
+/// (surface_output::Reader::strain_field).
+using SurfaceField = surface_output::StrainField;
 
-/// Reads `surface` from `path`. Throws InputError naming file and dataset.
+/// Reads `surface` from the surface output `path`. Throws InputError naming
+/// file and dataset.
 SurfaceField read_surface_field(const std::string& path, const std::string& surface);
 
 struct NodeDirections {

@@ -14,7 +14,11 @@
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/scene.h"
+#include "musculoskeletal/kinematics_file.h"
+#include "pipelines/json.h"
 #include "pipelines/stages.h"
+#include "pipelines/surface_output.h"
+#include "pipelines/study.h"
 #include "pipelines/report.h"
 
 namespace arthrosim::pipelines {
@@ -50,8 +54,42 @@ void PostOptions::declare(common::OptionVisitor& v) {
   v.number("view_up_z", view.up.z(), Unit::kNone, {-1e6, 1e6}, std::string("z ") + up);
 }
 
-PostOptions post_options_from_scene(const common::Scene& scene) {
+PostOptions post_from_scene(const common::Scene& scene) {
   return common::read_options<PostOptions>(scene.block("post"));
+}
+
+std::vector<PostScenarioSummary> read_post_summary(const std::filesystem::path& file) {
+  const json::Value doc = json::read(file);
+  std::vector<PostScenarioSummary> out;
+  const json::Value* scenarios = doc.get("scenarios");
+  if (scenarios == nullptr) return out;
+  for (const json::Value& sc : scenarios->array) {
+    PostScenarioSummary s;
+    const json::Value* name = sc.get("scenario");
+    s.scenario = name != nullptr ? name->string : "?";
+    const json::Value* stats = sc.get("angle_statistics");
+    if (stats != nullptr && !stats->array.empty()) {
+      double sum = 0.0, weight = 0.0;
+      bool all = false;
+      for (const json::Value& r : stats->array) {
+        const json::Value* region = r.get("region");
+        const json::Value* mean = r.get("mean_deg");
+        if (mean == nullptr || mean->kind != json::Value::Kind::kNumber) continue;
+        if (region != nullptr && region->string == "all") {
+          s.mean_angle_deg = mean->number;
+          all = true;
+          break;
+        }
+        const json::Value* covered = r.get("covered");
+        const double w = covered != nullptr ? covered->number : 1.0;
+        sum += w * mean->number;
+        weight += w;
+      }
+      if (!all && weight > 0.0) s.mean_angle_deg = sum / weight;
+    }
+    out.push_back(s);
+  }
+  return out;
 }
 
 StageDescriptor post_stage_descriptor() {
@@ -61,6 +99,31 @@ StageDescriptor post_stage_descriptor() {
   d.summary = "averaged principal strain directions against split-line maps (CPD); report.html, summary.json";
   d.block = block_schema<PostOptions>("post", "options of the post stage");
   d.outputs = {"report"};
+  d.runs = [](const common::Scene& scene, const std::filesystem::path& out) {
+    StageStep s;
+    s.name = "post";
+    s.executable = "arthrosim-post";
+    s.provides = {"report"};
+    s.origin = "the post stage";
+    const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
+    if (scenarios.empty()) s.unavailable = "a 'surface' block with at least one scenario";
+    for (const common::BlockInstance& sc : scenarios) {
+      const std::filesystem::path file = out / ("surface_" + sc.name + ".h5");
+      s.inputs.emplace_back(file.filename().string(), file);
+      s.arguments.insert(s.arguments.end(), {"--surface", file.string()});
+    }
+    const std::filesystem::path kinematics = out / "kinematics.h5";
+    s.optional_inputs.push_back({"kinematics.h5", kinematics, {"--kinematics", kinematics.string()}});
+    const common::OptionBlock& block = scene.block("post");
+    s.options = block.canonical();
+    add_path_inputs(block, s);
+    s.outputs = {out / "report.html", out / "summary.json"};
+    s.arguments.insert(s.arguments.end(), {"--scene", scene.file.string(), "--out-dir", out.string()});
+    return std::vector<StageStep>{s};
+  };
+  d.key_outputs = [](const std::string&, const std::filesystem::path& dir, const std::filesystem::path& ref) {
+    return study::post_metrics(dir / "summary.json", ref / "summary.json");
+  };
   return d;
 }
 
@@ -69,15 +132,17 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// Every dataset under `group` whose name contains "force" and has shape (n) or (n, 3)
-// with n = frames becomes a series (|F| for 3 columns), labelled by its path below the
-// group (docs/kinematics_file.md: force, medial_force, lateral_force; cop, area and
-// max_pressure are not forces and are skipped).
+// Every dataset under `group` (the contact group of a kinematics file or a
+// surface output) whose name contains "force" and has shape (n) or (n, 3)
+// with n = frames becomes a series (|F| for 3 columns), labelled by its path
+// below the group (docs/kinematics_file.md: force, medial_force,
+// lateral_force; cop, area and max_pressure are not forces and are skipped).
+// The frames' times: the kinematics clock (a surface output with imposed
+// kinematics starts with a seating ramp; its /trial_time puts its frames on
+// the kinematics file's clock).
 std::vector<report::Series> contact_series(const common::H5File& f, const std::string& group, const std::string& prefix) {
   std::vector<report::Series> out;
   if (!f.is_group(group) || !f.exists("/time")) return out;
-  // A surface output with imposed kinematics starts with a seating ramp:
-  // /trial_time puts its frames on the kinematics file's clock (stage 1).
   const Eigen::VectorXd t = f.read_vector(f.exists("/trial_time") ? "/trial_time" : "/time");
   std::function<void(const std::string&)> walk = [&](const std::string& g) {
     for (const auto& name : f.list(g)) {
@@ -176,9 +241,11 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   json.value("scene", in.scene_file);
   if (!in.kinematics.empty()) {
     const auto t0 = Clock::now();
-    common::H5File k(in.kinematics, common::H5File::Mode::kRead);
-    auto s = contact_series(k, "/contact/tibiofemoral", "stage 1 ");
-    if (s.empty()) summary.missing.push_back("kinematics file " + in.kinematics + " has no /contact/tibiofemoral series over /time");
+    const musculoskeletal::KinematicsFileReader kin(in.kinematics);
+    const common::H5File& k = kin.file();
+    const std::string group = musculoskeletal::KinematicsFileReader::kContactGroup;
+    auto s = contact_series(k, group, "stage 1 ");
+    if (s.empty()) summary.missing.push_back("kinematics file " + in.kinematics + " has no " + group + " series over its frames");
     force.insert(force.end(), s.begin(), s.end());
     auto a = attributes(k, "kinematics");
     attrs.insert(attrs.end(), a.begin(), a.end());
@@ -186,15 +253,17 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   }
   bool any_stage2 = false;
   for (const auto& [scenario, file] : in.surfaces) {
-    common::H5File f(file, common::H5File::Mode::kRead);
-    auto s = contact_series(f, "/contact/tibiofemoral", "stage 2 " + scenario + " ");
+    const surface_output::Reader out(file);
+    const common::H5File& f = out.file();
+    auto s = contact_series(f, surface_output::kContactGroup, "stage 2 " + scenario + " ");
     any_stage2 = any_stage2 || !s.empty();
     force.insert(force.end(), s.begin(), s.end());
     auto a = attributes(f, scenario);
     attrs.insert(attrs.end(), a.begin(), a.end());
   }
   if (!in.surfaces.empty() && !any_stage2) {
-    summary.missing.push_back("no surface output holds /contact/tibiofemoral (stage-2 contact force)");
+    summary.missing.push_back(std::string("no surface output holds ") + surface_output::kContactGroup +
+                              " (stage-2 contact force)");
   }
   if (!force.empty()) add_figure("fig-contact", "Tibiofemoral contact force over the cycle (stage 1 vs stage 2)",
                                  report::line_plot("Tibiofemoral contact force", "time [s]", "force [N]", force));
@@ -210,28 +279,18 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   std::vector<std::vector<std::string>> rule_rows;
   json.begin_array("accuracy_rule");
   for (const auto& [scenario, file] : in.surfaces) {
-    common::H5File f(file, common::H5File::Mode::kRead);
-    if (!f.exists("/solver/penetration_ratio") || !f.exists("/solver/time") || !f.exists("/solver/active_contacts")) continue;
-    const Eigen::VectorXd t = f.read_vector("/solver/time");
-    const Eigen::VectorXd r = f.read_vector("/solver/penetration_ratio");
-    const Eigen::VectorXi n = f.read_vector_int("/solver/active_contacts");  // int, as the stage writes it
-    if (r.size() != t.size() || n.size() != t.size())
-      throw InputError(file, 0, "/solver/penetration_ratio, /solver/active_contacts and /solver/time have different lengths (" +
-                                    std::to_string(r.size()) + ", " + std::to_string(n.size()) + ", " + std::to_string(t.size()) + ")");
-    double offset = 0;  // surface clock -> trial clock (seating first)
-    if (f.exists("/trial_time") && f.exists("/time")) {
-      const Eigen::VectorXd tt = f.read_vector("/trial_time"), ts = f.read_vector("/time");
-      if (tt.size() > 0 && tt.size() == ts.size()) offset = tt(tt.size() - 1) - ts(ts.size() - 1);
-    }
-    const bool has_limit = f.has_attribute("/solver", "penetration_limit");
-    const double limit = has_limit ? f.attribute_double("/solver", "penetration_limit") : 0.0;
-    // The ratio over unfaded contacts only (files written since 2026-12-02;
-    // older ones lack it and their rows say so).
-    const bool has_unfaded = f.exists("/solver/unfaded_penetration_ratio");
-    const Eigen::VectorXd ri = has_unfaded ? f.read_vector("/solver/unfaded_penetration_ratio") : Eigen::VectorXd();
-    if (has_unfaded && ri.size() != t.size())
-      throw InputError(file, 0, "/solver/unfaded_penetration_ratio has " + std::to_string(ri.size()) +
-                                    " values, /solver/time " + std::to_string(t.size()));
+    const std::optional<surface_output::PenetrationSeries> pen = surface_output::Reader(file).penetration();
+    if (!pen) continue;
+    const Eigen::VectorXd& t = pen->time;
+    const Eigen::VectorXd& r = pen->ratio;
+    const Eigen::VectorXi& n = pen->active_contacts;
+    const double offset = pen->trial_offset_s;  // surface clock -> trial clock (seating first)
+    const bool has_limit = pen->limit.has_value();
+    const double limit = has_limit ? *pen->limit : 0.0;
+    // The ratio over unfaded contacts only (a file without it says so in
+    // its rows).
+    const bool has_unfaded = pen->has_unfaded;
+    const Eigen::VectorXd& ri = pen->unfaded_ratio;
     report::Series s, si;
     s.label = "stage 2 " + scenario;
     si.label = "stage 2 " + scenario + ", unfaded contacts";
@@ -353,9 +412,8 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     // deflection.
     bool follows_cycle = !key_times.empty() && field.time.size() > 2;
     if (follows_cycle) {
-      const common::H5File h5(file, common::H5File::Mode::kRead);
-      if (h5.exists("/effects/built"))
-        follows_cycle = common::read_effect_ledger(h5).built("imposed_kinematics");
+      if (const std::optional<common::EffectLedger> ledger = surface_output::Reader(file).ledger())
+        follows_cycle = ledger->built("imposed_kinematics");
     }
     if (follows_cycle) {
       // A key time the run does not reach (e.g. a walk that ends before the

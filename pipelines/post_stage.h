@@ -5,6 +5,7 @@
 // (the same numbers). Optional inputs that are absent are listed in both files under
 // "missing"; they never stop the run.
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -36,7 +37,7 @@ struct PostOptions {
 };
 
 /// The scene's post block as options.
-PostOptions post_options_from_scene(const common::Scene& scene);
+PostOptions post_from_scene(const common::Scene& scene);
 
 struct PostInputs {
   std::vector<std::pair<std::string, std::string>> surfaces;  ///< (scenario, file)
@@ -58,6 +59,17 @@ struct PostSummary {
   std::vector<std::string> figures;  ///< ids of the figures in report.html
   std::string report_path, summary_path;
 };
+
+/// One scenario of a summary.json, as its readers need it.
+struct PostScenarioSummary {
+  std::string scenario;
+  /// Mean model-map angle [deg]: region "all" when present, else the
+  /// covered-sample-weighted mean over the regions; NaN without statistics.
+  double mean_angle_deg = std::numeric_limits<double>::quiet_NaN();
+};
+/// The post stage's summary.json (written by run_post): its scenarios.
+/// InputError naming the file for unreadable JSON.
+std::vector<PostScenarioSummary> read_post_summary(const std::filesystem::path& file);
 
 /// Runs the post stage into `out_dir` (created). Throws InputError for unreadable or
 /// malformed inputs that were given.

@@ -53,6 +53,7 @@
 
 namespace arthrosim::common {
 struct RunMetadata;
+struct Scene;
 }
 
 namespace arthrosim::pipelines {
@@ -94,6 +95,9 @@ struct PrepareOptions {
   /// The scene's prepare block (common/options.h; ranges there).
   void declare(common::OptionVisitor& v);
 };
+
+/// The prepare block of a scene as options (pure: no file is read).
+PrepareOptions prepare_from_scene(const common::Scene& scene);
 
 /// Where a measured thickness value came from (stored per vertex / node).
 enum class ThicknessSource : int {

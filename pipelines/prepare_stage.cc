@@ -27,6 +27,10 @@ void PrepareOptions::declare(common::OptionVisitor& v) {
            "refuse a cartilage surface whose remesh is estimated to exceed this many triangles");
 }
 
+PrepareOptions prepare_from_scene(const common::Scene& scene) {
+  return common::read_options<PrepareOptions>(scene.block("prepare"));
+}
+
 StageDescriptor prepare_stage_descriptor() {
   StageDescriptor d;
   d.name = "prepare";
@@ -34,6 +38,23 @@ StageDescriptor prepare_stage_descriptor() {
   d.summary = "validated, remeshed cartilage and bone surfaces, thickness, quad articular meshes";
   d.block = block_schema<PrepareOptions>("prepare", "options of the prepare stage");
   d.outputs = {"prepared_model"};
+  d.runs = [](const common::Scene& scene, const std::filesystem::path& out) {
+    StageStep s;
+    s.name = "prepare";
+    s.executable = "arthrosim-prepare";
+    s.provides = {"prepared_model"};
+    s.origin = "the prepare stage";
+    const SceneInputs in = scene_inputs(scene);
+    s.inputs.emplace_back("model", in.model);
+    const common::OptionBlock& block = scene.block("prepare");
+    s.options = block.canonical();
+    add_path_inputs(block, s);
+    const std::filesystem::path prepared = out / "prepared.h5";
+    // arthrosim-prepare writes prepared.xdmf next to prepared.h5.
+    s.outputs = {prepared, out / "prepared.xdmf"};
+    s.arguments = {"--model", in.model.string(), "--scene", scene.file.string(), "--out", prepared.string()};
+    return std::vector<StageStep>{s};
+  };
   return d;
 }
 

@@ -1,12 +1,14 @@
 #pragma once
 // Self-contained report pieces for arthrosim-post (docs/post.md): inline SVG figures
-// drawn here (no plotting library), XHTML-safe escaping and a small JSON writer.
+// drawn here (no plotting library) and XHTML-safe escaping (JSON: pipelines/json.h).
 // Every figure is a complete <svg> element in the SVG namespace, so the report is
 // well-formed XML (XHTML) and can be checked with any XML parser.
 #include <Eigen/Core>
 
 #include <string>
 #include <vector>
+
+#include "pipelines/json.h"
 
 namespace arthrosim::pipelines::report {
 
@@ -46,27 +48,7 @@ std::string error_map(const std::string& title, const Eigen::MatrixX2d& outline,
 /// <table> with a header row; cells are escaped.
 std::string table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows);
 
-/// Minimal JSON builder producing pretty, deterministic output.
-class Json {
- public:
-  Json& begin_object(const std::string& key = "");
-  Json& end_object();
-  Json& begin_array(const std::string& key = "");
-  Json& end_array();
-  Json& value(const std::string& key, double v);
-  Json& value(const std::string& key, const std::string& v);
-  Json& value(const std::string& key, const char* v) { return value(key, std::string(v)); }
-  Json& value(const std::string& key, bool v);
-  Json& value(const std::string& key, int v) { return value(key, static_cast<double>(v)); }
-  Json& array(const std::string& key, const std::vector<double>& v);
-  Json& array(const std::string& key, const std::vector<std::string>& v);
-  const std::string& str() const { return out_; }
-
- private:
-  void key(const std::string& k);
-  std::string out_;
-  std::vector<bool> first_;  // per open container: nothing written yet
-  std::vector<bool> is_object_;
-};
+/// The JSON writer (pipelines/json.h).
+using Json = json::Writer;
 
 }  // namespace arthrosim::pipelines::report

@@ -32,20 +32,6 @@ using common::Scene;
 
 namespace {
 
-constexpr const char* kPrepared = "prepared.h5";
-constexpr const char* kKinematics = "kinematics.h5";
-
-std::string surface_file(const std::string& scenario) { return "surface_" + scenario + ".h5"; }
-
-// Every kPath option of a block is an input of the stage that reads it.
-void add_path_inputs(const common::OptionBlock& block, StageStep& step) {
-  for (const auto& [key, v] : block.values()) {
-    if (v.spec->type == common::OptionType::kPath) {
-      step.inputs.emplace_back(block.name() + "." + key, v.path);
-    }
-  }
-}
-
 std::string short_key(const std::string& key) { return key.substr(0, 12); }
 
 // ---------------------------------------------------------------------------
@@ -63,10 +49,6 @@ struct Stamp {
   /// stage reruns it while moving the repository or output folder does not.
   std::string arguments;
 };
-
-fs::path stamp_path(const fs::path& out_dir, const std::string& stage) {
-  return out_dir / ".stamps" / (stage + ".txt");
-}
 
 bool read_stamp(const fs::path& file, Stamp& stamp) {
   std::ifstream in(file);
@@ -312,138 +294,13 @@ class OutputFolderLock {
 
 }  // namespace
 
-std::vector<StageStep> plan_stages(const Scene& scene, const fs::path& out_dir) {
-  const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
-  const bool want_report = wants_output(scene, "report");
-  const bool want_surface = wants_output(scene, "surface") || want_report;
-  bool surface_moves = false;
-  if (want_surface) {
-    for (const common::BlockInstance& s : scenarios) {
-      surface_moves = surface_moves || s.wants("imposed_kinematics");
-    }
-  }
-  const bool want_biphasic = wants_output(scene, "biphasic");
-  const bool want_comak = wants_output(scene, "kinematics") || surface_moves || want_biphasic;
-  const bool want_prepare = wants_output(scene, "prepared_model") || want_comak || want_surface;
-  const fs::path scene_file = scene.file;
-  const SceneInputs in = scene_inputs(scene);
-  const common::OptionBlock& prepare = scene.block("prepare");
+fs::path stamp_path(const fs::path& out_dir, const std::string& run) {
+  return out_dir / ".stamps" / (run + ".txt");
+}
 
-  auto first_reason = [&](const std::string& direct, const std::string& otherwise) {
-    return wants_output(scene, direct) ? "output " + direct : otherwise;
-  };
-
-  std::vector<StageStep> plan;
-  if (want_prepare) {
-    StageStep s;
-    s.name = "prepare";
-    s.executable = "arthrosim-prepare";
-    s.needed_for = first_reason("prepared_model", "the prepared model used by later stages");
-    s.inputs.emplace_back("model", in.model);
-    s.options = prepare.canonical();
-    add_path_inputs(prepare, s);
-    // arthrosim-prepare writes prepared.xdmf next to prepared.h5.
-    s.outputs = {out_dir / kPrepared, out_dir / "prepared.xdmf"};
-    // Every prepare key of the schema maps to one flag, values as written
-    // (arthrosim-prepare takes millimetres).
-    s.arguments = {"--model", in.model.string(),
-                   "--edge-length-mm", prepare.value("edge_length_mm").canonical,
-                   "--unit", prepare.value("mesh_unit").canonical,
-                   "--max-cast-distance-mm", prepare.value("max_cast_distance_mm").canonical,
-                   "--remesh-iterations", prepare.value("remesh_iterations").canonical,
-                   "--min-thickness-mm", prepare.value("min_thickness_mm").canonical,
-                   "--max-triangles", prepare.value("max_triangles").canonical,
-                   "--out", (out_dir / kPrepared).string()};
-    const common::OptionValue& per_surface = prepare.value("surface_edge_length_mm");
-    for (std::size_t i = 0; i < per_surface.list.size(); ++i)
-      s.arguments.insert(s.arguments.end(),
-                         {"--surface-edge-length-mm",
-                          per_surface.list[i] + "=" + common::shortest_text(per_surface.numbers_as_written[i])});
-    plan.push_back(std::move(s));
-  }
-  if (want_comak) {
-    StageStep s;
-    s.name = "comak";
-    s.executable = "arthrosim-comak";
-    const common::OptionBlock& comak = scene.block("comak");
-    s.needed_for = first_reason("kinematics", surface_moves ? "bone motion for imposed_kinematics"
-                                                            : "bone poses and contact forces for the biphasic stage");
-    s.inputs.emplace_back("model", in.model);
-    s.inputs.emplace_back("trial", in.trial);
-    s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
-    s.options = comak.canonical();
-    // The trial window (top-level trial.start_s / trial.end_s) decides which
-    // frames the stage solves.
-    for (const auto& kv : scene.top.canonical())
-      if (kv.first.rfind("scene.trial.", 0) == 0) s.options.push_back(kv);
-    std::sort(s.options.begin(), s.options.end());
-    s.effects = comak.list("effects");
-    add_path_inputs(comak, s);
-    s.outputs = {out_dir / kKinematics};
-    s.arguments = {"--model", in.model.string(), "--prepared", (out_dir / kPrepared).string(),
-                   "--trial", in.trial.string(), "--scene", scene_file.string(),
-                   "--out", (out_dir / kKinematics).string()};
-    plan.push_back(std::move(s));
-  }
-  if (want_surface) {
-    for (const common::BlockInstance& sc : scenarios) {
-      StageStep s;
-      s.name = "surface." + sc.name;
-      s.executable = "arthrosim-surface";
-      s.needed_for = first_reason("surface", "the report");
-      s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
-      s.arguments = {"--prepared", (out_dir / kPrepared).string()};
-      if (sc.wants("imposed_kinematics")) {
-        s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
-        s.arguments.insert(s.arguments.end(), {"--kinematics", (out_dir / kKinematics).string()});
-      }
-      s.options = sc.options.canonical();
-      s.effects = sc.effects;
-      add_path_inputs(sc.options, s);
-      s.outputs = {out_dir / surface_file(sc.name)};
-      s.arguments.insert(s.arguments.end(), {"--scene", scene_file.string(), "--scenario", sc.name,
-                                             "--out", (out_dir / surface_file(sc.name)).string()});
-      plan.push_back(std::move(s));
-    }
-  }
-  if (want_biphasic) {
-    StageStep s;
-    s.name = "biphasic";
-    s.executable = "arthrosim-biphasic";
-    s.needed_for = "output biphasic";
-    const common::OptionBlock& biphasic = scene.block("biphasic");
-    s.inputs.emplace_back(kPrepared, out_dir / kPrepared);
-    s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
-    s.options = biphasic.canonical();
-    s.effects = biphasic.list("effects");
-    add_path_inputs(biphasic, s);
-    s.outputs = {out_dir / "biphasic.h5", out_dir / "biphasic.xdmf"};
-    s.arguments = {"--prepared", (out_dir / kPrepared).string(), "--kinematics", (out_dir / kKinematics).string(),
-                   "--scene",    scene_file.string(),            "--out",        (out_dir / "biphasic.h5").string()};
-    plan.push_back(std::move(s));
-  }
-  if (want_report) {
-    StageStep s;
-    s.name = "post";
-    s.executable = "arthrosim-post";
-    s.needed_for = "output report";
-    for (const common::BlockInstance& sc : scenarios) {
-      s.inputs.emplace_back(surface_file(sc.name), out_dir / surface_file(sc.name));
-      s.arguments.insert(s.arguments.end(),
-                         {"--surface", (out_dir / surface_file(sc.name)).string()});
-    }
-    if (want_comak) {
-      s.inputs.emplace_back(kKinematics, out_dir / kKinematics);
-      s.arguments.insert(s.arguments.end(), {"--kinematics", (out_dir / kKinematics).string()});
-    }
-    s.options = scene.block("post").canonical();
-    add_path_inputs(scene.block("post"), s);
-    s.outputs = {out_dir / "report.html", out_dir / "summary.json"};
-    s.arguments.insert(s.arguments.end(),
-                       {"--scene", scene_file.string(), "--out-dir", out_dir.string()});
-    plan.push_back(std::move(s));
-  }
-  return plan;
+std::string stamp_executable_hash(const fs::path& out_dir, const std::string& run) {
+  Stamp stamp;
+  return read_stamp(stamp_path(out_dir, run), stamp) ? stamp.executable : std::string();
 }
 
 fs::path default_stage_dir() {
@@ -468,19 +325,18 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
   for (const StageStep& s : plan) log << " " << s.name;
   log << "\n";
   for (const StageStep& s : plan) log << "  " << s.name << ": needed for " << s.needed_for << "\n";
-  // Say what the scene describes but its outputs do not ask for.
   const auto planned = [&](const std::string& name) {
     for (const StageStep& s : plan) {
       if (s.name == name) return true;
     }
     return false;
   };
-  if (scene.has_block("comak") && !planned("comak")) {
-    log << "  not run: comak (no output needs kinematics)\n";
-  }
-  for (const common::BlockInstance& sc : scene.instances("surface")) {
-    if (!planned("surface." + sc.name)) {
-      log << "  not run: surface." << sc.name << " (outputs ask for neither surface nor report)\n";
+  // Say what the scene describes but its outputs do not ask for.
+  for (const StageDescriptor& d : stages()) {
+    if (!scene.has_block(d.name) || !d.runs) continue;
+    for (const StageStep& r : d.runs(scene, out_dir)) {
+      if (!planned(r.name) && r.unavailable.empty())
+        log << "  not run: " << r.name << " (no requested output needs it)\n";
     }
   }
   for (const StageStep& s : plan) {

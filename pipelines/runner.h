@@ -6,16 +6,10 @@
 // reading and writing files in the output folder, and reuses a stage's output
 // when nothing it depends on has changed.
 //
-// Stage graph (files in the output folder DIR):
-//   prepare          model                                   -> prepared.h5
-//   comak            model, trial, prepared.h5               -> kinematics.h5
-//   surface.<name>   prepared.h5 [+ kinematics.h5 when the
-//                    scenario uses imposed_kinematics]       -> surface_<name>.h5
-//   post             every surface_<name>.h5 [+ kinematics.h5
-//                    when comak is part of the run]          -> report.html, summary.json
-// Outputs -> stages: prepared_model -> prepare; kinematics -> comak;
-// surface -> every scenario; biphasic -> biphasic (and therefore comak);
-// report -> post (and therefore every scenario).
+// The plan comes from the stage table (pipelines/stages.h, plan_stages): each
+// stage's descriptor says which runs a scene has, what each reads and writes
+// and which scene outputs it provides; a run is planned when the scene asks
+// for one of its outputs or a planned run reads one of its files.
 //
 // Effects: a comak, surface or biphasic stage whose output's effect ledger holds a term
 // the scene did not ask for fails (and is not stamped), so "only the effects a
@@ -39,31 +33,9 @@
 #include <vector>
 
 #include "common/scene.h"
+#include "pipelines/stages.h"
 
 namespace arthrosim::pipelines {
-
-/// One stage of a plan: what to execute and what its result depends on.
-struct StageStep {
-  std::string name;        ///< "prepare", "comak", "surface.osmotic", "post"
-  std::string executable;  ///< file name, e.g. "arthrosim-prepare"
-  std::vector<std::string> arguments;  ///< after the program name
-  /// (label, path) of every file or folder whose contents the output depends
-  /// on; labels ("model", "prepared.h5") are what messages and stamps show.
-  std::vector<std::pair<std::string, std::filesystem::path>> inputs;
-  std::vector<std::filesystem::path> outputs;  ///< files the stage must write
-  /// ("block.key", canonical value), sorted: the options the stage reads.
-  std::vector<std::pair<std::string, std::string>> options;
-  std::string needed_for;  ///< why it is in the plan, e.g. "output prepared_model"
-  /// For stages that build physics terms (comak, surface.*): the effects the
-  /// scene asks for. After the stage exits 0 the runner reads the effect
-  /// ledger (/effects, common/effects.h) from outputs[0] and fails the stage
-  /// if the ledger is missing or holds a term not in this list.
-  std::optional<std::vector<std::string>> effects;
-};
-
-/// The stages `scene` needs, in execution order, writing into `out_dir`.
-std::vector<StageStep> plan_stages(const common::Scene& scene,
-                                   const std::filesystem::path& out_dir);
 
 struct RunnerOptions {
   std::filesystem::path out_dir = "out";  ///< created when missing
@@ -123,6 +95,12 @@ struct RunReport {
 /// for a failing stage (see RunReport); throws common::InputError for files
 /// that cannot be read or an output folder that cannot be created.
 RunReport run_scene(const common::Scene& scene, const RunnerOptions& options, std::ostream& log);
+
+/// The stamp of a run in an output folder: DIR/.stamps/<run>.txt (its format
+/// is the runner's own; read it through these functions).
+std::filesystem::path stamp_path(const std::filesystem::path& out_dir, const std::string& run);
+/// The hash of the executable that wrote a run's stamp ("" without a stamp).
+std::string stamp_executable_hash(const std::filesystem::path& out_dir, const std::string& run);
 
 /// The executables folder of the running program: $ARTHROSIM_STAGE_DIR when
 /// set, else the folder of /proc/self/exe.

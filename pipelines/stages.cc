@@ -29,6 +29,14 @@ const StageDescriptor* find_stage(std::string_view name) {
   return nullptr;
 }
 
+const StageDescriptor* stage_of_run(std::string_view run) {
+  for (const StageDescriptor& s : stages())
+    if (run == s.name || (run.size() > s.name.size() && run.substr(0, s.name.size()) == s.name &&
+                          run[s.name.size()] == '.'))
+      return &s;
+  return nullptr;
+}
+
 namespace {
 
 std::string output_choices() {
@@ -43,36 +51,6 @@ std::string output_list() {
   for (const StageDescriptor& d : stages())
     for (const std::string& o : d.outputs) s += (s.empty() ? "" : ", ") + o;
   return s;
-}
-
-// What the outputs need must be in the scene: the blocks and inputs of the
-// stages that produce them.
-void check_needs(const common::Scene& scene) {
-  const common::OptionValue& outputs = scene.top.value("outputs");
-  const bool wants_surface = wants_output(scene, "surface") || wants_output(scene, "report");
-  const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
-  if (wants_surface && scenarios.empty()) {
-    throw common::InputError(scene.file.string(), outputs.value_line, outputs.value_column,
-                             "output '" + std::string(wants_output(scene, "surface") ? "surface" : "report") +
-                                 "' needs a 'surface' block with at least one scenario");
-  }
-  const common::BlockInstance* moving = nullptr;
-  if (wants_surface) {
-    for (const common::BlockInstance& s : scenarios)
-      if (s.wants("imposed_kinematics") && moving == nullptr) moving = &s;
-  }
-  if (!wants_output(scene, "kinematics") && moving == nullptr) return;
-  const std::string why =
-      moving ? "scenario '" + moving->name + "' uses imposed_kinematics" : "output 'kinematics' is requested";
-  const int line = moving ? moving->line : outputs.value_line, column = moving ? 1 : outputs.value_column;
-  if (!scene.has_block("comak")) {
-    throw common::InputError(scene.file.string(), line, column,
-                             why + ", which needs the musculoskeletal stage: add a 'comak' block with its effects");
-  }
-  if (!scene.top.has("trial")) {
-    throw common::InputError(scene.file.string(), line, column,
-                             why + ", which needs a walking trial: add 'trial: PATH'");
-  }
 }
 
 }  // namespace
@@ -107,11 +85,85 @@ const common::SceneSchema& scene_schema() {
   return kSchema;
 }
 
+void add_path_inputs(const common::OptionBlock& block, StageStep& step) {
+  for (const auto& [key, v] : block.values()) {
+    if (v.spec->type == common::OptionType::kPath) step.inputs.emplace_back(block.name() + "." + key, v.path);
+  }
+}
+
+std::vector<StageStep> plan_stages(const common::Scene& scene, const std::filesystem::path& out_dir) {
+  namespace fs = std::filesystem;
+  std::vector<StageStep> runs;
+  for (const StageDescriptor& d : stages()) {
+    if (!d.runs) continue;
+    for (StageStep& r : d.runs(scene, out_dir)) runs.push_back(std::move(r));
+  }
+  const auto producer = [&](const fs::path& file) -> int {
+    for (std::size_t i = 0; i < runs.size(); ++i)
+      for (const fs::path& o : runs[i].outputs)
+        if (o == file) return static_cast<int>(i);
+    return -1;
+  };
+  std::vector<bool> needed(runs.size(), false);
+  const common::OptionValue& outputs = scene.top.value("outputs");
+  // Marks run i as needed (and, recursively, the runs writing its inputs).
+  // `who`, `line`, `column`: what needs it, for the error when it cannot run.
+  std::function<void(std::size_t, const std::string&, const std::string&, int, int)> need =
+      [&](std::size_t i, const std::string& why, const std::string& who, int line, int column) {
+        if (needed[i]) return;
+        StageStep& r = runs[i];
+        if (!r.unavailable.empty())
+          throw common::InputError(scene.file.string(), line, column, who + ", which needs " + r.unavailable);
+        needed[i] = true;
+        r.needed_for = why;
+        for (const auto& [label, path] : r.inputs) {
+          const int p = producer(path);
+          if (p < 0) continue;
+          auto reason = r.input_reasons.find(label);
+          const std::string what =
+              (r.origin.empty() ? r.name : r.origin) + " " +
+              (reason == r.input_reasons.end() ? "reads " + label : reason->second);
+          need(static_cast<std::size_t>(p), label + " for " + r.name, what, r.line ? r.line : line,
+               r.line ? r.column : column);
+        }
+      };
+  for (const std::string& word : scene.top.list("outputs")) {
+    bool provided = false;
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      if (std::find(runs[i].provides.begin(), runs[i].provides.end(), word) == runs[i].provides.end()) continue;
+      provided = true;
+      need(i, "output " + word, "output '" + word + "' is requested", outputs.value_line, outputs.value_column);
+    }
+    if (provided) continue;
+    std::string lacks = "a stage that provides it";
+    for (const StageDescriptor& d : stages())
+      if (std::find(d.outputs.begin(), d.outputs.end(), word) != d.outputs.end() && !d.no_runs.empty())
+        lacks = d.no_runs;
+    throw common::InputError(scene.file.string(), outputs.value_line, outputs.value_column,
+                             "output '" + word + "' is requested, which needs " + lacks);
+  }
+  std::vector<StageStep> plan;
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    if (!needed[i]) continue;
+    StageStep r = runs[i];
+    // Optional inputs are read when a planned run writes them.
+    for (const StageStep::OptionalInput& o : r.optional_inputs) {
+      const int p = producer(o.path);
+      if (p < 0 || !needed[static_cast<std::size_t>(p)]) continue;
+      r.inputs.emplace_back(o.label, o.path);
+      r.arguments.insert(r.arguments.end(), o.arguments.begin(), o.arguments.end());
+    }
+    r.optional_inputs.clear();
+    plan.push_back(std::move(r));
+  }
+  return plan;
+}
+
 common::Scene parse_scene(const std::string& text, const std::filesystem::path& file) {
   common::Scene scene = common::parse_scene(text, file, scene_schema());
   for (const StageDescriptor& d : stages())
     if (d.check) d.check(scene);
-  check_needs(scene);
+  plan_stages(scene, "OUT");  // what the outputs need must be in the scene
   return scene;
 }
 
@@ -119,7 +171,7 @@ common::Scene load_scene(const std::filesystem::path& file) {
   common::Scene scene = common::load_scene(file, scene_schema());
   for (const StageDescriptor& d : stages())
     if (d.check) d.check(scene);
-  check_needs(scene);
+  plan_stages(scene, "OUT");  // what the outputs need must be in the scene
   return scene;
 }
 

@@ -15,7 +15,11 @@
 #include "common/hashing.h"
 #include "common/hdf5.h"
 #include "common/scene.h"
+#include "musculoskeletal/kinematics_file.h"
+#include "pipelines/json.h"
+#include "pipelines/post_stage.h"
 #include "pipelines/stages.h"
+#include "pipelines/surface_output.h"
 #include "common/scene_edit.h"
 #include "pipelines/report.h"
 #include "pipelines/runner.h"
@@ -75,186 +79,6 @@ std::string csv_field(const std::string& s) {
 }
 
 // ---------------------------------------------------------------------------
-// A minimal JSON reader for summary.json (objects, arrays, strings, numbers,
-// true/false/null). Errors name the file and the byte offset.
-// ---------------------------------------------------------------------------
-struct JsonValue {
-  // Declared (not an aggregate): clang with libstdc++ would otherwise need
-  // std::pair<std::string, JsonValue> complete inside this class.
-  JsonValue() = default;
-  enum class Kind { kNull, kBool, kNumber, kString, kArray, kObject } kind = Kind::kNull;
-  bool boolean = false;
-  double number = 0.0;
-  std::string string;
-  std::vector<JsonValue> array;
-  std::vector<std::pair<std::string, JsonValue>> object;
-
-  const JsonValue* get(const std::string& key) const {
-    for (const auto& [k, v] : object) {
-      if (k == key) return &v;
-    }
-    return nullptr;
-  }
-};
-
-class JsonReader {
- public:
-  JsonReader(std::string text, std::string file) : text_(std::move(text)), file_(std::move(file)) {}
-
-  JsonValue document() {
-    JsonValue v = value();
-    space();
-    if (pos_ != text_.size()) fail("expected the end of the document");
-    return v;
-  }
-
- private:
-  [[noreturn]] void fail(const std::string& what) {
-    throw InputError(file_, 0, what + " at byte " + std::to_string(pos_));
-  }
-  void space() {
-    while (pos_ < text_.size() && std::isspace(static_cast<unsigned char>(text_[pos_]))) ++pos_;
-  }
-  bool literal(const char* word) {
-    const std::size_t n = std::char_traits<char>::length(word);
-    if (text_.compare(pos_, n, word) != 0) return false;
-    pos_ += n;
-    return true;
-  }
-  std::string string_body() {
-    ++pos_;  // opening quote
-    std::string s;
-    while (pos_ < text_.size() && text_[pos_] != '"') {
-      char c = text_[pos_++];
-      if (c != '\\') {
-        s += c;
-        continue;
-      }
-      if (pos_ >= text_.size()) fail("unterminated escape");
-      c = text_[pos_++];
-      switch (c) {
-        case 'n': s += '\n'; break;
-        case 't': s += '\t'; break;
-        case 'r': s += '\r'; break;
-        case 'b': s += '\b'; break;
-        case 'f': s += '\f'; break;
-        case 'u': {
-          if (pos_ + 4 > text_.size()) fail("short \\u escape");
-          const unsigned code = static_cast<unsigned>(std::stoul(text_.substr(pos_, 4), nullptr, 16));
-          pos_ += 4;
-          // UTF-8 of a code point of the basic plane (enough for our files).
-          if (code < 0x80) {
-            s += static_cast<char>(code);
-          } else if (code < 0x800) {
-            s += static_cast<char>(0xC0 | (code >> 6));
-            s += static_cast<char>(0x80 | (code & 0x3F));
-          } else {
-            s += static_cast<char>(0xE0 | (code >> 12));
-            s += static_cast<char>(0x80 | ((code >> 6) & 0x3F));
-            s += static_cast<char>(0x80 | (code & 0x3F));
-          }
-          break;
-        }
-        default: s += c;  // \" \\ \/
-      }
-    }
-    if (pos_ >= text_.size()) fail("unterminated string");
-    ++pos_;
-    return s;
-  }
-  JsonValue value() {
-    space();
-    if (pos_ >= text_.size()) fail("expected a value, found the end of the file");
-    JsonValue v;
-    const char c = text_[pos_];
-    if (c == '{') {
-      v.kind = JsonValue::Kind::kObject;
-      ++pos_;
-      space();
-      if (pos_ < text_.size() && text_[pos_] == '}') {
-        ++pos_;
-        return v;
-      }
-      while (true) {
-        space();
-        if (pos_ >= text_.size() || text_[pos_] != '"') fail("expected a key");
-        std::string k = string_body();
-        space();
-        if (pos_ >= text_.size() || text_[pos_] != ':') fail("expected ':'");
-        ++pos_;
-        v.object.emplace_back(std::move(k), value());
-        space();
-        if (pos_ < text_.size() && text_[pos_] == ',') {
-          ++pos_;
-          continue;
-        }
-        if (pos_ < text_.size() && text_[pos_] == '}') {
-          ++pos_;
-          return v;
-        }
-        fail("expected ',' or '}'");
-      }
-    }
-    if (c == '[') {
-      v.kind = JsonValue::Kind::kArray;
-      ++pos_;
-      space();
-      if (pos_ < text_.size() && text_[pos_] == ']') {
-        ++pos_;
-        return v;
-      }
-      while (true) {
-        v.array.push_back(value());
-        space();
-        if (pos_ < text_.size() && text_[pos_] == ',') {
-          ++pos_;
-          continue;
-        }
-        if (pos_ < text_.size() && text_[pos_] == ']') {
-          ++pos_;
-          return v;
-        }
-        fail("expected ',' or ']'");
-      }
-    }
-    if (c == '"') {
-      v.kind = JsonValue::Kind::kString;
-      v.string = string_body();
-      return v;
-    }
-    if (literal("true")) {
-      v.kind = JsonValue::Kind::kBool;
-      v.boolean = true;
-      return v;
-    }
-    if (literal("false")) {
-      v.kind = JsonValue::Kind::kBool;
-      return v;
-    }
-    if (literal("null")) return v;
-    const char* begin = text_.c_str() + pos_;
-    char* end = nullptr;
-    v.number = std::strtod(begin, &end);
-    if (end == begin) fail("expected a value");
-    pos_ += static_cast<std::size_t>(end - begin);
-    v.kind = JsonValue::Kind::kNumber;
-    return v;
-  }
-
-  std::string text_;
-  std::string file_;
-  std::size_t pos_ = 0;
-};
-
-JsonValue read_json(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw InputError(file.string(), 0, "cannot open");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return JsonReader(ss.str(), file.string()).document();
-}
-
-// ---------------------------------------------------------------------------
 // Key outputs of each stage
 // ---------------------------------------------------------------------------
 
@@ -308,39 +132,34 @@ Metric relative_series_metric(const std::string& name, const std::string& descri
   return m;
 }
 
-std::vector<bool> converged_frames(const common::H5File& h5, Eigen::Index n) {
-  std::vector<bool> valid(static_cast<std::size_t>(n), true);
-  if (!h5.exists("/solver/status")) return valid;
-  const Eigen::VectorXi status = h5.read_vector_int("/solver/status");
-  for (Eigen::Index k = 0; k < std::min<Eigen::Index>(n, status.size()); ++k) {
-    valid[static_cast<std::size_t>(k)] = status(k) == 0;
-  }
-  return valid;
-}
-
 }  // namespace
 
+bool has_key_outputs(const std::string& run) {
+  const StageDescriptor* stage = stage_of_run(run);
+  return stage != nullptr && static_cast<bool>(stage->key_outputs);
+}
+
 std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file) {
-  const common::H5File a(file.string(), common::H5File::Mode::kRead);
-  const common::H5File b(ref_file.string(), common::H5File::Mode::kRead);
+  const musculoskeletal::KinematicsFileReader a(file.string());
+  const musculoskeletal::KinematicsFileReader b(ref_file.string());
   std::vector<Metric> out;
-  const std::string force = "/contact/tibiofemoral/force";
+  const std::string force = musculoskeletal::KinematicsFileReader::kTibiofemoralForce;
   const std::string force_description =
       "RMS over the cycle of |F - F_ref| / mean |F_ref|, F the tibiofemoral contact force";
-  if (!a.exists(force) || !b.exists(force)) {
+  const std::optional<Eigen::MatrixXd> fa = a.tibiofemoral_force(), fb = b.tibiofemoral_force();
+  if (!fa || !fb) {
     Metric m;
     m.name = "contact_force";
     m.description = force_description;
     m.output_unit = "N";
-    m.note = "no " + force + " in " + (a.exists(force) ? ref_file : file).string();
+    m.note = "no " + force + " in " + (fa ? ref_file : file).string();
     out.push_back(m);
   } else {
-    TimeSeries x{a.read_vector("/time"), a.read_matrix(force, 3), {}};
-    TimeSeries r{b.read_vector("/time"), b.read_matrix(force, 3), {}};
-    x.valid = converged_frames(a, x.t.size());
-    r.valid = converged_frames(b, r.t.size());
-    out.push_back(relative_series_metric("contact_force", force_description, x, r,
-                                         file.string() + ":" + force,
+    TimeSeries x{a.time(), *fa, {}};
+    TimeSeries r{b.time(), *fb, {}};
+    x.valid = a.converged(x.t.size());
+    r.valid = b.converged(r.t.size());
+    out.push_back(relative_series_metric("contact_force", force_description, x, r, file.string() + ":" + force,
                                          ref_file.string() + ":" + force));
   }
 
@@ -348,16 +167,17 @@ std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file
   act.name = "activations";
   act.description = "RMS over frames and muscles of a - a_ref (activations in [0, 1])";
   act.output_unit = "mean activation";
-  const std::string ds = "/muscles/activation";
-  if (!a.exists(ds) || !b.exists(ds)) {
-    act.note = "no " + ds + " in " + (a.exists(ds) ? ref_file : file).string();
+  const std::string ds = musculoskeletal::KinematicsFileReader::kActivations;
+  const auto aa = a.activations(), ab = b.activations();
+  if (!aa || !ab) {
+    act.note = "no " + ds + " in " + (aa ? ref_file : file).string();
     out.push_back(act);
     return out;
   }
-  const std::vector<std::string> names_a = a.read_strings("/muscles/names");
-  const std::vector<std::string> names_b = b.read_strings("/muscles/names");
-  const Eigen::MatrixXd xa = a.read_matrix(ds);
-  const Eigen::MatrixXd xb = b.read_matrix(ds);
+  const std::vector<std::string>& names_a = aa->first;
+  const std::vector<std::string>& names_b = ab->first;
+  const Eigen::MatrixXd& xa = aa->second;
+  const Eigen::MatrixXd& xb = ab->second;
   std::vector<Eigen::Index> ca, cb;
   for (std::size_t j = 0; j < names_b.size(); ++j) {
     const auto it = std::find(names_a.begin(), names_a.end(), names_b[j]);
@@ -365,14 +185,14 @@ std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file
     ca.push_back(it - names_a.begin());
     cb.push_back(static_cast<Eigen::Index>(j));
   }
-  TimeSeries x{a.read_vector("/time"), Eigen::MatrixXd(xa.rows(), ca.size()), {}};
-  TimeSeries r{b.read_vector("/time"), Eigen::MatrixXd(xb.rows(), cb.size()), {}};
+  TimeSeries x{a.time(), Eigen::MatrixXd(xa.rows(), ca.size()), {}};
+  TimeSeries r{b.time(), Eigen::MatrixXd(xb.rows(), cb.size()), {}};
   for (std::size_t j = 0; j < ca.size(); ++j) {
     x.x.col(static_cast<Eigen::Index>(j)) = xa.col(ca[j]);
     r.x.col(static_cast<Eigen::Index>(j)) = xb.col(cb[j]);
   }
-  x.valid = converged_frames(a, x.t.size());
-  r.valid = converged_frames(b, r.t.size());
+  x.valid = a.converged(x.t.size());
+  r.valid = b.converged(r.t.size());
   if (x.x.size() > 0) act.output = x.x.mean();
   const std::string bad_a = non_finite(x, file.string() + ":" + ds);
   const std::string bad_b = non_finite(r, ref_file.string() + ":" + ds);
@@ -387,9 +207,7 @@ std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file
     } else {
       act.error = d.rms_per_component;
       act.note = frames_note(d) + ", " + std::to_string(ca.size()) + " muscles" +
-                 (ca.size() < names_b.size() || ca.size() < names_a.size()
-                      ? " (only those in both runs)"
-                      : "");
+                 (ca.size() < names_b.size() || ca.size() < names_a.size() ? " (only those in both runs)" : "");
     }
   }
   out.push_back(act);
@@ -398,30 +216,24 @@ std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file
 
 namespace {
 
-// The deflection of largest magnitude over every frame and node (signed), or
-// NaN with `why` set.
-double peak_deflection(const common::H5File& h5, const std::string& surface, std::string& why) {
-  const std::string ds = "/surfaces/" + surface + "/deflection";
-  if (!h5.exists(ds)) {
-    why = "no " + ds + " in " + h5.path();
-    return kNaN;
-  }
-  const Eigen::MatrixXd d = h5.read_matrix(ds);
-  // /time counts the complete frames (docs/surface_output.md).
-  const Eigen::Index n = std::min<Eigen::Index>(d.rows(), h5.read_vector("/time").size());
+// The deflection of largest magnitude over every complete frame and node
+// (signed), or NaN with `why` set.
+double peak_deflection(const surface_output::Reader& file, const std::string& surface, std::string& why) {
+  const std::optional<Eigen::MatrixXd> d = file.deflection(surface, why);
+  if (!d) return kNaN;
   double peak = 0.0;
-  for (Eigen::Index k = 0; k < n; ++k) {
-    for (Eigen::Index i = 0; i < d.cols(); ++i) {
-      if (!std::isfinite(d(k, i))) {
-        why = "non-finite deflection in " + h5.path() + ":" + ds + " at frame " +
+  for (Eigen::Index k = 0; k < d->rows(); ++k) {
+    for (Eigen::Index i = 0; i < d->cols(); ++i) {
+      if (!std::isfinite((*d)(k, i))) {
+        why = "non-finite deflection of surface " + surface + " in " + file.path() + " at frame " +
               std::to_string(k) + ", node " + std::to_string(i);
         return kNaN;
       }
-      if (std::abs(d(k, i)) > std::abs(peak)) peak = d(k, i);
+      if (std::abs((*d)(k, i)) > std::abs(peak)) peak = (*d)(k, i);
     }
   }
-  if (n == 0) {
-    why = "no complete frame in " + h5.path();
+  if (d->rows() == 0) {
+    why = "no complete frame in " + file.path();
     return kNaN;
   }
   return peak;
@@ -430,21 +242,18 @@ double peak_deflection(const common::H5File& h5, const std::string& surface, std
 }  // namespace
 
 std::vector<Metric> surface_metrics(const fs::path& file, const fs::path& ref_file) {
-  const common::H5File a(file.string(), common::H5File::Mode::kRead);
-  const common::H5File b(ref_file.string(), common::H5File::Mode::kRead);
+  const surface_output::Reader a(file.string());
+  const surface_output::Reader b(ref_file.string());
   std::vector<Metric> out;
-  const std::vector<std::string> surfaces = b.exists("/surfaces") ? b.list("/surfaces")
-                                                                  : std::vector<std::string>{};
-  const std::vector<std::string> own = a.exists("/surfaces") ? a.list("/surfaces")
-                                                             : std::vector<std::string>{};
+  const std::vector<std::string> surfaces = b.surfaces();
+  const std::vector<std::string> own = a.surfaces();
   for (const std::string& s : surfaces) {
     Metric m;
     m.name = "max_deflection[" + s + "]";
     // A generic mesh's surface is named after its file, which a study may
     // vary: one surface on each side is the same surface whatever its name.
     std::string mine = s;
-    if (std::find(own.begin(), own.end(), s) == own.end() && own.size() == 1 &&
-        surfaces.size() == 1) {
+    if (std::find(own.begin(), own.end(), s) == own.end() && own.size() == 1 && surfaces.size() == 1) {
       mine = own.front();
       m.note = "surface " + mine + " compared with the reference's " + s;
     }
@@ -464,27 +273,21 @@ std::vector<Metric> surface_metrics(const fs::path& file, const fs::path& ref_fi
     }
     out.push_back(m);
   }
-  const std::string force = "/contact/tibiofemoral/force";
+  const std::string force = surface_output::kContactForce;
   const std::string description =
       "RMS over time of |F - F_ref| / mean |F_ref|, F the stage-2 tibiofemoral contact force";
-  if (a.exists(force) && b.exists(force)) {
-    const TimeSeries x{a.read_vector("/time"), a.read_matrix(force, 3), {}};
-    const TimeSeries r{b.read_vector("/time"), b.read_matrix(force, 3), {}};
-    // Frames of the force beyond /time are incomplete.
-    TimeSeries xs{x.t, x.x.topRows(std::min(x.x.rows(), x.t.size())), {}};
-    TimeSeries rs{r.t, r.x.topRows(std::min(r.x.rows(), r.t.size())), {}};
-    xs.t.conservativeResize(xs.x.rows());
-    rs.t.conservativeResize(rs.x.rows());
-    out.push_back(relative_series_metric("contact_force", description, xs, rs,
-                                         file.string() + ":" + force,
+  const std::optional<surface_output::Series> fa = a.contact_force(), fb = b.contact_force();
+  if (fa && fb) {
+    const TimeSeries xs{fa->time, fa->values, {}};
+    const TimeSeries rs{fb->time, fb->values, {}};
+    out.push_back(relative_series_metric("contact_force", description, xs, rs, file.string() + ":" + force,
                                          ref_file.string() + ":" + force));
   } else {
     Metric m;
     m.name = "contact_force";
     m.description = description;
     m.output_unit = "N";
-    m.note = "not in the surface output (" + force + " absent from " +
-             (a.exists(force) ? ref_file : file).filename().string() +
+    m.note = "not in the surface output (" + force + " absent from " + (fa ? ref_file : file).filename().string() +
              "): this scenario or build writes no stage-2 contact force";
     out.push_back(m);
   }
@@ -492,25 +295,6 @@ std::vector<Metric> surface_metrics(const fs::path& file, const fs::path& ref_fi
 }
 
 namespace {
-
-// Mean angle of a scenario's comparison: region "all" when present, else the
-// covered-sample-weighted mean over regions. NaN when there is none.
-double scenario_mean_angle(const JsonValue& scenario) {
-  const JsonValue* stats = scenario.get("angle_statistics");
-  if (stats == nullptr || stats->array.empty()) return kNaN;
-  double sum = 0.0, weight = 0.0;
-  for (const JsonValue& r : stats->array) {
-    const JsonValue* region = r.get("region");
-    const JsonValue* mean = r.get("mean_deg");
-    if (mean == nullptr || mean->kind != JsonValue::Kind::kNumber) continue;
-    if (region != nullptr && region->string == "all") return mean->number;
-    const JsonValue* covered = r.get("covered");
-    const double w = covered != nullptr ? covered->number : 1.0;
-    sum += w * mean->number;
-    weight += w;
-  }
-  return weight > 0.0 ? sum / weight : kNaN;
-}
 
 }  // namespace
 
@@ -531,12 +315,10 @@ std::vector<Metric> biphasic_metrics(const fs::path& file, const fs::path& ref_f
 }
 
 std::vector<Metric> post_metrics(const fs::path& file, const fs::path& ref_file) {
-  const JsonValue a = read_json(file);
-  const JsonValue b = read_json(ref_file);
+  const std::vector<PostScenarioSummary> a = read_post_summary(file);
+  const std::vector<PostScenarioSummary> b = read_post_summary(ref_file);
   std::vector<Metric> out;
-  const JsonValue* sb = b.get("scenarios");
-  const JsonValue* sa = a.get("scenarios");
-  if (sb == nullptr || sb->array.empty()) {
+  if (b.empty()) {
     Metric m;
     m.name = "mean_angle";
     m.description = "|m - m_ref| / m_ref, m the mean model-map angle";
@@ -545,23 +327,18 @@ std::vector<Metric> post_metrics(const fs::path& file, const fs::path& ref_file)
     out.push_back(m);
     return out;
   }
-  for (const JsonValue& scenario_ref : sb->array) {
-    const JsonValue* name = scenario_ref.get("scenario");
-    const std::string sname = name != nullptr ? name->string : "?";
+  for (const PostScenarioSummary& scenario_ref : b) {
+    const std::string& sname = scenario_ref.scenario;
     Metric m;
     m.name = "mean_angle[" + sname + "]";
     m.description = "|m - m_ref| / m_ref, m the mean acute angle between the model's averaged "
                     "strain lines and the split-line map, scenario " + sname;
     m.output_unit = "deg";
-    const JsonValue* scenario = nullptr;
-    if (sa != nullptr) {
-      for (const JsonValue& s : sa->array) {
-        const JsonValue* n = s.get("scenario");
-        if (n != nullptr && n->string == sname) scenario = &s;
-      }
-    }
-    const double mb = scenario_mean_angle(scenario_ref);
-    const double ma = scenario != nullptr ? scenario_mean_angle(*scenario) : kNaN;
+    const PostScenarioSummary* scenario = nullptr;
+    for (const PostScenarioSummary& s : a)
+      if (s.scenario == sname) scenario = &s;
+    const double mb = scenario_ref.mean_angle_deg;
+    const double ma = scenario != nullptr ? scenario->mean_angle_deg : kNaN;
     m.output = ma;
     if (scenario == nullptr) {
       m.note = "scenario " + sname + " missing from " + file.string();
@@ -620,16 +397,6 @@ std::map<std::string, std::set<std::string>> upstream_stages(const std::vector<S
   return up;
 }
 
-// A "field<TAB>value" line of a runner stamp (pipelines/runner.cc).
-std::string stamp_field(const fs::path& stamp, const std::string& field) {
-  std::ifstream in(stamp);
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind(field + "\t", 0) == 0) return line.substr(field.size() + 1);
-  }
-  return "";
-}
-
 // Copies the outputs (and files sharing their stem, e.g. .xdmf and .sto
 // sidecars) and the stamp of every stage of `donor` whose signature equals the
 // same stage of `target`, when the target folder has no stamp of its own for
@@ -656,8 +423,8 @@ std::vector<std::string> seed_run_folder(const std::vector<StageStep>& donor_pla
       continue;
     }
     same.insert(t.name);
-    const fs::path donor_stamp = donor_dir / ".stamps" / (t.name + ".txt");
-    const fs::path target_stamp = target_dir / ".stamps" / (t.name + ".txt");
+    const fs::path donor_stamp = stamp_path(donor_dir, t.name);
+    const fs::path target_stamp = stamp_path(target_dir, t.name);
     // The donor ran (or was checked) earlier in this study with the current
     // stage program; a target stamp written by another build of it is stale
     // and is replaced too. (A target stamp of the current build is left
@@ -665,7 +432,7 @@ std::vector<std::string> seed_run_folder(const std::vector<StageStep>& donor_pla
     // files, and then it is the right one.)
     if (!fs::exists(donor_stamp)) continue;
     if (fs::exists(target_stamp) &&
-        stamp_field(target_stamp, "executable") == stamp_field(donor_stamp, "executable")) {
+        stamp_executable_hash(target_dir, t.name) == stamp_executable_hash(donor_dir, t.name)) {
       continue;
     }
     fs::create_directories(target_stamp.parent_path());
@@ -1164,7 +931,8 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
   std::set<std::string> noted;
   for (SettingResult& r : result.settings) {
     for (StageRecord& rec : r.stages) {
-      if (rec.stage == "prepare") continue;
+      const StageDescriptor* stage = stage_of_run(rec.stage);
+      if (stage == nullptr || !stage->key_outputs) continue;
       const auto usable = [](const StageRecord& x) {
         return x.run == "ran" || x.run == "reused" || x.failed_with_output;
       };
@@ -1173,16 +941,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
                                         [&](const StageRecord& x) { return x.stage == rec.stage; });
       const bool have_ref = ref_rec != ref.stages.end() && usable(*ref_rec);
       try {
-        if (rec.stage == "comak") {
-          if (have && have_ref) rec.metrics = comak_metrics(r.dir / "kinematics.h5", ref.dir / "kinematics.h5");
-        } else if (rec.stage.rfind("surface.", 0) == 0) {
-          const std::string f = "surface_" + rec.stage.substr(8) + ".h5";
-          if (have && have_ref) rec.metrics = surface_metrics(r.dir / f, ref.dir / f);
-        } else if (rec.stage == "biphasic") {
-          if (have && have_ref) rec.metrics = biphasic_metrics(r.dir / "biphasic.h5", ref.dir / "biphasic.h5");
-        } else if (rec.stage == "post") {
-          if (have && have_ref) rec.metrics = post_metrics(r.dir / "summary.json", ref.dir / "summary.json");
-        }
+        if (have && have_ref) rec.metrics = stage->key_outputs(rec.stage, r.dir, ref.dir);
       } catch (const InputError& e) {
         Metric m;
         m.name = "read";
@@ -1222,7 +981,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
   std::vector<std::string> stage_names;
   for (const SettingResult& r : result.settings) {
     for (const StageRecord& rec : r.stages) {
-      if (rec.stage != "prepare" &&
+      if (has_key_outputs(rec.stage) &&
           std::find(stage_names.begin(), stage_names.end(), rec.stage) == stage_names.end()) {
         stage_names.push_back(rec.stage);
       }
@@ -1283,7 +1042,7 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
   for (const SettingResult& r : result.settings) {
     log << "  " << r.label << ":";
     for (const StageRecord& rec : r.stages) {
-      if (rec.stage == "prepare") continue;
+      if (!has_key_outputs(rec.stage)) continue;
       log << " " << rec.stage << " " << percent(rec.stage_error) << " (" << fixed(rec.time_to_output_s, 1)
           << " s)";
     }
@@ -1594,14 +1353,14 @@ void write_study_outputs(const StudyOptions& options, const StudyResult& result)
     h += "<h3>" + report::escape(stage) + "</h3>\n<table><tr><th>setting</th><th>run</th><th>wall [s]</th>"
          "<th>CPU [s]</th><th>peak RSS [MB]</th><th>time to output [s]</th>";
     for (const std::string& m : metric_cols) h += "<th>" + report::escape(m) + " error</th><th>output</th>";
-    if (stage != "prepare") h += "<th>stage error</th><th>within " + report::escape(percent(options.tolerance)) + "</th>";
+    if (has_key_outputs(stage)) h += "<th>stage error</th><th>within " + report::escape(percent(options.tolerance)) + "</th>";
     h += "</tr>\n";
     const int rec_setting = recommended_for(stage);
     for (std::size_t i = 0; i < result.settings.size(); ++i) {
       const SettingResult& r = result.settings[i];
       for (const StageRecord& rec : r.stages) {
         if (rec.stage != stage) continue;
-        const bool marked = rec_setting == static_cast<int>(i) && stage != "prepare";
+        const bool marked = rec_setting == static_cast<int>(i) && has_key_outputs(stage);
         h += std::string(marked ? "<tr class=\"rec\">" : "<tr>") + "<td>" + report::escape(r.label) +
              (i == result.reference ? " (reference)" : "") + (marked ? " — recommended" : "") + "</td><td>" +
              report::escape(rec.run + (rec.produced_by.empty() ? "" : " (" + rec.produced_by + ")") +
@@ -1621,7 +1380,7 @@ void write_study_outputs(const StudyOptions& options, const StudyResult& result)
                ">" + report::escape(percent(found->error)) + "</td><td>" +
                report::escape(sci(found->output) + (found->output_unit.empty() ? "" : " " + found->output_unit)) + "</td>";
         }
-        if (stage != "prepare") {
+        if (has_key_outputs(stage)) {
           h += "<td>" + report::escape(percent(rec.stage_error)) + "</td><td>" +
                (std::isfinite(rec.stage_error) ? (rec.stage_error <= options.tolerance ? "yes" : "no") : "-") + "</td>";
         }
@@ -1629,8 +1388,9 @@ void write_study_outputs(const StudyOptions& options, const StudyResult& result)
       }
     }
     h += "</table>\n";
-    if (stage == "prepare") {
-      h += "<p>prepare has no key output of its own; its resolution shows in the errors of the later stages.</p>\n";
+    if (!has_key_outputs(stage)) {
+      h += "<p>" + report::escape(stage) +
+           " has no key output of its own; its resolution shows in the errors of the later stages.</p>\n";
     }
   }
   h += "<h2>Metrics</h2>\n<ul>";

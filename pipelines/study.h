@@ -44,6 +44,8 @@
 #include <utility>
 #include <vector>
 
+#include "pipelines/stages.h"
+
 namespace arthrosim::pipelines::study {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -78,15 +80,8 @@ struct StudyOptions {
   std::string command_line;
 };
 
-/// One key output of a stage, compared with the reference.
-struct Metric {
-  std::string name;         ///< e.g. "contact_force", "max_deflection[femur]"
-  std::string description;  ///< how the error is defined
-  double error = kNaN;      ///< against the reference (NaN: not available)
-  double output = kNaN;     ///< the output itself at this setting
-  std::string output_unit;  ///< "N", "mm", "deg"
-  std::string note;         ///< why it is not available, or how it was compared
-};
+/// One key output of a stage, compared with the reference (pipelines/stages.h).
+using Metric = OutputMetric;
 
 /// One stage of one setting.
 struct StageRecord {

@@ -20,10 +20,13 @@
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/metadata.h"
+#include "common/prepared_model_file.h"
 #include "common/progress.h"
 #include "common/scene.h"
-#include "common/xdmf.h"
+#include "musculoskeletal/kinematics_file.h"
 #include "pipelines/stages.h"
+#include "pipelines/surface_output.h"
+#include "pipelines/study.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -36,27 +39,14 @@ double now_s() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-/// Reads one cartilage surface of the prepared model (docs/prepared_model.md).
-cartilage::SurfaceInput read_prepared_surface(const H5File& f, const std::string& name) {
-  const std::string g = "/surfaces/" + name + "/quads/";
+/// One cartilage surface of the prepared model (docs/prepared_model.md).
+cartilage::SurfaceInput read_prepared_surface(const common::PreparedModelReader& prepared, const std::string& name) {
+  common::PreparedModelReader::QuadSurface q = prepared.quads(name);
   cartilage::SurfaceInput s;
   s.name = name;
-  s.mesh.name = name;
-  s.mesh.V = f.read_matrix(g + "nodes", 3);
-  const Eigen::MatrixXi Q = f.read_matrix_int(g + "quads", 4);
-  s.mesh.Q = Q;
-  s.normals = f.read_matrix(g + "normals", 3);
-  const Eigen::VectorXi P = f.read_vector_int(g + "periphery");
-  s.periphery.assign(P.data(), P.data() + P.size());
-  const int N = static_cast<int>(s.mesh.V.rows());
-  if (s.normals.rows() != N)
-    throw common::InputError(f.path() + ": error: dataset " + g + "normals: expected " + std::to_string(N) +
-                             " rows (one per node), found " + std::to_string(s.normals.rows()));
-  if (Q.size() > 0 && (Q.minCoeff() < 0 || Q.maxCoeff() >= N))
-    throw common::InputError(f.path() + ": error: dataset " + g + "quads: node index out of range [0, " +
-                             std::to_string(N) + ")");
-  if (!s.mesh.V.allFinite() || !s.normals.allFinite())
-    throw common::InputError(f.path() + ": error: dataset " + g + "nodes or " + g + "normals holds NaN/Inf");
+  s.mesh = std::move(q.mesh);
+  s.normals = std::move(q.normals);
+  s.periphery = std::move(q.periphery);
   return s;
 }
 
@@ -215,7 +205,6 @@ struct SurfaceRun {
   std::string bone_name;  // "" for generic meshes
   Eigen::Isometry3d X_WB0 = Eigen::Isometry3d::Identity();  // bone pose at t = 0
   cartilage::NodeBasis basis;
-  std::vector<H5File::Appender> frame_out;  // displacement, deflection, E, e1, e1_dir, e2 [, contact_pressure]
   SurfaceSummary summary;
 };
 
@@ -337,6 +326,36 @@ StageDescriptor surface_stage_descriptor() {
   for (const common::EffectInfo& e : common::known_effects())
     if (e.stage == common::EffectStage::kSurface)
       d.effects.push_back({std::string(e.name), "surface", std::string(e.description)});
+  d.no_runs = "a 'surface' block with at least one scenario";
+  d.runs = [](const common::Scene& scene, const std::filesystem::path& out) {
+    std::vector<StageStep> runs;
+    const std::filesystem::path prepared = out / "prepared.h5", kinematics = out / "kinematics.h5";
+    for (const common::BlockInstance& sc : scene.instances("surface")) {
+      StageStep s;
+      s.name = "surface." + sc.name;
+      s.executable = "arthrosim-surface";
+      s.provides = {"surface"};
+      s.origin = "scenario '" + sc.name + "'";
+      s.line = sc.line;
+      s.column = sc.column;
+      s.inputs.emplace_back("prepared.h5", prepared);
+      s.arguments = {"--prepared", prepared.string()};
+      if (sc.wants("imposed_kinematics")) {
+        s.inputs.emplace_back("kinematics.h5", kinematics);
+        s.input_reasons["kinematics.h5"] = "uses imposed_kinematics";
+        s.arguments.insert(s.arguments.end(), {"--kinematics", kinematics.string()});
+      }
+      s.options = sc.options.canonical();
+      s.effects = sc.effects;
+      add_path_inputs(sc.options, s);
+      const std::filesystem::path file = out / ("surface_" + sc.name + ".h5");
+      s.outputs = {file};
+      s.arguments.insert(s.arguments.end(),
+                         {"--scene", scene.file.string(), "--scenario", sc.name, "--out", file.string()});
+      runs.push_back(std::move(s));
+    }
+    return runs;
+  };
   d.check = [](const common::Scene& scene) {
     // Without imposed kinematics nothing sets the run's duration.
     for (const common::BlockInstance& sc : scene.instances("surface")) {
@@ -345,130 +364,80 @@ StageDescriptor surface_stage_descriptor() {
                                  "scenario '" + sc.name +
                                      "' does not use imposed_kinematics, so it needs 'end_time_s' (in the scenario or "
                                      "the surface block)");
+      surface_from_scene(scene, sc.name);  // every other rule between its keys
     }
+  };
+  d.key_outputs = [](const std::string& run, const std::filesystem::path& dir, const std::filesystem::path& ref) {
+    const std::string file = "surface_" + run.substr(run.find('.') + 1) + ".h5";
+    return study::surface_metrics(dir / file, ref / file);
   };
   return d;
 }
 
-SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
-  const double t_start = now_s();
-  const common::Scene scene = load_scene(options.scene);
+SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::string& scenario) {
   const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
   const common::BlockInstance* sc = nullptr;
-  if (!options.scenario.empty()) {
-    sc = &scene.require_instance("surface", options.scenario);
+  if (!scenario.empty()) {
+    sc = &scene.require_instance("surface", scenario);
   } else {
     if (scenarios.size() != 1)
-      throw common::InputError(options.scene + ": error: the scene has " + std::to_string(scenarios.size()) +
+      throw common::InputError(scene.file.string() + ": error: the scene has " + std::to_string(scenarios.size()) +
                                " scenarios; choose one with --scenario");
     sc = &scenarios.front();
   }
   const common::OptionBlock& o = sc->options;  // where each value was written (messages)
-  const SurfaceScenarioOptions opt = common::read_options<SurfaceScenarioOptions>(o);
+  const std::string file = scene.file.string();
+  SurfaceScenarioConfig c;
+  c.scene_file = scene.file;
+  c.name = sc->name;
+  c.line = sc->line;
+  c.effects = sc->effects;
+  c.options = common::read_options<SurfaceScenarioOptions>(o);
+  c.canonical_options = o.canonical_text();
+  c.surfaces_line = o.value("surfaces").line;
+  const SurfaceScenarioOptions& opt = c.options;
+  auto wants = [&](const char* e) { return sc->wants(e); };
+  c.moving = wants("imposed_kinematics");
+  c.generic = !opt.mesh.empty();
+  c.contact = wants("mesh_contact");
+  c.steady = opt.steady_state;
+  c.quasi_static = c.steady || !wants("inertia");
 
-  // ---- parameters (SI from the scene) ------------------------------------
-  cartilage::SurfaceParameters par = opt.physics;
-  par.osmotic_ramp_s = 0;  // set below (osmotic_ramp_s, or the seating ramp)
-  if (opt.periphery_normal == SurfaceScenarioOptions::PeripheryNormal::kFoundation)
-    par.periphery_tie_N_m3 = opt.periphery_tie_N_m3;
-  // ---- kinematics (imposed_kinematics) -------------------------------------
-  const bool moving = sc->wants("imposed_kinematics");
-  std::unique_ptr<H5File> kin;
-  std::vector<double> kin_times;
-  if (moving) {
-    if (options.kinematics.empty())
-      throw common::InputError(scene.file.string(), sc->line,
-                               "scenario '" + sc->name + "' lists imposed_kinematics: give --kinematics");
-    kin = std::make_unique<H5File>(options.kinematics, H5File::Mode::kRead);
-    const Eigen::VectorXd t = kin->read_vector("/time");
-    kin_times.assign(t.data(), t.data() + t.size());
-    if (kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
-  } else if (!options.kinematics.empty()) {
-    common::log_warn("--kinematics " + options.kinematics + " is not used: scenario '" + sc->name +
-                     "' does not list imposed_kinematics");
-  }
-  auto bone_motion = [&](const std::string& bone) {
-    const std::string ds = "/bodies/" + bone + "/X_W";
-    const common::Tensor3d X = kin->read_tensor3(ds);
-    if (X.dims[0] != static_cast<std::int64_t>(kin_times.size()) || X.dims[1] != 4 || X.dims[2] != 4)
-      throw common::InputError(options.kinematics + ": error: dataset " + ds + ": expected dims (" +
-                               std::to_string(kin_times.size()) + ", 4, 4), found (" + std::to_string(X.dims[0]) +
-                               ", " + std::to_string(X.dims[1]) + ", " + std::to_string(X.dims[2]) + ")");
-    std::vector<Eigen::Isometry3d> poses(kin_times.size());
-    for (std::int64_t k = 0; k < X.dims[0]; ++k) {
-      Eigen::Matrix4d M;
-      for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) M(i, j) = X(k, i, j);
-      common::check_finite(M, options.kinematics + ": dataset " + ds + ", frame " + std::to_string(k));
-      if ((M.topLeftCorner<3, 3>().transpose() * M.topLeftCorner<3, 3>() - Eigen::Matrix3d::Identity()).norm() > 1e-6)
-        throw common::InputError(options.kinematics + ": error: dataset " + ds + ", frame " + std::to_string(k) +
-                                 ": expected a rotation in the top-left 3 x 3 block");
-      poses[k].matrix() = M;
-    }
-    return cartilage::interpolated_bone_motion(kin_times, std::move(poses), options.kinematics + ": " + ds);
-  };
-
-  if (!opt.end_time_s && !moving)
-    throw common::InputError(scene.file.string(), sc->line,
-                             "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
-  const double end_time = opt.end_time_s ? *opt.end_time_s : kin_times.back() - kin_times.front();
-  if (!(end_time > 0))
-    throw common::InputError(scene.file.string(), sc->line, "scenario '" + sc->name + "': nothing to simulate (end time 0)");
-  const double dt = opt.integrator.dt_s;
-  const bool steady = opt.steady_state;
-  const bool quasi_static = steady || !sc->wants("inertia");
-  if (steady && !(end_time > 0))
-    throw common::InputError(scene.file.string(), sc->line, "steady_state needs end_time_s > 0");
-  double interval = opt.output_interval_s;
-  if (steady) interval = end_time;
-  if (interval < dt) interval = dt;
-
-  numerics::IntegratorOptions iopt = opt.integrator;
-  iopt.same_tolerances();
-  iopt.quasi_static = quasi_static;
-  iopt.dt_s = steady ? end_time : dt;
-  // Opt-in keys of the dynamic path (docs/scenes.md; all off by default).
+  if (!opt.end_time_s && !c.moving)
+    throw common::InputError(file, sc->line, "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
+  if (opt.end_time_s && !(*opt.end_time_s > 0))
+    throw common::InputError(file, sc->line, "scenario '" + sc->name + "': nothing to simulate (end time 0)");
   // osmotic_ramp_s: without imposed kinematics the osmotic pressure rises
   // over this time, by the same smoothstep the seating ramp uses with
-  // imposed kinematics (SurfaceParameters::osmotic_ramp_s, set below from
+  // imposed kinematics (SurfaceParameters::osmotic_ramp_s, set from
   // seating_time_s when bones move).
   const double osmotic_ramp = opt.physics.osmotic_ramp_s;
   if (osmotic_ramp > 0) {
-    if (moving)
-      throw common::InputError(scene.file.string(), o.value("osmotic_ramp_s").line,
+    if (c.moving)
+      throw common::InputError(file, o.value("osmotic_ramp_s").line,
                                "scenario '" + sc->name + "': osmotic_ramp_s is for scenarios without "
                                "imposed_kinematics (with them the pressure rises over seating_time_s)");
-    if (osmotic_ramp > end_time)
-      throw common::InputError(scene.file.string(), o.value("osmotic_ramp_s").line,
+    if (osmotic_ramp > *opt.end_time_s)
+      throw common::InputError(file, o.value("osmotic_ramp_s").line,
                                "scenario '" + sc->name + "': osmotic_ramp_s (" + std::to_string(osmotic_ramp) +
-                                   " s) exceeds end_time_s (" + std::to_string(end_time) +
+                                   " s) exceeds end_time_s (" + std::to_string(*opt.end_time_s) +
                                    " s): the pressure would never reach osmotic_pressure_mpa");
-    par.osmotic_ramp_s = osmotic_ramp;
   }
-  // steady_state_change_mm: a time-stepping run ends once the largest
-  // weighted coordinate change over one step is at most this (m here).
-  const double stop_change = opt.steady_state_change_m;
-  if (stop_change > 0 && steady)
-    throw common::InputError(scene.file.string(), o.value("steady_state_change_mm").line,
+  if (opt.steady_state_change_m > 0 && c.steady)
+    throw common::InputError(file, o.value("steady_state_change_mm").line,
                              "scenario '" + sc->name + "': steady_state_change_mm stops a time-stepping run; "
                              "it has no meaning with steady_state: true");
-
-  // ---- models -------------------------------------------------------------
-  common::EffectLedger ledger("surface:" + sc->name);
-  std::vector<SurfaceRun> runs;
-  const bool generic = !opt.mesh.empty();
-  const bool contact = sc->wants("mesh_contact");
   for (const char* e : {"fixed_nodes", "point_loads", "pressure", "prescribed_displacement"}) {
-    if (sc->wants(e) && !generic)
-      throw common::InputError(scene.file.string(), sc->line,
-                               "scenario '" + sc->name + "': effect '" + e + "' needs a generic `mesh`");
+    if (wants(e) && !c.generic)
+      throw common::InputError(file, sc->line, "scenario '" + sc->name + "': effect '" + e + "' needs a generic `mesh`");
   }
-  if (contact && generic)
-    throw common::InputError(scene.file.string(), sc->line,
-                             "scenario '" + sc->name + "': mesh_contact needs the prepared model's surfaces, not a generic `mesh`");
+  if (c.contact && c.generic)
+    throw common::InputError(file, sc->line,
+                             "scenario '" + sc->name +
+                                 "': mesh_contact needs the prepared model's surfaces, not a generic `mesh`");
   auto require = [&](const char* key, const char* effect) {
-    if (sc->wants(effect) && !o.has(key))
-      throw common::InputError(scene.file.string(), sc->line,
+    if (wants(effect) && !o.has(key))
+      throw common::InputError(file, sc->line,
                                "scenario '" + sc->name + "': effect '" + effect + "' needs `" + key + "`");
   };
   require("fixed_box_mm", "fixed_nodes");
@@ -477,14 +446,123 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   require("pressure_mpa", "pressure");
   require("displaced_box_mm", "prescribed_displacement");
   require("displacement_mm", "prescribed_displacement");
-  if (generic) {
+  if (c.generic) {
+    std::string ext = opt.mesh.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
+    if (ext != ".obj" && ext != ".vtk")
+      throw common::InputError(file, o.value("mesh").line,
+                               "mesh '" + opt.mesh.string() + "': expected an .obj or .vtk quad mesh");
+  } else {
+    c.surfaces = opt.surfaces;
+  }
+  // Contact pairs: "a:b", both simulated.
+  if (c.contact) {
+    for (const std::string& pr : opt.contact_pairs) {
+      const auto colon = pr.find(':');
+      const std::string a = pr.substr(0, colon), b = colon == std::string::npos ? "" : pr.substr(colon + 1);
+      const auto ia = std::find(c.surfaces.begin(), c.surfaces.end(), a);
+      const auto ib = std::find(c.surfaces.begin(), c.surfaces.end(), b);
+      if (colon == std::string::npos || ia == c.surfaces.end() || ib == c.surfaces.end() || ia == ib)
+        throw common::InputError(file, o.value("contact_pairs").line,
+                                 "contact pair '" + pr + "': expected 'a:b' with two different surfaces of this "
+                                 "scenario's `surfaces`");
+      c.contact_pairs.emplace_back(static_cast<int>(ia - c.surfaces.begin()), static_cast<int>(ib - c.surfaces.begin()));
+      c.contact_pair_names.push_back(pr);
+    }
+    if (c.contact_pairs.empty())
+      throw common::InputError(file, sc->line, "scenario '" + sc->name + "' lists mesh_contact but contact_pairs is empty");
+  }
+  // osmotic_surfaces: which surfaces carry osmotic_pressure (empty: all).
+  if (!c.generic && wants("osmotic_pressure")) {
+    for (const std::string& name : opt.osmotic_surfaces)
+      if (std::find(c.surfaces.begin(), c.surfaces.end(), name) == c.surfaces.end())
+        throw common::InputError(file, o.value("osmotic_surfaces").line,
+                                 "osmotic surface '" + name + "' is not one of this scenario's `surfaces`");
+  }
+  if (opt.contact.faded_vertex_weights && opt.contact.rim_vertices)
+    throw common::InputError(file + ": error: scenario '" + sc->name +
+                             "': contact_rim_vertices applies to contact_vertex_weights: tributary only (faded "
+                             "weights give rim nodes their own, reduced weight)");
+  if (opt.integrator.reuse_factorization && c.contact)
+    throw common::InputError(file, o.value("newton_reuse_factorization").line,
+                             "scenario '" + sc->name + "': newton_reuse_factorization cannot be combined with "
+                             "mesh_contact (its Newton line search needs a fresh tangent)");
+  return c;
+}
+
+namespace {
+
+// ---------------------------------------------------------------------------
+// build: the shell models of one scenario, their coupled system and the
+// integrator's options, from the scenario and its input files.
+// ---------------------------------------------------------------------------
+struct SurfaceBuild {
+  const SurfaceScenarioConfig* config = nullptr;
+  std::vector<double> kin_times;  // imposed kinematics: the kinematics file's frame times
+  double end_time = 0, seating = 0, total_time = 0, dt = 0, interval = 0;
+  cartilage::SurfaceParameters par;
+  common::EffectLedger ledger;
+  std::vector<SurfaceRun> runs;
+  std::unique_ptr<cartilage::CoupledShellSystem> system;
+  numerics::IntegratorOptions iopt;
+};
+
+std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c, const SurfaceStageOptions& options) {
+  auto b = std::make_unique<SurfaceBuild>();
+  b->config = &c;
+  const SurfaceScenarioOptions& opt = c.options;
+  const std::string file = c.scene_file.string();
+  b->par = opt.physics;
+  b->par.osmotic_ramp_s = 0;  // below: osmotic_ramp_s, or the seating ramp
+  if (opt.periphery_normal == SurfaceScenarioOptions::PeripheryNormal::kFoundation)
+    b->par.periphery_tie_N_m3 = opt.periphery_tie_N_m3;
+  cartilage::SurfaceParameters& par = b->par;
+  // ---- kinematics (imposed_kinematics) -------------------------------------
+  std::unique_ptr<musculoskeletal::KinematicsFileReader> kin;
+  if (c.moving) {
+    if (options.kinematics.empty())
+      throw common::InputError(file, c.line, "scenario '" + c.name + "' lists imposed_kinematics: give --kinematics");
+    kin = std::make_unique<musculoskeletal::KinematicsFileReader>(options.kinematics);
+    const Eigen::VectorXd t = kin->time();
+    b->kin_times.assign(t.data(), t.data() + t.size());
+    if (b->kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
+  } else if (!options.kinematics.empty()) {
+    common::log_warn("--kinematics " + options.kinematics + " is not used: scenario '" + c.name +
+                     "' does not list imposed_kinematics");
+  }
+  const std::vector<double>& kin_times = b->kin_times;
+  auto bone_motion = [&](const std::string& bone) {
+    return cartilage::interpolated_bone_motion(
+        kin_times, kin->body_poses(bone),
+        options.kinematics + ": " + musculoskeletal::KinematicsFileReader::body_poses_dataset(bone));
+  };
+
+  const double end_time = opt.end_time_s ? *opt.end_time_s : kin_times.back() - kin_times.front();
+  if (!(end_time > 0))
+    throw common::InputError(file, c.line, "scenario '" + c.name + "': nothing to simulate (end time 0)");
+  b->end_time = end_time;
+  b->dt = opt.integrator.dt_s;
+  double interval = opt.output_interval_s;
+  if (c.steady) interval = end_time;
+  if (interval < b->dt) interval = b->dt;
+  b->interval = interval;
+
+  b->iopt = opt.integrator;
+  numerics::IntegratorOptions& iopt = b->iopt;
+  iopt.same_tolerances();
+  iopt.quasi_static = c.quasi_static;
+  iopt.dt_s = c.steady ? end_time : b->dt;
+  if (opt.physics.osmotic_ramp_s > 0) par.osmotic_ramp_s = opt.physics.osmotic_ramp_s;
+
+  // ---- models -------------------------------------------------------------
+  b->ledger = common::EffectLedger("surface:" + c.name);
+  common::EffectLedger& ledger = b->ledger;
+  std::vector<SurfaceRun>& runs = b->runs;
+  if (c.generic) {
     SurfaceRun r;
     const std::string mesh_file = opt.mesh.string();
     std::string ext = opt.mesh.extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-    if (ext != ".obj" && ext != ".vtk")
-      throw common::InputError(scene.file.string(), o.value("mesh").line,
-                               "mesh '" + mesh_file + "': expected an .obj or .vtk quad mesh");
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
     r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file);
     r.input.name = opt.mesh.stem().string();
     r.input.mesh.name = r.input.name;
@@ -503,100 +581,74 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       const auto& u = opt.displacement_m;
       g.displacement_m = Eigen::Vector3d(u[0], u[1], u[2]);
     }
-    r.model = cartilage::build_surface_model(r.input, par, sc->effects, cartilage::BoneMotion::fixed(), &ledger);
+    r.model = cartilage::build_surface_model(r.input, par, c.effects, cartilage::BoneMotion::fixed(), &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
     r.summary.name = r.input.name;
     r.summary.nodes = r.model->num_nodes();
     r.summary.elements = r.model->num_elements();
     runs.push_back(std::move(r));
   }
-  if (!generic && options.prepared.empty())
-    throw common::InputError(options.scene + ": error: scenario '" + sc->name +
+  if (!c.generic && options.prepared.empty())
+    throw common::InputError(options.scene + ": error: scenario '" + c.name +
                              "' simulates the prepared model's surfaces: give --prepared");
-  std::unique_ptr<H5File> prepared_file;
+  std::unique_ptr<common::PreparedModelReader> prepared_file;
   std::vector<std::string> names;
-  if (!generic) {
-    prepared_file = std::make_unique<H5File>(options.prepared, H5File::Mode::kRead);
-    names = prepared_file->read_strings("/surfaces/names");
+  if (!c.generic) {
+    prepared_file = std::make_unique<common::PreparedModelReader>(options.prepared);
+    names = prepared_file->surface_names();
   }
-  const std::vector<std::string> surface_names = generic ? std::vector<std::string>{} : opt.surfaces;
-  // Contact pairs: "a:b", both simulated.
-  std::vector<std::pair<int, int>> pair_index;
-  std::vector<std::string> pair_names;
-  if (contact) {
-    for (const std::string& pr : opt.contact_pairs) {
-      const auto colon = pr.find(':');
-      const std::string a = pr.substr(0, colon), b = colon == std::string::npos ? "" : pr.substr(colon + 1);
-      const auto ia = std::find(surface_names.begin(), surface_names.end(), a);
-      const auto ib = std::find(surface_names.begin(), surface_names.end(), b);
-      if (colon == std::string::npos || ia == surface_names.end() || ib == surface_names.end() || ia == ib)
-        throw common::InputError(scene.file.string(), o.value("contact_pairs").line,
-                                 "contact pair '" + pr + "': expected 'a:b' with two different surfaces of this "
-                                 "scenario's `surfaces`");
-      pair_index.emplace_back(static_cast<int>(ia - surface_names.begin()), static_cast<int>(ib - surface_names.begin()));
-      pair_names.push_back(pr);
-    }
-    if (pair_index.empty())
-      throw common::InputError(scene.file.string(), sc->line,
-                               "scenario '" + sc->name + "' lists mesh_contact but contact_pairs is empty");
-  }
-  // osmotic_surfaces: which surfaces carry osmotic_pressure (empty: all).
-  std::vector<std::string> osmotic_surfaces;
-  if (!generic && sc->wants("osmotic_pressure")) {
-    osmotic_surfaces = opt.osmotic_surfaces;
-    for (const std::string& s : osmotic_surfaces)
-      if (std::find(surface_names.begin(), surface_names.end(), s) == surface_names.end())
-        throw common::InputError(scene.file.string(), o.value("osmotic_surfaces").line,
-                                 "osmotic surface '" + s + "' is not one of this scenario's `surfaces`");
-  }
-  const double seating = moving ? opt.seating_time_s : 0.0;
+  const std::vector<std::string>& osmotic_surfaces =
+      !c.generic && std::find(c.effects.begin(), c.effects.end(), "osmotic_pressure") != c.effects.end()
+          ? opt.osmotic_surfaces
+          : std::vector<std::string>{};
+  b->seating = c.moving ? opt.seating_time_s : 0.0;
   // With imposed kinematics the pressure rises during the seating ramp (a
   // step load on the resting shells would start a dynamic inflation).
-  if (moving) par.osmotic_ramp_s = seating;
+  if (c.moving) par.osmotic_ramp_s = b->seating;
   const double seat_offset = opt.seating_offset_m;
-  for (const std::string& name : surface_names) {
-    const H5File& prepared = *prepared_file;
+  for (const std::string& name : c.surfaces) {
+    const common::PreparedModelReader& prepared = *prepared_file;
     if (std::find(names.begin(), names.end(), name) == names.end()) {
       std::string have;
       for (const auto& n : names) have += (have.empty() ? "" : ", ") + n;
-      throw common::InputError(scene.file.string(), o.value("surfaces").line,
+      throw common::InputError(file, c.surfaces_line,
                                "surface '" + name + "' is not in the prepared model " + options.prepared +
                                    " (it has: " + have + ")");
     }
     SurfaceRun r;
     r.input = read_prepared_surface(prepared, name);
-    r.bone_name = prepared.attribute_string("/surfaces/" + name, "bone");
-    if (moving) {
+    r.bone_name = prepared.bone(name);
+    if (c.moving) {
       // Prepared coordinates are bone-frame coordinates (the model frame at
       // q = 0, docs/kinematics_file.md); the shell's reference is the surface
       // placed by the bone's pose at t = 0 (after the seating offset).
       const Eigen::Vector3d offset = r.bone_name == "femur" ? Eigen::Vector3d::Zero()
                                                             : Eigen::Vector3d(0, seat_offset, 0);
-      r.bone = seated(bone_motion(r.bone_name), seating, offset);
+      r.bone = seated(bone_motion(r.bone_name), b->seating, offset);
       r.X_WB0 = r.bone.pose(0.0);
       r.input.mesh.V = ((r.input.mesh.V * r.X_WB0.linear().transpose()).rowwise() + r.X_WB0.translation().transpose()).eval();
       r.input.normals = (r.input.normals * r.X_WB0.linear().transpose()).eval();
     }
     cartilage::SurfaceParameters p = par;
-    if (opt.foundation_from_thickness && sc->wants("foundation_springs")) {
-      const Eigen::VectorXd h = prepared.read_vector("/surfaces/" + name + "/quads/thickness");
+    if (opt.foundation_from_thickness && std::find(c.effects.begin(), c.effects.end(), "foundation_springs") != c.effects.end()) {
+      const Eigen::VectorXd h = prepared.quad_thickness(name);
       p.foundation_stiffness_per_node_N_m3 = cartilage::matched_foundation_stiffness(
           h, opt.matched_youngs_modulus_Pa, opt.matched_poisson_ratio,
-          options.prepared + ": dataset /surfaces/" + name + "/quads/thickness");
+          options.prepared + ": dataset " + common::PreparedModelReader::quad_thickness_dataset(name));
     }
-    std::vector<std::string> effects = sc->effects;
+    std::vector<std::string> effects = c.effects;
     if (!osmotic_surfaces.empty() &&
         std::find(osmotic_surfaces.begin(), osmotic_surfaces.end(), name) == osmotic_surfaces.end())
       effects.erase(std::remove(effects.begin(), effects.end(), "osmotic_pressure"), effects.end());
     r.model = cartilage::build_surface_model(r.input, p, effects, r.bone, &ledger);
-    if (moving) r.model->set_motion_predictor(r.bone);
+    if (c.moving) r.model->set_motion_predictor(r.bone);
     r.basis = cartilage::node_strain_basis(*r.model);
     r.summary.name = name;
     r.summary.nodes = r.model->num_nodes();
     r.summary.elements = r.model->num_elements();
     runs.push_back(std::move(r));
   }
-  const double total_time = end_time + seating;
+  b->total_time = end_time + b->seating;
   // One system of all surfaces (side by side, exactly the separate models
   // when there is no contact), coupled by the contact pairs.
   std::vector<ShellModel*> model_ptrs;
@@ -605,115 +657,79 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     model_ptrs.push_back(r.model.get());
     model_names.push_back(r.summary.name);
   }
-  cartilage::CoupledShellSystem system(model_ptrs, model_names);
-  system.attach_ledger(&ledger);
-  const cartilage::ContactOptions& copt = opt.contact;
-  if (copt.faded_vertex_weights && copt.rim_vertices)
-    throw common::InputError(options.scene + ": error: scenario '" + sc->name +
-                             "': contact_rim_vertices applies to contact_vertex_weights: tributary only (faded "
-                             "weights give rim nodes their own, reduced weight)");
-  for (size_t k = 0; k < pair_index.size(); ++k)
-    system.add_contact(pair_names[k], pair_index[k].first, pair_index[k].second, copt);
-  ledger.require_only(sc->effects);
+  b->system = std::make_unique<cartilage::CoupledShellSystem>(model_ptrs, model_names);
+  b->system->attach_ledger(&ledger);
+  for (size_t k = 0; k < c.contact_pairs.size(); ++k)
+    b->system->add_contact(c.contact_pair_names[k], c.contact_pairs[k].first, c.contact_pairs[k].second, opt.contact);
+  ledger.require_only(c.effects);
   common::log_info(ledger.to_text());
 
+  if (c.contact) iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
+  // Imposed kinematics: each step starts from the surfaces carried by their
+  // bones (rigid predictor), so Newton only finds the deformation change.
+  if (c.moving)
+    iopt.predictor = opt.predictor == SurfaceScenarioOptions::Predictor::kExtrapolated
+                         ? numerics::IntegratorOptions::Predictor::kSystemExtrapolated
+                         : numerics::IntegratorOptions::Predictor::kSystem;
+  return b;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// run: integrate and record.
+// ---------------------------------------------------------------------------
+SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
+  const double t_start = now_s();
+  const common::Scene scene = load_scene(options.scene);
+  const SurfaceScenarioConfig config = surface_from_scene(scene, options.scenario);
+  std::unique_ptr<SurfaceBuild> built = build_surface_stage(config, options);
+  SurfaceBuild& b = *built;
+  const SurfaceScenarioConfig& c = config;
+  const SurfaceScenarioOptions& opt = c.options;
+  std::vector<SurfaceRun>& runs = b.runs;
+  cartilage::CoupledShellSystem& system = *b.system;
+  numerics::IntegratorOptions& iopt = b.iopt;
+  const bool contact = c.contact, moving = c.moving, steady = c.steady;
+  const double end_time = b.end_time, seating = b.seating, total_time = b.total_time, dt = b.dt, interval = b.interval;
+  const double osmotic_ramp = opt.physics.osmotic_ramp_s, stop_change = opt.steady_state_change_m;
+  const std::string file = c.scene_file.string();
+
   // ---- output file: static part -------------------------------------------
-  H5File out(options.out, H5File::Mode::kTruncate);
-  {
-    std::vector<const char*> argv;
-    for (const auto& a : options.argv) argv.push_back(a.c_str());
-    common::write_metadata(out, common::collect_run_metadata("arthrosim-surface", static_cast<int>(argv.size()),
-                                                             argv.data(), options.scene, o.canonical_text()));
-  }
-  out.set_attribute("/", "schema", "arthrosim surface output 2");
-  out.set_attribute("/", "scenario", sc->name);
-  out.set_attribute("/", "prepared_model", generic ? std::string() : options.prepared);
-  out.set_attribute("/", "mesh", generic ? opt.mesh.string() : std::string());
-  out.set_attribute("/", "mode", steady ? "steady_state" : (quasi_static ? "quasi_static" : "hht"));
-  out.set_attribute("/", "status", "running");
-  out.set_attribute("/", "seating_time_s", seating);
-  common::write_effect_ledger(out, ledger);
-  const auto n_frames_expected = static_cast<std::int64_t>(std::floor(total_time / interval + 1e-9)) + 1 +
-                                 (std::fmod(total_time, interval) > 1e-12 * interval ? 1 : 0);
-  const auto n_steps_expected = static_cast<std::int64_t>(std::ceil(total_time / (steady ? total_time : dt) - 1e-9));
-  H5File::Appender time_out = out.appender("/time", {}, {n_frames_expected, 0});
-  std::unique_ptr<H5File::Appender> trial_time_out;
-  if (moving) trial_time_out = std::make_unique<H5File::Appender>(out.appender("/trial_time", {}, {n_frames_expected, 0}));
+  surface_output::Layout layout;
+  layout.scenario = c.name;
+  layout.prepared_model = c.generic ? std::string() : options.prepared;
+  layout.mesh = c.generic ? opt.mesh.string() : std::string();
+  layout.mode = steady ? "steady_state" : (c.quasi_static ? "quasi_static" : "hht");
+  layout.seating_time_s = seating;
+  layout.frames_expected = static_cast<std::int64_t>(std::floor(total_time / interval + 1e-9)) + 1 +
+                           (std::fmod(total_time, interval) > 1e-12 * interval ? 1 : 0);
+  layout.steps_expected = static_cast<std::int64_t>(std::ceil(total_time / (steady ? total_time : dt) - 1e-9));
+  layout.contact = contact;
+  layout.trial_time = moving;
+  layout.change = stop_change > 0;
+  layout.contact_pairs = c.contact_pair_names;
+  std::vector<const char*> argv;
+  for (const auto& a : options.argv) argv.push_back(a.c_str());
+  surface_output::Writer out(options.out,
+                             common::collect_run_metadata("arthrosim-surface", static_cast<int>(argv.size()),
+                                                          argv.data(), options.scene, c.canonical_options),
+                             layout, b.ledger);
   for (SurfaceRun& r : runs) {
-    const std::string g = "/surfaces/" + r.summary.name + "/";
-    const std::int64_t N = r.model->num_nodes();
-    out.write(g + "nodes", r.input.mesh.V);
-    out.write(g + "quads", Eigen::MatrixXi(r.input.mesh.Q));
-    out.write(g + "normals", Eigen::MatrixXd(r.basis.n));
-    out.write(g + "basis_a1", Eigen::MatrixXd(r.basis.a1));
-    out.write(g + "basis_a2", Eigen::MatrixXd(r.basis.a2));
-    if (!r.bone_name.empty()) out.set_attribute("/surfaces/" + r.summary.name, "bone", r.bone_name);
-    std::vector<int> fixed(r.model->constrained().size() / 6);
-    for (size_t i = 0; i < fixed.size(); ++i) fixed[i] = r.model->constrained()[6 * i] ? 1 : 0;
-    out.write(g + "fixed", fixed);
-    const common::H5AppendOptions fo{n_frames_expected, 0};
-    r.frame_out.push_back(out.appender(g + "displacement", {N, 3}, fo));
-    r.frame_out.push_back(out.appender(g + "deflection", {N}, fo));
-    r.frame_out.push_back(out.appender(g + "strain/E", {N, 3}, fo));
-    r.frame_out.push_back(out.appender(g + "strain/e1", {N}, fo));
-    r.frame_out.push_back(out.appender(g + "strain/e1_dir", {N, 3}, fo));
-    r.frame_out.push_back(out.appender(g + "strain/e2", {N}, fo));
-    if (contact) r.frame_out.push_back(out.appender(g + "contact_pressure", {N}, fo));
-  }
-  const common::H5AppendOptions so{n_steps_expected, 0};
-  std::vector<H5File::Appender> solver_out;  // per step
-  for (const char* name : {"time", "dt"}) solver_out.push_back(out.appender(std::string("/solver/") + name, {}, so));
-  solver_out.push_back(out.appender_int("/solver/newton_iterations", {}, so));
-  solver_out.push_back(out.appender("/solver/residual_N", {}, so));
-  solver_out.push_back(out.appender("/solver/residual_tolerance_N", {}, so));
-  solver_out.push_back(out.appender_int("/solver/rejections", {}, so));
-  solver_out.push_back(out.appender("/solver/wall_s", {}, so));
-  solver_out.push_back(out.appender("/solver/max_deflection_m", {}, so));
-  // steady_state_change_mm: the largest weighted coordinate change per step.
-  std::unique_ptr<H5File::Appender> change_out;
-  if (stop_change > 0) change_out = std::make_unique<H5File::Appender>(out.appender("/solver/change_m", {}, so));
-  if (contact) {
-    solver_out.push_back(out.appender("/solver/max_penetration_m", {}, so));
-    solver_out.push_back(out.appender("/solver/penetration_ratio", {}, so));
-    solver_out.push_back(out.appender_int("/solver/active_contacts", {}, so));
-    solver_out.push_back(out.appender("/solver/max_rim_depth_m", {}, so));
-    solver_out.push_back(out.appender("/solver/max_unfaded_penetration_m", {}, so));
-    solver_out.push_back(out.appender("/solver/unfaded_penetration_ratio", {}, so));
-  }
-  // Tibiofemoral contact force per frame (on the second surface of each
-  // pair, in its bone's frame; pairs named medial/lateral are the
-  // compartments), as in the kinematics file.
-  std::vector<H5File::Appender> contact_out;
-  if (contact) {
-    contact_out.push_back(out.appender("/contact/tibiofemoral/force", {3}, {n_frames_expected, 0}));
-    contact_out.push_back(out.appender("/contact/tibiofemoral/medial_force", {3}, {n_frames_expected, 0}));
-    contact_out.push_back(out.appender("/contact/tibiofemoral/lateral_force", {3}, {n_frames_expected, 0}));
-    contact_out.push_back(out.appender("/contact/tibiofemoral/area", {}, {n_frames_expected, 0}));
-    contact_out.push_back(out.appender("/contact/tibiofemoral/max_penetration", {}, {n_frames_expected, 0}));
-    out.write("/contact/pairs", pair_names);
+    surface_output::SurfaceGeometry g;
+    g.name = r.summary.name;
+    g.bone = r.bone_name;
+    g.nodes = r.input.mesh.V;
+    g.quads = r.input.mesh.Q;
+    g.normals = r.basis.n;
+    g.basis_a1 = r.basis.a1;
+    g.basis_a2 = r.basis.a2;
+    g.fixed.resize(r.model->constrained().size() / 6);
+    for (size_t i = 0; i < g.fixed.size(); ++i) g.fixed[i] = r.model->constrained()[6 * i] ? 1 : 0;
+    out.add_surface(g);
   }
   out.flush();
 
-  std::vector<double> times;
-  const std::string xdmf_path = std::filesystem::path(options.out).replace_extension(".xdmf").string();
-  auto write_sidecar = [&]() {
-    common::XdmfSeries series;
-    series.times = times;
-    for (const SurfaceRun& r : runs) {
-      const std::string g = "/surfaces/" + r.summary.name + "/";
-      common::XdmfSurface s;
-      s.name = r.summary.name;
-      s.geometry_dataset = g + "nodes";
-      s.topology_dataset = g + "quads";
-      s.cell_type = common::XdmfCellType::kQuadrilateral;
-      s.fields = {{"displacement", g + "displacement"}, {"deflection", g + "deflection"},
-                  {"E", g + "strain/E"},                {"e1", g + "strain/e1"},
-                  {"e1_dir", g + "strain/e1_dir"},      {"e2", g + "strain/e2"}};
-      if (contact) s.fields.push_back({"contact_pressure", g + "contact_pressure"});
-      series.surfaces.push_back(std::move(s));
-    }
-    common::write_xdmf(xdmf_path, out, series);
-  };
   // Bone-relative rigid motion of surface r at time t.
   auto rigid = [&](const SurfaceRun& r, double t) { return Eigen::Isometry3d(r.bone.pose(t) * r.X_WB0.inverse()); };
   auto max_abs_deflection = [&](const Eigen::VectorXd& qs, double t) {
@@ -730,8 +746,6 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   // separates the penalty's own interpenetration from the rims' faded zone.
   long unfaded_over = 0;
   double worst_unfaded_ratio = 0;
-  // One frame: every surface's fields, the contact forces, then /time (so
-  // /time counts complete frames).
   // Contact state of every pair at q (computed once per step; the frame
   // written after that step reuses it).
   auto contact_reports = [&](const Eigen::VectorXd& qs) {
@@ -739,39 +753,42 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     for (int k = 0; k < system.num_contacts(); ++k) reps.push_back(system.contact_report(k, qs));
     return reps;
   };
+  int frames_written = 0;
+  // One frame: every surface's fields, the contact forces, then /time (so
+  // /time counts complete frames).
   auto write_frame = [&](const Eigen::VectorXd& qs, double t, const std::vector<cartilage::ContactPairReport>& reps) {
     std::vector<Eigen::VectorXd> pressure(runs.size());
     for (size_t k = 0; k < runs.size(); ++k) pressure[k] = Eigen::VectorXd::Zero(runs[k].model->num_nodes());
-    Eigen::Vector3d total = Eigen::Vector3d::Zero(), medial = total, lateral = total;
-    double area = 0, max_pen = 0;
+    surface_output::ContactFrame cf;
     for (int k = 0; k < system.num_contacts(); ++k) {
       const cartilage::ContactPairReport& rep = reps[k];
-      const int a = pair_index[k].first, b = pair_index[k].second;
+      const int a = c.contact_pairs[k].first, bb = c.contact_pairs[k].second;
       pressure[a] += rep.pressure_a;
-      pressure[b] += rep.pressure_b;
-      const Eigen::Vector3d f_B = runs[b].bone.pose(t).linear().transpose() * rep.total_force_b;
-      total += f_B;
-      if (pair_names[k].find("medial") != std::string::npos) medial += f_B;
-      if (pair_names[k].find("lateral") != std::string::npos) lateral += f_B;
-      area += rep.contact_area_m2;
-      max_pen = std::max(max_pen, rep.counts.max_penetration_m);
+      pressure[bb] += rep.pressure_b;
+      const Eigen::Vector3d f_B = runs[bb].bone.pose(t).linear().transpose() * rep.total_force_b;
+      cf.force += f_B;
+      if (c.contact_pair_names[k].find("medial") != std::string::npos) cf.medial_force += f_B;
+      if (c.contact_pair_names[k].find("lateral") != std::string::npos) cf.lateral_force += f_B;
+      cf.area += rep.contact_area_m2;
+      cf.max_penetration = std::max(cf.max_penetration, rep.counts.max_penetration_m);
     }
+    std::vector<surface_output::SurfaceFrame> frames(runs.size());
     for (size_t k = 0; k < runs.size(); ++k) {
       SurfaceRun& r = runs[k];
+      surface_output::SurfaceFrame& fr = frames[k];
       const Eigen::VectorXd q = system.segment(static_cast<int>(k), qs);
       const Eigen::Isometry3d T = rigid(r, t);
-      const Eigen::MatrixXd u = cartilage::nodal_displacement(*r.model, q, T);
-      const Eigen::VectorXd w = cartilage::nodal_deflection(*r.model, q, T);
+      fr.displacement = cartilage::nodal_displacement(*r.model, q, T);
+      fr.deflection = cartilage::nodal_deflection(*r.model, q, T);
       const cartilage::NodalStrains st = cartilage::nodal_strains(*r.model, r.basis, q);
-      common::check_finite(u, "surface " + r.summary.name + ": displacement at t = " + std::to_string(t));
+      common::check_finite(fr.displacement, "surface " + r.summary.name + ": displacement at t = " + std::to_string(t));
       common::check_finite(st.E, "surface " + r.summary.name + ": strain at t = " + std::to_string(t));
-      r.frame_out[0].append(u);
-      r.frame_out[1].append(w);
-      r.frame_out[2].append(st.E);
-      r.frame_out[3].append(st.e1);
-      r.frame_out[4].append(st.e1_dir);
-      r.frame_out[5].append(st.e2);
-      if (contact) r.frame_out[6].append(pressure[k]);
+      fr.E = st.E;
+      fr.e1 = st.e1;
+      fr.e1_dir = st.e1_dir;
+      fr.e2 = st.e2;
+      if (contact) fr.contact_pressure = pressure[k];
+      const Eigen::VectorXd& w = fr.deflection;
       Eigen::Index imax = 0;
       w.cwiseAbs().maxCoeff(&imax);
       if (std::abs(w(imax)) >= std::abs(r.summary.max_deflection_m)) {
@@ -782,30 +799,11 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       r.summary.e1_max = std::max(r.summary.e1_max, st.e1.maxCoeff());
       r.summary.e2_min = std::min(r.summary.e2_min, st.e2.minCoeff());
     }
-    if (contact) {
-      contact_out[0].append(total);
-      contact_out[1].append(medial);
-      contact_out[2].append(lateral);
-      contact_out[3].append(area);
-      contact_out[4].append(max_pen);
-    }
-    time_out.append(t);
-    if (trial_time_out) trial_time_out->append(t - seating + kin_times.front());
-    times.push_back(t);
-    write_sidecar();
+    out.append_frame(t, moving ? t - seating + b.kin_times.front() : 0.0, frames, contact ? &cf : nullptr);
+    ++frames_written;
   };
 
   // ---- integrate ----------------------------------------------------------
-  if (contact) iopt.line_search_halvings = 8;  // Newton globalisation for penalty contact
-  if (iopt.reuse_factorization && contact)
-    throw common::InputError(scene.file.string(), o.value("newton_reuse_factorization").line,
-                             "scenario '" + sc->name + "': newton_reuse_factorization cannot be combined with "
-                             "mesh_contact (its Newton line search needs a fresh tangent)");
-  // Imposed kinematics: each step starts from the surfaces carried by their
-  // bones (rigid predictor), so Newton only finds the deformation change.
-  if (moving)
-    iopt.predictor = opt.predictor == SurfaceScenarioOptions::Predictor::kExtrapolated ? numerics::IntegratorOptions::Predictor::kSystemExtrapolated
-                                                           : numerics::IntegratorOptions::Predictor::kSystem;
   Eigen::VectorXd q0(system.num_dofs());
   for (int k = 0; k < system.num_models(); ++k)
     q0.segment(system.offset(k), runs[k].model->num_dofs()) = runs[k].model->reference_state();
@@ -814,23 +812,23 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   std::vector<cartilage::ContactPairReport> reports = contact_reports(q0);
   for (int k = 0; k < system.num_contacts(); ++k)
     if (reports[k].counts.vertex_face + reports[k].counts.edge_edge > 0)
-      throw common::InputError(scene.file.string(), sc->line,
-                               "scenario '" + sc->name + "': contact pair " + pair_names[k] + " overlaps by " +
+      throw common::InputError(file, c.line,
+                               "scenario '" + c.name + "': contact pair " + c.contact_pair_names[k] + " overlaps by " +
                                    std::to_string(reports[k].counts.max_penetration_m * 1e3) +
                                    " mm at t = 0; increase seating_offset_mm (now " +
-                                   std::to_string(seat_offset * 1e3) + " mm)");
+                                   std::to_string(opt.seating_offset_m * 1e3) + " mm)");
   // Rejections are reported as they happen: one output step may hold many
   // halved sub-steps, and the run must not look idle meanwhile.
   long rejections_logged = 0;
   iopt.on_rejection = [&](const std::string& rejection) {
-    common::log_warn("surface " + sc->name + ": step rejected and halved (" + std::to_string(++rejections_logged) +
+    common::log_warn("surface " + c.name + ": step rejected and halved (" + std::to_string(++rejections_logged) +
                      " so far): " + rejection);
   };
-  numerics::HhtIntegrator integrator(system, iopt);
+  HhtIntegrator integrator(system, iopt);
   integrator.initialize(0.0, q0);
-  common::log_info("scenario " + sc->name + ": " +
+  common::log_info("scenario " + c.name + ": " +
                    (steady ? std::string("steady state (static equilibrium at t = ") + std::to_string(end_time) + " s)"
-                           : (quasi_static ? "quasi-static" : "HHT alpha " + std::to_string(iopt.alpha)) +
+                           : (c.quasi_static ? "quasi-static" : "HHT alpha " + std::to_string(iopt.alpha)) +
                                  std::string(", dt ") + std::to_string(dt) + " s to " + std::to_string(total_time) +
                                  " s" + (seating > 0 ? " (" + std::to_string(seating) + " s seating first)" : "") +
                                  (osmotic_ramp > 0 ? ", osmotic pressure ramped over " + std::to_string(osmotic_ramp) +
@@ -842,7 +840,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   write_frame(integrator.q(), 0.0, reports);
   common::ProgressOptions popt;
   if (!options.progress) popt.mode = common::ProgressOptions::Mode::kOff;
-  common::Progress progress("surface " + sc->name, std::max<std::int64_t>(n_steps_expected, 1), popt);
+  common::Progress progress("surface " + c.name, std::max<std::int64_t>(layout.steps_expected, 1), popt);
   const double step = steady ? total_time : dt;
   const double limit = opt.penetration_limit;
   const bool stop_on_penetration = opt.stop_on_penetration;
@@ -866,7 +864,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         bool at_steady = false;
         if (stop_change > 0) {
           at_steady = integrator.advance_to_steady_state(stop_change, t_next, &last_change) &&
-                      t_next >= par.osmotic_ramp_s;
+                      t_next >= b.par.osmotic_ramp_s;
         } else {
           integrator.advance_to(t_next);
         }
@@ -885,15 +883,16 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         res.final_residual_N = rl;
         res.residual_tolerance_N = std::max(iopt.residual_rtol * r0, iopt.residual_atol_N);
         const double max_def = max_abs_deflection(integrator.q(), t_next);
-        solver_out[0].append(t_next);
-        solver_out[1].append(rec.dt);
-        solver_out[2].append(static_cast<int>(s.newton_iterations - last_iterations));
-        solver_out[3].append(rl);
-        solver_out[4].append(res.residual_tolerance_N);
-        solver_out[5].append(static_cast<int>(s.rejected_steps - last_rejections));
-        solver_out[6].append(wall);
-        solver_out[7].append(max_def);
-        if (change_out) change_out->append(last_change);
+        surface_output::StepRecord sr;
+        sr.time = t_next;
+        sr.dt = rec.dt;
+        sr.newton_iterations = static_cast<int>(s.newton_iterations - last_iterations);
+        sr.residual_N = rl;
+        sr.residual_tolerance_N = res.residual_tolerance_N;
+        sr.rejections = static_cast<int>(s.rejected_steps - last_rejections);
+        sr.wall_s = wall;
+        sr.max_deflection_m = max_def;
+        sr.change_m = last_change;
         if (contact) {
           reports = contact_reports(integrator.q());
           double pen = 0, rim_depth = 0, unfaded = 0;
@@ -908,12 +907,12 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
             return max_def > 0 ? p / max_def : (p > 0 ? std::numeric_limits<double>::infinity() : 0.0);
           };
           const double ratio = ratio_of(pen), unfaded_ratio = ratio_of(unfaded);
-          solver_out[8].append(pen);
-          solver_out[9].append(ratio);
-          solver_out[10].append(static_cast<int>(active));
-          solver_out[11].append(rim_depth);
-          solver_out[12].append(unfaded);
-          solver_out[13].append(unfaded_ratio);
+          sr.max_penetration_m = pen;
+          sr.penetration_ratio = ratio;
+          sr.active_contacts = static_cast<int>(active);
+          sr.max_rim_depth_m = rim_depth;
+          sr.max_unfaded_penetration_m = unfaded;
+          sr.unfaded_penetration_ratio = unfaded_ratio;
           if (active > 0 && unfaded_ratio > limit) {
             ++unfaded_over;
             worst_unfaded_ratio = std::max(worst_unfaded_ratio, unfaded_ratio);
@@ -929,14 +928,17 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
             std::ostringstream m;
             m << "t = " << t_next << " s: max interpenetration " << pen * 1e3 << " mm is " << ratio
               << " of the max deflection " << max_def * 1e3 << " mm (limit " << limit << ")";
-            if (stop_on_penetration)
-              throw common::NumericalError("surface " + sc->name + ": accuracy rule broken: " + m.str() +
+            if (stop_on_penetration) {
+              out.append_step(sr);
+              throw common::NumericalError("surface " + c.name + ": accuracy rule broken: " + m.str() +
                                            "; raise contact_stiffness_n_per_mm3 or set penetration_action: warn");
+            }
             if (penetration_warnings <= 5 || penetration_warnings % 1000 == 0)
-              common::log_warn("surface " + sc->name + ": " + m.str() + " (warning " +
+              common::log_warn("surface " + c.name + ": " + m.str() + " (warning " +
                                std::to_string(penetration_warnings) + ")");
           }
         }
+        out.append_step(sr);
         last_iterations = s.newton_iterations;
         last_rejections = s.rejected_steps;
         t = t_next;
@@ -951,42 +953,39 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       if (stopped_steady) break;
     }
   } catch (const std::exception& e) {
-    out.set_attribute("/", "status", std::string("failed: ") + e.what());
-    out.flush();
+    out.fail(e.what());
     throw;
   }
   progress.finish();
 
   // ---- statistics -----------------------------------------------------------
-  res.scenario = sc->name;
-  res.frames = static_cast<int>(times.size());
+  res.scenario = c.name;
+  res.frames = frames_written;
   for (SurfaceRun& r : runs) {
-    for (auto& a : r.frame_out) a.close();
-    const std::string g = "/surfaces/" + r.summary.name;
-    out.set_attribute(g, "max_deflection_m", r.summary.max_deflection_m);
-    out.set_attribute(g, "max_deflection_time_s", r.summary.max_deflection_time_s);
-    out.set_attribute(g, "e1_min", r.summary.e1_min);
-    out.set_attribute(g, "e1_max", r.summary.e1_max);
-    out.set_attribute(g, "e2_min", r.summary.e2_min);
     r.summary.final_residual_N = res.final_residual_N;
     r.summary.residual_tolerance_N = res.residual_tolerance_N;
-    out.set_attribute(g, "final_residual_N", res.final_residual_N);
-    out.set_attribute(g, "residual_tolerance_N", res.residual_tolerance_N);
+    surface_output::SurfaceSummaryAttributes a;
+    a.max_deflection_m = r.summary.max_deflection_m;
+    a.max_deflection_time_s = r.summary.max_deflection_time_s;
+    a.e1_min = r.summary.e1_min;
+    a.e1_max = r.summary.e1_max;
+    a.e2_min = r.summary.e2_min;
+    a.final_residual_N = res.final_residual_N;
+    a.residual_tolerance_N = res.residual_tolerance_N;
+    out.set_surface_summary(r.summary.name, a);
     res.surfaces.push_back(r.summary);
   }
-  for (auto& a : solver_out) a.close();
-  if (change_out) change_out->close();
   if (stop_change > 0) {
     res.steady_state_stop = true;
     res.steady_state_reached = stopped_steady;
     res.stop_time_s = t;
     res.last_change_m = last_change;
-    out.set_attribute("/solver", "steady_state_change_tol_m", stop_change);
-    out.set_attribute("/solver", "stop_reason", stopped_steady ? "steady_state" : "end_time");
-    out.set_attribute("/solver", "stop_time_s", t);
-    out.set_attribute("/solver", "last_change_m", last_change);
+    out.set_solver_attribute("steady_state_change_tol_m", stop_change);
+    out.set_solver_attribute("stop_reason", std::string(stopped_steady ? "steady_state" : "end_time"));
+    out.set_solver_attribute("stop_time_s", t);
+    out.set_solver_attribute("last_change_m", last_change);
     std::ostringstream m;
-    m << "scenario " << sc->name << ": ";
+    m << "scenario " << c.name << ": ";
     if (stopped_steady) {
       m << "steady state reached at t = " << t << " s after " << integrator.statistics().steps
         << " steps: largest weighted change over the last step " << last_change * 1e3 << " mm <= "
@@ -999,49 +998,48 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       common::log_warn(m.str());
     }
   }
-  if (osmotic_ramp > 0) out.set_attribute("/", "osmotic_ramp_s", osmotic_ramp);
-  for (auto& a : contact_out) a.close();
+  if (osmotic_ramp > 0) out.set_root_attribute("osmotic_ramp_s", osmotic_ramp);
   const numerics::IntegratorStatistics& s = integrator.statistics();
   const cartilage::CoupledSystemStatistics& cs = system.statistics();
-  out.set_attribute("/solver", "steps", static_cast<std::int64_t>(s.steps));
-  out.set_attribute("/solver", "newton_iterations", static_cast<std::int64_t>(s.newton_iterations));
-  out.set_attribute("/solver", "rejected_steps", static_cast<std::int64_t>(s.rejected_steps));
-  out.set_attribute("/solver", "factorizations", static_cast<std::int64_t>(s.factorizations));
-  out.set_attribute("/solver", "symbolic_analyses", static_cast<std::int64_t>(s.symbolic_analyses));
-  out.set_attribute("/solver", "solver_switches", static_cast<std::int64_t>(s.solver_switches));
-  out.set_attribute("/solver", "pattern_changes", static_cast<std::int64_t>(s.pattern_changes));
-  out.set_attribute("/solver", "line_search_reductions", static_cast<std::int64_t>(s.line_search_reductions));
-  out.set_attribute("/solver", "linear_solver", s.linear_solver);
-  out.set_attribute("/solver", "assembly_s", s.assembly_s);
-  out.set_attribute("/solver", "contact_s", cs.contact_time_s);
+  out.set_solver_attribute("steps", static_cast<std::int64_t>(s.steps));
+  out.set_solver_attribute("newton_iterations", static_cast<std::int64_t>(s.newton_iterations));
+  out.set_solver_attribute("rejected_steps", static_cast<std::int64_t>(s.rejected_steps));
+  out.set_solver_attribute("factorizations", static_cast<std::int64_t>(s.factorizations));
+  out.set_solver_attribute("symbolic_analyses", static_cast<std::int64_t>(s.symbolic_analyses));
+  out.set_solver_attribute("solver_switches", static_cast<std::int64_t>(s.solver_switches));
+  out.set_solver_attribute("pattern_changes", static_cast<std::int64_t>(s.pattern_changes));
+  out.set_solver_attribute("line_search_reductions", static_cast<std::int64_t>(s.line_search_reductions));
+  out.set_solver_attribute("linear_solver", s.linear_solver);
+  out.set_solver_attribute("assembly_s", s.assembly_s);
+  out.set_solver_attribute("contact_s", cs.contact_time_s);
   // Where the assembly time goes (wall): element loops, summing element
   // results into the surface matrices, the surfaces' evaluations as a whole
   // (all their terms), and copying between the surfaces and the system.
   double elements_s = 0, element_scatter_s = 0;
-  for (const ShellModel* m : model_ptrs) {
-    elements_s += m->statistics().element_time_s;
-    element_scatter_s += m->statistics().scatter_time_s;
+  for (const SurfaceRun& r : runs) {
+    elements_s += r.model->statistics().element_time_s;
+    element_scatter_s += r.model->statistics().scatter_time_s;
   }
   const long evaluations = cs.evaluations, tangent_evaluations = cs.tangent_evaluations;
-  out.set_attribute("/solver", "evaluations", static_cast<std::int64_t>(evaluations));
-  out.set_attribute("/solver", "tangent_evaluations", static_cast<std::int64_t>(tangent_evaluations));
-  out.set_attribute("/solver", "elements_s", elements_s);
-  out.set_attribute("/solver", "element_scatter_s", element_scatter_s);
-  out.set_attribute("/solver", "surfaces_s", cs.models_time_s);
-  out.set_attribute("/solver", "coupling_copy_s", cs.copy_time_s);
-  out.set_attribute("/solver", "factorization_s", s.factorization_s);
-  out.set_attribute("/solver", "solve_s", s.solve_s);
-  out.set_attribute("/solver", "total_s", s.total_s);
+  out.set_solver_attribute("evaluations", static_cast<std::int64_t>(evaluations));
+  out.set_solver_attribute("tangent_evaluations", static_cast<std::int64_t>(tangent_evaluations));
+  out.set_solver_attribute("elements_s", elements_s);
+  out.set_solver_attribute("element_scatter_s", element_scatter_s);
+  out.set_solver_attribute("surfaces_s", cs.models_time_s);
+  out.set_solver_attribute("coupling_copy_s", cs.copy_time_s);
+  out.set_solver_attribute("factorization_s", s.factorization_s);
+  out.set_solver_attribute("solve_s", s.solve_s);
+  out.set_solver_attribute("total_s", s.total_s);
   std::string rej;
   for (const auto& x : s.rejections) rej += x + "\n";
-  out.set_attribute("/solver", "rejections", rej);
+  out.set_solver_attribute("rejections", rej);
   if (contact) {
-    out.set_attribute("/solver", "penetration_warnings", static_cast<std::int64_t>(penetration_warnings));
-    out.set_attribute("/solver", "worst_penetration_ratio", worst_ratio);
-    out.set_attribute("/solver", "unfaded_penetration_warnings", static_cast<std::int64_t>(unfaded_over));
-    out.set_attribute("/solver", "worst_unfaded_penetration_ratio", worst_unfaded_ratio);
-    out.set_attribute("/solver", "penetration_limit", limit);
-    out.set_attribute("/solver", "max_penetration_m", res.max_penetration_m);
+    out.set_solver_attribute("penetration_warnings", static_cast<std::int64_t>(penetration_warnings));
+    out.set_solver_attribute("worst_penetration_ratio", worst_ratio);
+    out.set_solver_attribute("unfaded_penetration_warnings", static_cast<std::int64_t>(unfaded_over));
+    out.set_solver_attribute("worst_unfaded_penetration_ratio", worst_unfaded_ratio);
+    out.set_solver_attribute("penetration_limit", limit);
+    out.set_solver_attribute("max_penetration_m", res.max_penetration_m);
   }
   res.steps = s.steps;
   res.newton_iterations = s.newton_iterations;
@@ -1062,13 +1060,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.worst_penetration_ratio = worst_ratio;
   res.unfaded_penetration_warnings = unfaded_over;
   res.worst_unfaded_penetration_ratio = worst_unfaded_ratio;
-  time_out.close();
-  if (trial_time_out) trial_time_out->close();
   res.wall_s = now_s() - t_start;
-  out.set_attribute("/solver", "wall_s", res.wall_s);
-  out.set_attribute("/", "status", "completed");
-  out.flush();
-  write_sidecar();
+  out.set_solver_attribute("wall_s", res.wall_s);
+  out.complete();
   res.status = SurfaceStageStatus::kCompleted;
   return res;
 }

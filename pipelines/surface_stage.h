@@ -1,19 +1,28 @@
 #pragma once
-// The deformable-surface stage (arthrosim-surface, issue 5): reads a prepared
-// model (docs/prepared_model.md) and a scene scenario (docs/scenes.md), builds
-// one ANCF shell model per cartilage surface with exactly the scenario's
-// effects (cartilage/surface_model.h), integrates it (HHT, quasi-static, or a
-// direct steady-state solve) and writes the output HDF5 + XDMF sidecar
-// (schema: docs/surface_output.md).
+// The deformable-surface stage (arthrosim-surface): reads a prepared model
+// (docs/prepared_model.md) and a scene scenario (docs/scenes.md), builds one
+// ANCF shell model per cartilage surface with exactly the scenario's effects
+// (cartilage/surface_model.h), integrates it (HHT, quasi-static, or a direct
+// steady-state solve) and writes the output HDF5 + XDMF sidecar through
+// pipelines/surface_output.h (schema: docs/surface_output.md).
+//
+// Shape: surface_from_scene (the scenario's options, every cross-key rule;
+// no file read) -> build (models, coupled system, integrator options from the
+// prepared model and kinematics files) -> run (integrate, record).
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cartilage/mesh_contact.h"
 #include "cartilage/surface_model.h"
 #include "common/options.h"
 #include "numerics/hht_integrator.h"
+
+namespace arthrosim::common {
+struct Scene;
+}
 
 namespace arthrosim::pipelines {
 
@@ -80,6 +89,33 @@ struct SurfaceScenarioOptions {
     declare_instance(v);
   }
 };
+
+/// One scenario of a scene, checked: every rule between its keys that needs
+/// no file (surface_from_scene). Pure data.
+struct SurfaceScenarioConfig {
+  std::filesystem::path scene_file;
+  std::string name;  ///< the scenario
+  int line = 0;      ///< where it is written in the scene
+  int surfaces_line = 0;  ///< where `surfaces` is written (0: the default)
+  std::vector<std::string> effects;
+  SurfaceScenarioOptions options;
+  std::string canonical_options;  ///< the scenario's options as the runner hashes them
+  bool moving = false;        ///< imposed_kinematics
+  bool generic = false;       ///< a generic `mesh` instead of the prepared model
+  bool contact = false;       ///< mesh_contact
+  bool steady = false;        ///< steady_state
+  bool quasi_static = false;  ///< steady_state, or no inertia
+  std::vector<std::string> surfaces;  ///< prepared surfaces simulated (empty for a generic mesh)
+  /// mesh_contact: pairs as indices into `surfaces`, and as written ("a:b").
+  std::vector<std::pair<int, int>> contact_pairs;
+  std::vector<std::string> contact_pair_names;
+};
+
+/// The scenario `scenario` of `scene` ("" = the scene's only one) with every
+/// cross-key rule checked (osmotic_ramp_s and imposed_kinematics, generic
+/// effects and their keys, contact pairs among the surfaces, ...). Reads no
+/// file; InputError with the scene's line otherwise.
+SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::string& scenario);
 
 struct SurfaceStageOptions {
   std::string prepared;    ///< prepared-model HDF5

@@ -1,75 +1,31 @@
-// arthrosim-comak: the musculoskeletal stage. Per frame of a walking trial,
-// one Ipopt NLP (muscle activations + 11 secondary knee coordinates, static
-// equilibrium of all 12 knee coordinates under muscles, ligaments,
-// elastic-foundation contact and the external knee loads; musculoskeletal/
-// comak.h, docs/comak.md), written frame by frame into the kinematics file
-// (docs/kinematics_file.md).
+// arthrosim-comak: the musculoskeletal stage's program: command line ->
+// pipelines::ComakStageConfig -> pipelines::run_comak_stage (the driver,
+// pipelines/comak_stage.h). Per frame of a walking trial, one Ipopt NLP
+// (musculoskeletal/comak.h, docs/comak.md), written frame by frame into the
+// kinematics file (docs/kinematics_file.md).
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <cstdio>
-#include <cstdlib>
 #include <exception>
-#include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <limits>
-#include <sstream>
 #include <string>
 
-#include "common/effects.h"
 #include "common/error.h"
 #include "common/log.h"
-#include "common/metadata.h"
-#include "common/progress.h"
-#include "common/scene.h"
-#include "common/storage.h"
-#include "musculoskeletal/ankle_muscles.h"
 #include "musculoskeletal/comak.h"
-#include "musculoskeletal/gait_trial.h"
-#include "musculoskeletal/kinematics_file.h"
-#include "musculoskeletal/knee_loads.h"
-#include "musculoskeletal/model_io.h"
 #include "pipelines/apps/name_value.h"
 #include "pipelines/comak_stage.h"
 #include "pipelines/stages.h"
 
 using namespace arthrosim;
 namespace msk = arthrosim::musculoskeletal;
-namespace fs = std::filesystem;
-
-namespace {
-// --model may name a URDF or a model folder (as scenes do). A folder is
-// resolved to the one URDF inside it, or else to the one URDF next to it
-// that references meshes in it ("<folder>/" in the file, as the bundled
-// knee.urdf references medium/...). Anything else is an error naming what
-// was found.
-std::string resolve_model(const std::string& given) {
-  const fs::path p(given);
-  if (!fs::is_directory(p)) return given;
-  std::vector<fs::path> inside, beside;
-  for (const auto& e : fs::directory_iterator(p))
-    if (e.path().extension() == ".urdf") inside.push_back(e.path());
-  if (inside.size() == 1) return inside[0].string();
-  const fs::path dir = fs::weakly_canonical(p);
-  const std::string needle = "\"" + dir.filename().string() + "/";
-  for (const auto& e : fs::directory_iterator(dir.parent_path())) {
-    if (e.path().extension() != ".urdf") continue;
-    std::ifstream in(e.path());
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (text.find(needle) != std::string::npos) beside.push_back(e.path());
-  }
-  std::sort(beside.begin(), beside.end());
-  if (inside.empty() && beside.size() == 1) return beside[0].string();
-  throw common::InputError(given + ": error: model folder: expected one URDF in it or one URDF next to "
-                           "it referencing its meshes, found " + std::to_string(inside.size()) +
-                           " and " + std::to_string(beside.size()));
-}
-}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
-      "arthrosim-comak: COMAK over a walking trial. Per frame one Ipopt NLP: muscle activations and the\n"
+      "arthrosim-comak: COMAK over a walking trial (driver: pipelines/comak_stage.h). Per frame one Ipopt NLP:\n"
+      "muscle activations and the\n"
       "11 secondary knee coordinates minimising sum w V a^2 subject to static equilibrium of the 12 knee\n"
       "coordinates (flexion prescribed from the trial) under muscles, ligaments, elastic-foundation contact\n"
       "and the external knee loads. Writes the kinematics file (HDF5, docs/kinematics_file.md), an XDMF\n"
@@ -77,7 +33,7 @@ int main(int argc, char** argv) {
   std::string model_path, trial_path, out, sto_prefix, scene_path, prepared_path;
   int first = 0, last = -1, stride = 1;
   msk::ComakOptions o;
-  double lowpass_hz = msk::GaitTrialOptions().lowpass.cutoff_hz;  // the one default (signal.h)
+  double lowpass_hz = 0;  // used only when given
   bool verbose = false, quiet = false, no_pressure = false;
   app.add_option("--model", model_path,
                  "model URDF (e.g. data/models/knee_parametric/knee.urdf) or a model folder")
@@ -95,20 +51,21 @@ int main(int argc, char** argv) {
   double start_time = std::numeric_limits<double>::quiet_NaN(), end_time = start_time;
   app.add_option("--start-time", start_time,
                  "first time of the trial to solve [s] (the frames from the first at or after it; "
-                 "the whole trial is still filtered and differentiated)");
-  app.add_option("--end-time", end_time, "last time of the trial to solve [s] (frames at or before it)");
+                 "the whole trial is still filtered and differentiated; default: the scene's trial.start_s)");
+  app.add_option("--end-time", end_time,
+                 "last time of the trial to solve [s] (frames at or before it; default: the scene's trial.end_s)");
   app.add_option("--tolerance", o.force_tolerance,
                  "equilibrium tolerance of the force rows [N]; moment rows x length scale 0.03 m")
       ->capture_default_str();
-  app.add_option("--ipopt-tolerance", o.ipopt_tolerance, "Ipopt 'tol' (scaled NLP)")->capture_default_str();
-  app.add_option("--max-iterations", o.max_iterations, "Ipopt iteration limit per attempt")
-      ->capture_default_str();
+  app.add_option("--ipopt-tolerance", o.ipopt_tolerance, "Ipopt 'tol' (scaled NLP; default: comak.ipopt_tolerance)");
+  app.add_option("--max-iterations", o.max_iterations,
+                 "Ipopt iteration limit per attempt (default: comak.ipopt_max_iterations)");
   app.add_option("--acceptable-iterations", o.acceptable_iterations,
                  "consecutive iterates at Ipopt's acceptable level that end a solve as 'acceptable' "
-                 "(a larger value keeps iterating towards --ipopt-tolerance)")
-      ->capture_default_str();
-  app.add_option("--activation-min", o.activation_min, "lower bound of the activations, 0..1")
-      ->capture_default_str();
+                 "(a larger value keeps iterating towards --ipopt-tolerance; default: "
+                 "comak.ipopt_acceptable_iterations)");
+  app.add_option("--activation-min", o.activation_min,
+                 "lower bound of the activations, 0..1 (default: comak.activation_min)");
   std::vector<std::string> weight_args;
   app.add_option("--muscle-weight", weight_args,
                  "objective weight w_i of a muscle, name=value (> 0; default 1), repeatable");
@@ -139,12 +96,12 @@ int main(int argc, char** argv) {
   bool no_move_limits = false;
   app.add_flag("--no-move-limits", no_move_limits,
                "solve attempt 1 and the second start as one Ipopt solve each, without the step "
-               "control of moving limits (as before 2026-12-03; faster on some frames, can leave "
-               "the patella's groove; docs/comak.md)");
+               "control of moving limits (faster on some frames, can leave the patella's groove; "
+               "docs/comak.md)");
   app.add_option("--retries", o.retries, "retry attempts of a failed frame: 0..3 (docs/comak.md)")
       ->capture_default_str();
-  app.add_option("--lowpass-hz", lowpass_hz, "low-pass cutoff of the trial kinematics [Hz]")
-      ->capture_default_str();
+  app.add_option("--lowpass-hz", lowpass_hz,
+                 "low-pass cutoff of the trial kinematics [Hz] (default: comak.lowpass_cutoff_hz)");
   app.add_option("--sto-prefix", sto_prefix,
                  "prefix of the .sto exports (default: --out without .h5)");
   app.add_flag("--no-pressure", no_pressure, "do not store per-triangle pressure / XDMF");
@@ -175,189 +132,63 @@ int main(int argc, char** argv) {
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
 
   try {
-    std::vector<std::string> effects = {"ligaments", "muscles", "tibiofemoral_contact",
-                                        "patellofemoral_contact"};
-    if (!scene_path.empty()) {
-      const common::Scene scene = pipelines::load_scene(scene_path);
-      // The trial window of the scene (explicit flags win).
-      const pipelines::SceneInputs in = pipelines::scene_inputs(scene);
-      if (in.trial_start_s && !app.count("--start-time") && !app.count("--first-frame"))
-        start_time = *in.trial_start_s;
-      if (in.trial_end_s && !app.count("--end-time") && !app.count("--last-frame")) end_time = *in.trial_end_s;
-      if (scene.has_block("comak")) {
-        const pipelines::ComakStageOptions c = common::read_options<pipelines::ComakStageOptions>(scene.block("comak"));
-        effects = c.effects;
-        if (!app.count("--ipopt-tolerance")) o.ipopt_tolerance = c.solver.ipopt_tolerance;
-        if (!app.count("--acceptable-iterations")) o.acceptable_iterations = c.solver.acceptable_iterations;
-        if (!app.count("--max-iterations")) o.max_iterations = c.solver.max_iterations;
-        if (!app.count("--activation-min")) o.activation_min = c.solver.activation_min;
-        if (!app.count("--reserve-actuators")) o.reserve_actuators = c.solver.reserve_actuators;
-        if (!ankle_flag->count()) o.ankle_equilibrium = c.solver.ankle_equilibrium;
-        if (!app.count("--body-inertia")) o.body_inertia = c.solver.body_inertia;
-        if (!hip_flag->count()) o.hip_equilibrium = c.solver.hip_equilibrium;
-        if (!no_damping) o.coordinate_damping = c.solver.coordinate_damping;
-        if (!app.count("--lowpass-hz")) lowpass_hz = c.trial.lowpass.cutoff_hz;
-        if (!single_start) o.second_start = c.solver.second_start;
-      }
-    }
-    if (single_start) o.second_start = false;
-    if (no_damping) o.coordinate_damping = false;
-    if (no_move_limits) o.move_limits_first = false;
+    pipelines::ComakStageConfig c;
+    c.options = scene_path.empty() ? pipelines::ComakStageOptions{}
+                                   : pipelines::comak_from_scene(pipelines::load_scene(scene_path));
+    if (scene_path.empty()) c.options.effects = {"ligaments", "muscles", "tibiofemoral_contact", "patellofemoral_contact"};
+    // Explicit flags win over the scene.
+    msk::ComakOptions& so = c.options.solver;
+    if (app.count("--tolerance")) so.force_tolerance = o.force_tolerance;
+    if (app.count("--ipopt-tolerance")) so.ipopt_tolerance = o.ipopt_tolerance;
+    if (app.count("--max-iterations")) so.max_iterations = o.max_iterations;
+    if (app.count("--activation-min")) so.activation_min = o.activation_min;
+    if (app.count("--reserve-actuators")) so.reserve_actuators = o.reserve_actuators;
+    if (app.count("--acceptable-iterations")) so.acceptable_iterations = o.acceptable_iterations;
+    if (ankle_flag->count()) so.ankle_equilibrium = o.ankle_equilibrium;
+    if (hip_flag->count()) so.hip_equilibrium = o.hip_equilibrium;
+    if (app.count("--body-inertia")) so.body_inertia = o.body_inertia;
+    if (app.count("--force-length")) so.forces.force_length = o.forces.force_length;
+    if (app.count("--retries")) so.retries = o.retries;
+    if (app.count("--ipopt-print-level")) so.print_level = o.print_level;
+    if (app.count("--lowpass-hz")) c.options.trial.lowpass.cutoff_hz = lowpass_hz;
+    if (single_start) so.second_start = false;
+    if (no_move_limits) so.move_limits_first = false;
+    if (no_damping) so.coordinate_damping = false;
+    // The trial window: explicit flags win over the scene's trial.start_s/end_s.
+    const bool frame_flags = app.count("--first-frame") || app.count("--last-frame");
+    const bool time_flags = app.count("--start-time") || app.count("--end-time");
+    if (frame_flags && time_flags)
+      throw common::InputError("arthrosim-comak: give --start-time/--end-time or --first-frame/--last-frame, "
+                               "not both");
+    if (frame_flags) c.options.start_time_s = c.options.end_time_s = std::numeric_limits<double>::quiet_NaN();
+    if (app.count("--start-time")) c.options.start_time_s = start_time;
+    if (app.count("--end-time")) c.options.end_time_s = end_time;
     for (const std::string& wa : weight_args) {
       const auto [name, w] = pipelines::parse_name_value(wa, "--muscle-weight");
-      o.muscle_weights[name] = w;  // name and range checked by ComakProblem
+      so.muscle_weights[name] = w;  // name and range checked by ComakProblem
     }
-    auto wants = [&](const char* e) { return std::find(effects.begin(), effects.end(), e) != effects.end(); };
-    if (!wants("muscles"))
-      throw common::InputError(scene_path + ": error: comak effects must include muscles (they balance the "
-                               "flexion equation)");
-    if (wants("tibiofemoral_contact") != wants("patellofemoral_contact"))
-      throw common::InputError(scene_path + ": error: comak effects: tibiofemoral_contact and "
-                               "patellofemoral_contact can only be simulated together (the model "
-                               "evaluates all contact pairs as one term)");
-    o.forces.ligaments = wants("ligaments");
-    o.forces.contact = wants("tibiofemoral_contact");
-    model_path = resolve_model(model_path);
-    msk::Model model = msk::load_model(model_path);
-    // A model with its own leg to the ground (an imported OpenSim model)
-    // takes the trial's coordinates by name and its forces on its bodies.
-    const bool model_dynamics = model.role_body("ground") >= 0;
-    if (o.ankle_equilibrium && !model_dynamics) {
-      // Uniarticular ankle muscles so that the ankle row can be balanced in
-      // both directions (musculoskeletal/ankle_muscles.h).
-      msk::add_ankle_muscles(model);
-      common::log_info("ankle equilibrium: added the ankle muscles soleus and tibant");
-    }
-    if (!prepared_path.empty()) {
-      // The prepare stage's cartilage (its edge length sets the contact
-      // resolution of this stage too).
-      const auto rep = msk::use_prepared_surfaces(model, prepared_path);
-      std::string text;
-      for (const auto& l : rep.lines) text += "\n  " + l;
-      common::log_info("contact surfaces from " + prepared_path + ":" + text);
-    }
-    msk::GaitTrialOptions to;
-    to.lowpass.cutoff_hz = lowpass_hz;
-    // A non-finite trial value: run the frames before it, then stop naming
-    // the frame, file, line and column (exit 1; the file keeps those frames).
-    to.truncate_at_non_finite = true;
-    if (model_dynamics) {
-      // Angles are the model's revolute coordinates (translations by its prismatic ones).
-      to.is_rotational = [&model](const std::string& label) {
-        const int c = model.tree.coordinate_index(label);
-        if (c < 0) return common::default_is_rotational(label);
-        for (const msk::Joint& j : model.tree.joints)
-          if (j.coordinate == c) return j.type == msk::JointType::kRevolute;
-        return false;
-      };
-    }
-    msk::GaitTrial trial = msk::load_gait_trial(trial_path, to);
-    if (!(trial.body_mass_kg > 0)) {
-      trial.body_mass_kg = model.subject_mass_kg;
-      common::log_info("subject mass from the model: " + std::to_string(model.subject_mass_kg) + " kg");
-    }
-    if (!std::isnan(start_time) || !std::isnan(end_time)) {
-      // The time window: frames of the trial's grid inside [start, end].
-      const auto [f0, f1] = msk::frames_in_window(trial, start_time, end_time);
-      if ((app.count("--start-time") || app.count("--end-time")) &&
-          (app.count("--first-frame") || app.count("--last-frame")))
-        throw common::InputError("arthrosim-comak: give --start-time/--end-time or --first-frame/--last-frame, "
-                                 "not both");
-      first = f0;
-      last = f1;
-    }
-    if (trial.side != msk::Side::kRight)
-      throw common::InputError(trial_path + ": error: the bundled knee models are right knees; "
-                               "this trial is of the left leg");
-    std::vector<msk::ComakFrameInput> frames;
-    if (model_dynamics) {
-      std::vector<std::string> ignored;
-      frames = msk::comak_model_frame_inputs(model, trial, first, last, stride, &ignored);
-      for (const auto& i : ignored) common::log_info("external force not applied: " + i);
-    } else {
-      const msk::LegModel leg = msk::leg_model_for_trial(trial);
-      const msk::KneeLoads loads = msk::compute_knee_loads(trial, leg);
-      frames = msk::comak_frame_inputs(loads, first, last, stride, &leg);
-    }
-    msk::ComakProblem problem(model, o);
-
-    std::ostringstream opts;
-    opts << "model: " << model_path << "\nprepared: " << (prepared_path.empty() ? "none" : prepared_path)
-         << "\ntrial: " << trial_path << "\nfirst_frame: " << first
-         << "\nlast_frame: " << last << "\nstride: " << stride
-         << "\nforce_tolerance_n: " << o.force_tolerance << "\nlength_scale_m: " << o.length_scale
-         << "\nipopt_tolerance: " << o.ipopt_tolerance << "\nmax_iterations: " << o.max_iterations
-         << "\nactivation_min: " << o.activation_min
-         << "\nacceptable_iterations: " << o.acceptable_iterations
-         << "\nreserve_actuators: " << (o.reserve_actuators ? "true" : "false")
-         << "\nankle_equilibrium: " << (o.ankle_equilibrium ? "true" : "false")
-         << "\nhip_equilibrium: " << (o.hip_equilibrium ? "true" : "false")
-         << "\nbody_inertia: " << (o.body_inertia ? "true" : "false")
-         << "\nforce_length: " << (o.forces.force_length ? "true" : "false")
-         << "\nsecond_start: " << (o.second_start ? "true" : "false")
-         << "\nretries: " << o.retries
-         << "\nmove_limits_first: " << (o.move_limits_first ? "true" : "false")
-         << "\nmove_limit_m: " << o.move_limit_m << "\nmove_limit_rad: " << o.move_limit_rad
-         << "\nsecond_start_move_limit_scale: " << o.second_start_move_limit_scale
-         << "\ncoordinate_damping: " << (o.coordinate_damping ? "true" : "false")
-         << "\nloads: " << (model_dynamics ? "model dynamics (the model's own leg)" : "generic leg chain (knee_loads.h)")
-         << "\nlowpass_cutoff_hz: " << lowpass_hz
-         << "\nhessian: limited-memory\n";
-    for (const auto& [name, w] : o.muscle_weights) opts << "muscle_weight." << name << ": " << w << "\n";
-    std::string effect_text;
-    for (const auto& e : effects) effect_text += (effect_text.empty() ? "" : ", ") + e;
-    opts << "effects: [" << effect_text << "]\n";
-    common::log_info("options:\n" + opts.str() + (trial.synthetic ? "trial is SYNTHETIC\n" : ""));
-    const auto meta = common::collect_run_metadata("arthrosim-comak", argc, argv, scene_path, opts.str());
-
-    common::EffectLedger ledger("comak");
-    if (o.forces.ligaments) ledger.record("ligaments", model.num_bundles());
-    ledger.record("muscles", static_cast<std::int64_t>(model.muscles.size()));
-    const int tibia = model.role_body("tibia"), patella = model.role_body("patella");
-    for (const auto& c : model.contacts) {
-      if (!o.forces.contact) break;
-      if (c.casting().body == tibia) ledger.record("tibiofemoral_contact", c.casting().mesh.F.rows(), c.name());
-      if (c.casting().body == patella) ledger.record("patellofemoral_contact", c.casting().mesh.F.rows(), c.name());
-    }
-
-    msk::KinematicsFileInfo info;
-    info.model_path = model_path;
-    info.trial_path = trial_path;
-    info.body_mass_kg = trial.body_mass_kg;
-    info.synthetic = trial.synthetic;
-    info.expected_frames = static_cast<std::int64_t>(frames.size());
-    info.pressure_fields = !no_pressure;
-    msk::KinematicsFileWriter writer(out, problem, info, meta);
-    if (trial.truncated)
-      common::log_warn(trial_path + ": the trial ends early at frame " +
-                       std::to_string(trial.truncated->frame) + ": " + trial.truncated->reason);
-    if (sto_prefix.empty()) {
-      sto_prefix = out;
-      if (sto_prefix.size() > 3 && sto_prefix.substr(sto_prefix.size() - 3) == ".h5")
-        sto_prefix.resize(sto_prefix.size() - 3);
-    }
-    common::Progress progress("comak", static_cast<std::int64_t>(frames.size()));
-    msk::ComakRunSummary summary;
-    try {
-      summary = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
-        writer.append(f, r, d);
-        progress.step();
-      });
-    } catch (const msk::ComakRunStopped& e) {
-      // Finish the file with the frames before the stop (attribute `stopped`).
-      progress.finish();
-      writer.finish(e.summary, ledger, sto_prefix);
-      // (run_comak has logged the reason, naming the frame.)
-      std::cerr << "arthrosim-comak: stopped at frame " << e.frame << "; the " << e.summary.frames
+    c.model = model_path;
+    c.prepared = prepared_path;
+    c.trial = trial_path;
+    c.out = out;
+    c.sto_prefix = sto_prefix;
+    c.first_frame = first;
+    c.last_frame = last;
+    c.stride = stride;
+    c.pressure_fields = !no_pressure;
+    c.scene = scene_path;
+    for (int i = 0; i < argc; ++i) c.argv.emplace_back(argv[i]);
+    const pipelines::ComakStageResult r = pipelines::run_comak_stage(c);
+    const msk::ComakRunSummary& summary = r.summary;
+    if (r.stopped) {
+      std::cerr << "arthrosim-comak: stopped at frame " << r.stopped_frame << "; the " << summary.frames
                 << " frames before it are in " << out << "\n";
       return 1;
     }
-    progress.finish();
-    writer.finish(summary, ledger, sto_prefix);
     std::printf("arthrosim-comak: %d frames, %d converged, %d failed, %d Ipopt iterations, %.2f s "
                 "(%.3f s/frame) -> %s\n",
-                summary.frames, summary.converged, summary.failed, summary.total_iterations,
-                summary.wall_time, summary.wall_time / std::max(1, summary.frames), out.c_str());
+                summary.frames, summary.converged, summary.failed, summary.total_iterations, summary.wall_time,
+                summary.wall_time / std::max(1, summary.frames), out.c_str());
     if (summary.failed) {
       std::string list;
       for (int i : summary.failed_frames) list += " " + std::to_string(i);

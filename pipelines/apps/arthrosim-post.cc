@@ -51,7 +51,7 @@ int main(int argc, char** argv) {
     pipelines::PostOptions options;
     pipelines::PostInputs inputs;
     if (!scene_file.empty()) {
-      options = pipelines::post_options_from_scene(pipelines::load_scene(scene_file));
+      options = pipelines::post_from_scene(pipelines::load_scene(scene_file));
       inputs.scene_file = scene_file;
     }
     if (!map.empty()) options.splitline_map = map;

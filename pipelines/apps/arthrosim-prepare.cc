@@ -17,7 +17,9 @@
 #include "common/mesh_io.h"
 #include "common/metadata.h"
 #include "pipelines/apps/name_value.h"
+#include "common/options.h"
 #include "pipelines/prepare.h"
+#include "pipelines/stages.h"
 
 using namespace arthrosim;
 
@@ -34,33 +36,38 @@ int main(int argc, char** argv) {
       "thickness). Cartilage thickness: the inward ray's entry into the bone; 0 for points inside the\n"
       "bone (overlapping segmentations), closest-point distance where no ray enters; raised to\n"
       "--min-thickness-mm; every case counted and stored. See docs/prepared_model.md."};
-  std::string model_dir, out, unit = "mm";
-  double edge_mm = 3.0, max_cast_mm = 10.0, min_thickness_mm = 0.2, max_triangles = 1e6;
-  int iterations = 5;
+  std::string model_dir, out, unit, scene_path;
+  double edge_mm = 0, max_cast_mm = 0, min_thickness_mm = 0, max_triangles = 0;
+  int iterations = 0;
   bool verbose = false, quiet = false;
   app.add_option("--model", model_dir, "model folder (with meshes.yaml or convention-named files), or a manifest")
       ->required();
-  app.add_option("--edge-length-mm", edge_mm, "target edge length of the remeshed cartilage [mm], 0.2..20")
-      ->capture_default_str();
+  app.add_option("--scene", scene_path,
+                 "scene YAML: its prepare block gives the options (docs/scenes.md); a flag below wins over it");
+  app.add_option("--edge-length-mm", edge_mm,
+                 "target edge length of the remeshed cartilage [mm], 0.2..20 (default: prepare.edge_length_mm)");
   std::vector<std::string> surface_edges;
   app.add_option("--surface-edge-length-mm", surface_edges,
                  "NAME=MM: target edge length of one cartilage surface instead of --edge-length-mm (repeatable)");
   app.add_option("--out", out, "prepared-model HDF5 file to write (XDMF next to it)")->required();
-  app.add_option("--unit", unit, "length unit of the input files: mm, cm or m (a manifest's unit: wins)")
-      ->capture_default_str();
-  app.add_option("--max-cast-distance-mm", max_cast_mm, "longest thickness ray [mm], 1..50")->capture_default_str();
-  app.add_option("--remesh-iterations", iterations, "isotropic remeshing iterations, 1..20")->capture_default_str();
+  app.add_option("--unit", unit, "length unit of the input files: mm, cm or m (a manifest's unit: wins; default: prepare.mesh_unit)");
+  app.add_option("--max-cast-distance-mm", max_cast_mm,
+                 "longest thickness ray [mm], 1..50 (default: prepare.max_cast_distance_mm)");
+  app.add_option("--remesh-iterations", iterations,
+                 "isotropic remeshing iterations, 1..20 (default: prepare.remesh_iterations)");
   app.add_option("--min-thickness-mm", min_thickness_mm,
-                 "thickness floor [mm], 0..2: thinner measured values are raised to it (counted)")
-      ->capture_default_str();
+                 "thickness floor [mm], 0..2: thinner measured values are raised to it (counted; default: "
+                 "prepare.min_thickness_mm)");
   app.add_option("--max-triangles", max_triangles,
-                 "refuse a surface whose remesh is estimated to exceed this many triangles (>= 100)")
-      ->capture_default_str();
+                 "refuse a surface whose remesh is estimated to exceed this many triangles, >= 100 (default: "
+                 "prepare.max_triangles)");
   app.add_flag("--verbose", verbose, "more messages");
   app.add_flag("--quiet", quiet, "warnings and errors only");
   app.footer(
       "Sample runs:\n"
       "  arthrosim-prepare --model data/models/knee_parametric/coarse --edge-length-mm 3 --out prepared_coarse.h5\n"
+      "  arthrosim-prepare --model data/models/knee_parametric/coarse --scene data/scenes/demo.yaml --out prepared.h5\n"
+      "      # options from the scene's prepare block (as `arthrosim run` calls it)\n"
       "  arthrosim-prepare --model data/models/knee_parametric/medium --edge-length-mm 2 --out prepared_medium.h5\n"
       "  arthrosim-prepare --model data/models/knee_parametric/coarse --edge-length-mm 3 \\\n"
       "      --surface-edge-length-mm femur=4.2 --out prepared_anchor.h5   # femoral 3,579 shells, tibial 1,059\n"
@@ -74,24 +81,29 @@ int main(int argc, char** argv) {
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
   try {
     pipelines::PrepareOptions options;
-    options.edge_length = edge_mm * 1e-3;
+    if (!scene_path.empty()) options = pipelines::prepare_from_scene(pipelines::load_scene(scene_path));
+    if (app.count("--edge-length-mm")) options.edge_length = edge_mm * common::units::mm;
     for (const std::string& item : surface_edges) {  // names and ranges checked by prepare_model
       const auto [name, mm] = pipelines::parse_name_value(item, "--surface-edge-length-mm");
-      options.surface_edge_length[name] = mm * 1e-3;
+      options.surface_edge_length[name] = mm * common::units::mm;
     }
-    options.unit = common::parse_length_unit(unit);
-    options.max_cast_distance = max_cast_mm * 1e-3;
-    options.remesh_iterations = iterations;
-    options.min_thickness = min_thickness_mm * 1e-3;
-    options.max_triangles = max_triangles;
+    if (app.count("--unit")) options.unit = common::parse_length_unit(unit);
+    if (app.count("--max-cast-distance-mm")) options.max_cast_distance = max_cast_mm * common::units::mm;
+    if (app.count("--remesh-iterations")) options.remesh_iterations = iterations;
+    if (app.count("--min-thickness-mm")) options.min_thickness = min_thickness_mm * common::units::mm;
+    if (app.count("--max-triangles")) options.max_triangles = max_triangles;
     std::ostringstream echo;
-    echo << "model: " << model_dir << "\nedge_length_mm: " << edge_mm << "\nunit: " << unit
-         << "\nmax_cast_distance_mm: " << max_cast_mm << "\nremesh_iterations: " << iterations
-         << "\nmin_thickness_mm: " << min_thickness_mm << "\nmax_triangles: " << max_triangles << "\n";
-    for (const std::string& item : surface_edges) echo << "surface_edge_length_mm: " << item << "\n";
-    common::log_info("options: model " + model_dir + ", edge " + std::to_string(edge_mm) + " mm, unit " + unit +
-                     ", max cast " + std::to_string(max_cast_mm) + " mm, " + std::to_string(iterations) +
-                     " remesh iterations -> " + out);
+    echo << "model: " << model_dir << "\nscene: " << (scene_path.empty() ? "none" : scene_path)
+         << "\nedge_length_mm: " << common::written_value(options.edge_length, common::Unit::kMillimetre)
+         << "\nunit: " << common::unit_name(options.unit)
+         << "\nmax_cast_distance_mm: " << common::written_value(options.max_cast_distance, common::Unit::kMillimetre)
+         << "\nremesh_iterations: " << options.remesh_iterations
+         << "\nmin_thickness_mm: " << common::written_value(options.min_thickness, common::Unit::kMillimetre)
+         << "\nmax_triangles: " << options.max_triangles << "\n";
+    for (const auto& [name, length] : options.surface_edge_length)
+      echo << "surface_edge_length_mm: " << name << "=" << common::written_value(length, common::Unit::kMillimetre)
+           << "\n";
+    common::log_info("options:\n" + echo.str() + "-> " + out);
 
     const pipelines::ModelFiles files = pipelines::find_model_files(model_dir);
     const pipelines::PreparedModel model = pipelines::prepare_model(files, options);

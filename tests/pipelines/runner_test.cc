@@ -30,8 +30,10 @@ using common::Scene;
 // A fake stage: appends "<stage> <args>" to $ARTHROSIM_FAKE_LOG, then writes
 // into each output (--out FILE, or report.html + summary.json in --out-dir)
 // its command line followed by the contents of every input file or folder
-// named on it (the scene file excepted). So its output changes exactly when
-// its arguments or one of its inputs do, like a deterministic stage.
+// named on it, and of the scene only its own block (the test scenes write
+// `prepare: {...}` on one line; the other fake stages read no option). So its
+// output changes exactly when its arguments, its options or one of its
+// inputs do, like a deterministic stage.
 constexpr const char* kFakeStage = R"SH(#!/bin/sh
 stage="$(basename "$0")"
 echo "$stage $*" >> "$ARTHROSIM_FAKE_LOG"
@@ -44,7 +46,8 @@ content() {
   echo "$stage $*"
   prev=""
   for a in "$@"; do
-    case "$prev" in --out|--out-dir|--scene) prev="$a"; continue ;; esac
+    case "$prev" in --scene) [ "$stage" = arthrosim-prepare ] && grep '^prepare' "$a"; prev="$a"; continue ;; esac
+    case "$prev" in --out|--out-dir) prev="$a"; continue ;; esac
     if [ -f "$a" ]; then cat "$a"; elif [ -d "$a" ]; then cat "$a"/*; fi
     prev="$a"
   done
@@ -199,12 +202,6 @@ TEST_F(RunnerTest, StagesFollowFromOutputs) {
       "--prepared", (out / "prepared.h5").string(), "--scene", osmotic.file.string(),
       "--scenario", "osmotic", "--out", (out / "surface_osmotic.h5").string()};
   EXPECT_EQ(surf.arguments, expect_args);
-  // prepare.surface_edge_length_mm items become --surface-edge-length-mm flags.
-  const Scene per_surface = scene(
-      "model: ../models/knee\noutputs: [prepared_model]\nprepare:\n  surface_edge_length_mm: [femur=4.2, patella=2]\n");
-  const StageStep prep_own = plan_stages(per_surface, out).at(0);
-  const std::vector<std::string> tail(prep_own.arguments.end() - 4, prep_own.arguments.end());
-  EXPECT_EQ(tail, (V{"--surface-edge-length-mm", "femur=4.2", "--surface-edge-length-mm", "patella=2"}));
   // Post gets kinematics only when COMAK is part of the run.
   const Scene report_osmotic = scene(
       "model: ../models/knee\noutputs: [report]\nsurface:\n  scenarios:\n"
@@ -224,13 +221,22 @@ TEST_F(RunnerTest, StagesFollowFromOutputs) {
                           "surface.gait.effects",
                           "[foundation_springs, imposed_kinematics, mesh_contact]")),
             gait.options.end());
-  // Prepare's command line carries the edge length as written, in mm.
-  const StageStep prep = plan_stages(scene(three_scenarios("[prepared_model]", "2.5")), out)[0];
-  const std::vector<std::string> prep_args = {
-      "--model", (root_ / "models" / "knee").string(), "--edge-length-mm", "2.5", "--unit", "mm",
-      "--max-cast-distance-mm", "10", "--remesh-iterations", "5", "--min-thickness-mm", "0.2",
-      "--max-triangles", "1e+06", "--out", (out / "prepared.h5").string()};
+  // Every stage reads its options from the scene (its block): prepare's
+  // command line names the model, the scene and its output.
+  const Scene edge25 = scene(three_scenarios("[prepared_model]", "2.5"));
+  const StageStep prep = plan_stages(edge25, out)[0];
+  const std::vector<std::string> prep_args = {"--model", (root_ / "models" / "knee").string(), "--scene",
+                                              edge25.file.string(), "--out", (out / "prepared.h5").string()};
   EXPECT_EQ(prep.arguments, prep_args);
+  EXPECT_NE(std::find(prep.options.begin(), prep.options.end(),
+                      std::pair<std::string, std::string>("prepare.edge_length_mm", "2.5")),
+            prep.options.end());
+  // Why each run is planned.
+  const std::vector<StageStep> all = plan_stages(scene(three_scenarios("[report]")), out);
+  EXPECT_EQ(all[0].needed_for, "prepared.h5 for surface.osmotic");  // the first run that reads it
+  EXPECT_EQ(all[1].needed_for, "kinematics.h5 for surface.gait");
+  EXPECT_EQ(all[2].needed_for, "surface_osmotic.h5 for post");
+  EXPECT_EQ(all.back().needed_for, "output report");
 }
 
 TEST_F(RunnerTest, RunsOnlyNeededStagesInOrderAndReusesThem) {

@@ -335,12 +335,12 @@ TEST_F(SceneTest, MissingRequiredKeys) {
 
 TEST_F(SceneTest, OutputsNeedTheirBlocks) {
   expect_error("model: ../models/knee\noutputs: [prepared_model, report]\n", 2, 10,
-               {"output 'report' needs a 'surface' block with at least one scenario"});
+               {"output 'report' is requested, which needs a 'surface' block with at least one scenario"});
   expect_error("model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\n", 3, 10,
                {"output 'kinematics' is requested", "add a 'comak' block"});
   expect_error("model: ../models/knee\noutputs: [surface]\ncomak: {effects: [muscles]}\n"
                "surface:\n  scenarios:\n    gait:\n      effects: [imposed_kinematics]\n",
-               6, 1, {"scenario 'gait' uses imposed_kinematics", "add 'trial: PATH'"});
+               6, 5, {"scenario 'gait' uses imposed_kinematics", "add 'trial: PATH'"});
   expect_error("model: ../models/knee\noutputs: [prepared_model, bogus]\n", 2, 27,
                {"'outputs': unknown item 'bogus'", "expected any of prepared_model, kinematics, surface, "
                                                    "biphasic, report"});

@@ -357,9 +357,10 @@ void expect_refused(const std::string& scene, const std::string& scenario, const
 }
 
 // The opt-in keys are refused where they cannot apply: the stop with the
-// direct steady-state solve, a ramp longer than the run.
+// direct steady-state solve, a ramp longer than the run. (A scene is checked
+// whole when it is read, so each bad scenario has a scene of its own.)
 TEST(SurfaceStage, DynamicOsmoticKeysRefusedWhereMeaningless) {
-  const std::string scene = write_scene("osmotic_dynamic_bad", R"(surface:
+  const std::string stop_static = write_scene("osmotic_dynamic_bad_stop", R"(surface:
   scenarios:
     stop_static:
       surfaces: [femur]
@@ -367,6 +368,9 @@ TEST(SurfaceStage, DynamicOsmoticKeysRefusedWhereMeaningless) {
       steady_state: true
       steady_state_change_mm: 1e-6
       effects: [foundation_springs, osmotic_pressure, periphery_fixed]
+)");
+  const std::string long_ramp = write_scene("osmotic_dynamic_bad_ramp", R"(surface:
+  scenarios:
     long_ramp:
       surfaces: [femur]
       end_time_s: 0.01
@@ -374,8 +378,8 @@ TEST(SurfaceStage, DynamicOsmoticKeysRefusedWhereMeaningless) {
       osmotic_ramp_s: 0.02
       effects: [foundation_springs, osmotic_pressure, periphery_fixed]
 )");
-  expect_refused(scene, "stop_static", "osmotic_dynamic_bad_stop_static.h5", "steady_state_change_mm");
-  expect_refused(scene, "long_ramp", "osmotic_dynamic_bad_long_ramp.h5", "osmotic_ramp_s");
+  expect_refused(stop_static, "stop_static", "osmotic_dynamic_bad_stop_static.h5", "steady_state_change_mm");
+  expect_refused(long_ramp, "long_ramp", "osmotic_dynamic_bad_long_ramp.h5", "osmotic_ramp_s");
 }
 
 // mesh_contact needs both surfaces of each contact pair: a scenario that
@@ -405,21 +409,24 @@ TEST(SurfaceStage, ContactPairWithoutItsSurfacesStopsWithClearError) {
 // rim_contacts treatment it stops before anything is written, naming what
 // conflicts.
 TEST(SurfaceStage, FadedVertexWeightsRefusedWithConflictingRimKeys) {
-  const std::string scene = write_scene("faded_weights_bad", R"(surface:
+  const std::string rim_vertices = write_scene("faded_weights_bad_rim_vertices", R"(surface:
   scenarios:
     with_rim_vertices:
       end_time_s: 1e-3
       contact_vertex_weights: faded
       contact_rim_vertices: true
       effects: [foundation_springs, periphery_fixed, mesh_contact]
+)");
+  const std::string rim_contacts = write_scene("faded_weights_bad_rim_contacts", R"(surface:
+  scenarios:
     with_rim_contacts:
       end_time_s: 1e-3
       contact_vertex_weights: faded
       contact_rim: rim_contacts
       effects: [foundation_springs, periphery_fixed, mesh_contact]
 )");
-  expect_refused(scene, "with_rim_vertices", "faded_weights_bad_rim_vertices.h5", "contact_rim_vertices");
-  expect_refused(scene, "with_rim_contacts", "faded_weights_bad_rim_contacts.h5", "fade_inside");
+  expect_refused(rim_vertices, "with_rim_vertices", "faded_weights_bad_rim_vertices.h5", "contact_rim_vertices");
+  expect_refused(rim_contacts, "with_rim_contacts", "faded_weights_bad_rim_contacts.h5", "fade_inside");
 }
 
 TEST(SurfaceStage, UnknownSurfaceNamesWhatThePreparedModelHas) {

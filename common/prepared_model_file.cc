@@ -1,0 +1,86 @@
+#include "common/prepared_model_file.h"
+
+#include "common/error.h"
+#include "common/hdf5.h"
+
+namespace arthrosim::common {
+
+namespace {
+std::string group(const std::string& surface) { return "/surfaces/" + surface; }
+}  // namespace
+
+PreparedModelReader::PreparedModelReader(const std::string& path)
+    : f_(std::make_unique<H5File>(path, H5File::Mode::kRead)) {}
+PreparedModelReader::~PreparedModelReader() = default;
+const std::string& PreparedModelReader::path() const { return f_->path(); }
+
+std::vector<std::string> PreparedModelReader::surface_names() const { return f_->read_strings("/surfaces/names"); }
+
+std::string PreparedModelReader::bone(const std::string& surface) const {
+  return f_->attribute_string(group(surface), "bone");
+}
+
+std::string PreparedModelReader::source_file(const std::string& surface) const {
+  return f_->attribute_string(group(surface), "source_file");
+}
+
+PreparedModelReader::QuadSurface PreparedModelReader::quads(const std::string& name) const {
+  const H5File& f = *f_;
+  const std::string g = group(name) + "/quads/";
+  QuadSurface s;
+  s.mesh.name = name;
+  s.mesh.V = f.read_matrix(g + "nodes", 3);
+  const Eigen::MatrixXi Q = f.read_matrix_int(g + "quads", 4);
+  s.mesh.Q = Q;
+  s.normals = f.read_matrix(g + "normals", 3);
+  const Eigen::VectorXi P = f.read_vector_int(g + "periphery");
+  s.periphery.assign(P.data(), P.data() + P.size());
+  const int N = static_cast<int>(s.mesh.V.rows());
+  if (s.normals.rows() != N)
+    throw InputError(f.path() + ": error: dataset " + g + "normals: expected " + std::to_string(N) +
+                     " rows (one per node), found " + std::to_string(s.normals.rows()));
+  if (Q.size() > 0 && (Q.minCoeff() < 0 || Q.maxCoeff() >= N))
+    throw InputError(f.path() + ": error: dataset " + g + "quads: node index out of range [0, " + std::to_string(N) +
+                     ")");
+  if (!s.mesh.V.allFinite() || !s.normals.allFinite())
+    throw InputError(f.path() + ": error: dataset " + g + "nodes or " + g + "normals holds NaN/Inf");
+  return s;
+}
+
+std::string PreparedModelReader::quad_thickness_dataset(const std::string& surface) {
+  return group(surface) + "/quads/thickness";
+}
+
+Eigen::VectorXd PreparedModelReader::quad_thickness(const std::string& surface) const {
+  return f_->read_vector(quad_thickness_dataset(surface));
+}
+
+PreparedModelReader::TriangleSurface PreparedModelReader::triangles(const std::string& surface) const {
+  TriangleSurface s;
+  s.group = group(surface) + "/triangles/";
+  s.mesh.V = f_->read_matrix(s.group + "vertices", 3);
+  s.mesh.F = f_->read_matrix_int(s.group + "faces", 3);
+  s.thickness = f_->read_vector(s.group + "thickness");
+  const std::string& g = s.group;
+  const Eigen::MatrixXd& V = s.mesh.V;
+  const Eigen::MatrixXi& F = s.mesh.F;
+  const Eigen::VectorXd& t = s.thickness;
+  if (t.size() != V.rows() || F.rows() == 0)
+    throw InputError(path(), 0, g + ": expected one thickness per vertex and triangles, found " +
+                                    std::to_string(t.size()) + " values for " + std::to_string(V.rows()) +
+                                    " vertices");
+  // Nothing outside the file's own arrays, no NaN/Inf (a damaged or foreign file).
+  for (int r = 0; r < F.rows(); ++r)
+    for (int k = 0; k < 3; ++k)
+      if (F(r, k) < 0 || F(r, k) >= V.rows())
+        throw InputError(path(), 0, g + "faces: expected vertex indices in [0, " + std::to_string(V.rows()) +
+                                        "), found " + std::to_string(F(r, k)) + " in triangle " +
+                                        std::to_string(r));
+  if (!V.allFinite()) throw InputError(path(), 0, g + "vertices: expected finite coordinates, found NaN or Inf");
+  if (!t.allFinite() || (t.array() < 0).any())
+    throw InputError(path(), 0,
+                     g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
+  return s;
+}
+
+}  // namespace arthrosim::common

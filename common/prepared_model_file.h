@@ -1,0 +1,60 @@
+#pragma once
+// The prepared-model file, prepared.h5 (schema docs/prepared_model.md): the
+// reader its consumers use (the surface stage's shells, the musculoskeletal
+// stage's contact surfaces). Every dataset path a consumer needs is here.
+// (The writer is pipelines::write_prepared_model, pipelines/prepare.h.)
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/mesh.h"
+
+namespace arthrosim::common {
+
+class H5File;
+
+class PreparedModelReader {
+ public:
+  /// Opens `path` (InputError naming it when it cannot be read).
+  explicit PreparedModelReader(const std::string& path);
+  ~PreparedModelReader();
+  const std::string& path() const;
+
+  /// The cartilage surfaces, in file order (/surfaces/names).
+  std::vector<std::string> surface_names() const;
+  /// The bone a surface lies on, e.g. "tibia".
+  std::string bone(const std::string& surface) const;
+  /// The cartilage mesh file a surface was prepared from.
+  std::string source_file(const std::string& surface) const;
+
+  /// The all-quad articular surface of the shell stage.
+  struct QuadSurface {
+    QuadMesh mesh;             ///< nodes [m], quads
+    Points3 normals;           ///< unit, per node, away from the bone
+    std::vector<int> periphery;  ///< outline nodes, sorted
+  };
+  /// Checked: one normal per node, quad indices in range, finite values;
+  /// InputError naming the file and dataset otherwise.
+  QuadSurface quads(const std::string& surface) const;
+  /// Cartilage thickness per quad node [m].
+  Eigen::VectorXd quad_thickness(const std::string& surface) const;
+  /// Dataset name of quad_thickness (for messages).
+  static std::string quad_thickness_dataset(const std::string& surface);
+
+  /// The remeshed triangle surface with its per-vertex thickness [m].
+  struct TriangleSurface {
+    TriangleMesh mesh;
+    Eigen::VectorXd thickness;
+    std::string group;  ///< its group in the file (messages)
+  };
+  /// Checked: one thickness per vertex, at least one triangle, indices in
+  /// range, finite coordinates, finite thickness >= 0; InputError naming the
+  /// file and dataset otherwise.
+  TriangleSurface triangles(const std::string& surface) const;
+
+ private:
+  std::unique_ptr<H5File> f_;
+};
+
+}  // namespace arthrosim::common
