@@ -329,7 +329,7 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
         << number(sim.critical_time_step() * 1e9) << " ns, " << sim.critical_tissue() << "; d/c_p of the fastest p-wave ("
         << sim.fastest_p_wave_tissue() << ", " << number(sim.fastest_p_wave()) << " m/s) "
         << number(m.lattice.diameter / sim.fastest_p_wave() * 1e9) << " ns), " << steps << " steps";
-      if (sim.filtration()) s << ", filtration sub-steps " << sim.filtration()->substeps();
+      if (sim.filtration()) s << ", filtration stages (fast bonds) " << sim.filtration()->substeps();
       if (pulse) s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa (T_p " << number(pulse->time_to_90_percent() * 1e6) << " us)";
       common::log_info(s.str());
     }

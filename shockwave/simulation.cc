@@ -179,12 +179,10 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
   pos_[1][1] = pos_[0][1];
   pos_[1][2] = pos_[0][2];
   const size_t nb = static_cast<size_t>(K_ / 2) * n_;
-  for (int b = 0; b < 2; ++b) {
-    sn_[b].assign(nb, 0.0);
-    tx_[b].assign(nb, 0.0);
-    ty_[b].assign(nb, 0.0);
-    tz_[b].assign(nb, 0.0);
-  }
+  sn_.assign(nb, 0.0);
+  tx_.assign(nb, 0.0);
+  ty_.assign(nb, 0.0);
+  tz_.assign(nb, 0.0);
   theta_.assign(n_, 0.0);
   b_.assign(n_, 0.0);
   pore_.assign(n_, 0.0);
@@ -222,10 +220,10 @@ void Simulation::set_angular_velocity(int i, const common::Vec3& w) {
 // in direction order.
 
 #define SW_INLINE inline __attribute__((always_inline))
-// The row kernels are also compiled for AVX2 (4 doubles per vector) and the
-// variant is chosen at run time; without FMA contraction both give the same
-// bits.
-#define SW_CLONES __attribute__((target_clones("avx2", "default")))
+// The row kernels are also compiled for AVX-512 and AVX2 (8 and 4 doubles per
+// vector) and the variant is chosen at run time; without FMA contraction all
+// give the same bits.
+#define SW_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 
 namespace {
 
@@ -286,7 +284,7 @@ struct PairIn {
 struct PairOut {
   double sn, tx, ty, tz;                    // new pair state
   double fx, fy, fz, mx, my, mz;            // force on the owner, moment (both)
-  double s11, s22, s33, s12, s23, s13;      // q n (x) F (both)
+  double tr;                                // q n . F, the trace of A4's q n (x) F (both)
   double e11, e22, e33, e12, e23, e13;      // sym(g (x) n), g the pair's strain vector (both)
 };
 
@@ -322,12 +320,7 @@ SW_INLINE void pair_loads(PairOut& out, const PairGeo<kLinear>& g, double sig, d
   out.mx = qS * (ny * tZ - nz * tY);
   out.my = qS * (nz * tX - nx * tZ);
   out.mz = qS * (nx * tY - ny * tX);
-  out.s11 = q * nx * out.fx;
-  out.s22 = q * ny * out.fy;
-  out.s33 = q * nz * out.fz;
-  out.s12 = 0.5 * q * (nx * out.fy + ny * out.fx);
-  out.s23 = 0.5 * q * (ny * out.fz + nz * out.fy);
-  out.s13 = 0.5 * q * (nx * out.fz + nz * out.fx);
+  out.tr = q * (nx * out.fx + ny * out.fy + nz * out.fz);
   pair_strain(out, g.r, nx, ny, nz, tX, tY, tZ, wsum, inv_d);
 }
 
@@ -385,8 +378,8 @@ void Simulation::build_rows() {
   max_row_ = 0;
   for (const Row& r : rows_) max_row_ = std::max(max_row_, r.len);
   runs_.assign(rows_.size() * K, Run{0, 0, 0});
-  if (periodic_) return;  // minimum images: the general path only
   for (size_t r = 0; r < rows_.size(); ++r) {
+    if (periodic_) break;  // minimum images: the general path only
     const int a0 = rows_[r].start, a1 = a0 + rows_[r].len;
     for (int s = 0; s < K; ++s) {
       // The longest stretch of the row with a constant, valid offset.
@@ -402,6 +395,19 @@ void Simulation::build_rows() {
         i = e;
       }
       runs_[r * K + s] = best;
+    }
+  }
+  // The pairs outside the runs (row ends, holes, periodic models), per row
+  // and direction in automaton order: the general path.
+  extra_.clear();
+  extra_start_.assign(rows_.size() * K + 1, 0);
+  for (size_t r = 0; r < rows_.size(); ++r) {
+    const int a0 = rows_[r].start, a1 = a0 + rows_[r].len;
+    for (int s = 0; s < K; ++s) {
+      const Run run = runs_[r * K + s];
+      for (int i = a0; i < a1; ++i)
+        if ((i < run.a || i >= run.b) && model_.neighbour(s, i) >= 0) extra_.push_back(i);
+      extra_start_[r * K + s + 1] = static_cast<std::int32_t>(extra_.size());
     }
   }
 }
@@ -442,10 +448,10 @@ SW_CLONES void Simulation::predictor() {
           sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
                                                  vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ux, uy, uz);
         }
-        for (int i = a0; i < a1; ++i) {
-          if (i >= run.a && i < run.b) continue;
+        const size_t rs = static_cast<size_t>(row) * K + s;
+        for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+          const int i = extra_[e];
           const int j = nb[static_cast<size_t>(s) * n + i];
-          if (j < 0) continue;
           double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
           if constexpr (kPeriodic) {
             dx = wrap(dx, Lx, iLx);
@@ -486,7 +492,7 @@ template <bool kPeriodic, bool kLinear>
 SW_CLONES void Simulation::pair_forces() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
-  const int c = cur_, o = 1 - cur_;
+  const int c = cur_;
   const double* __restrict px = pos_[c][0].data();
   const double* __restrict py = pos_[c][1].data();
   const double* __restrict pz = pos_[c][2].data();
@@ -496,14 +502,11 @@ SW_CLONES void Simulation::pair_forces() {
   const double* __restrict wx = omg_[c][0].data();
   const double* __restrict wy = omg_[c][1].data();
   const double* __restrict wz = omg_[c][2].data();
-  const double* __restrict sn0 = sn_[c].data();
-  const double* __restrict tx0 = tx_[c].data();
-  const double* __restrict ty0 = ty_[c].data();
-  const double* __restrict tz0 = tz_[c].data();
-  double* __restrict sn1 = sn_[o].data();
-  double* __restrict tx1 = tx_[o].data();
-  double* __restrict ty1 = ty_[o].data();
-  double* __restrict tz1 = tz_[o].data();
+  // Pair state, updated in place (each pair read and written once, by its owner).
+  double* __restrict snp = sn_.data();
+  double* __restrict txp = tx_.data();
+  double* __restrict typ = ty_.data();
+  double* __restrict tzp = tz_.data();
   const std::int32_t* __restrict nb = model_.neighbours.data();
   const double* __restrict w = wa_.data();
   const double* __restrict b = b_.data();
@@ -517,17 +520,12 @@ SW_CLONES void Simulation::pair_forces() {
   double* __restrict A4 = acc_[4].data();
   double* __restrict A5 = acc_[5].data();
   double* __restrict A6 = acc_[6].data();
-  double* __restrict A7 = acc_[7].data();
-  double* __restrict A8 = acc_[8].data();
-  double* __restrict A9 = acc_[9].data();
-  double* __restrict A10 = acc_[10].data();
-  double* __restrict A11 = acc_[11].data();
-  double* __restrict E0 = acc_[12].data();
-  double* __restrict E1 = acc_[13].data();
-  double* __restrict E2 = acc_[14].data();
-  double* __restrict E3 = acc_[15].data();
-  double* __restrict E4 = acc_[16].data();
-  double* __restrict E5 = acc_[17].data();
+  double* __restrict E0 = acc_[7].data();
+  double* __restrict E1 = acc_[8].data();
+  double* __restrict E2 = acc_[9].data();
+  double* __restrict E3 = acc_[10].data();
+  double* __restrict E4 = acc_[11].data();
+  double* __restrict E5 = acc_[12].data();
   const double inv_d = 1.0 / model_.lattice.diameter;
   const double d0 = model_.lattice.diameter;
   auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
@@ -544,27 +542,22 @@ SW_CLONES void Simulation::pair_forces() {
     in.wt = w[j];
     in.bo = b[i];
     in.bt = b[j];
-    in.sn = sn0[bi];
-    in.tx = tx0[bi];
-    in.ty = ty0[bi];
-    in.tz = tz0[bi];
+    in.sn = snp[bi];
+    in.tx = txp[bi];
+    in.ty = typ[bi];
+    in.tz = tzp[bi];
     const PairOut out = pair_update<kLinear>(in, g, dx, dy, dz, S, dt, inv_d);
-    sn1[bi] = out.sn;
-    tx1[bi] = out.tx;
-    ty1[bi] = out.ty;
-    tz1[bi] = out.tz;
+    snp[bi] = out.sn;
+    txp[bi] = out.tx;
+    typ[bi] = out.ty;
+    tzp[bi] = out.tz;
     A0[i] += out.fx;
     A1[i] += out.fy;
     A2[i] += out.fz;
     A3[i] += out.mx;
     A4[i] += out.my;
     A5[i] += out.mz;
-    A6[i] += out.s11;
-    A7[i] += out.s22;
-    A8[i] += out.s33;
-    A9[i] += out.s12;
-    A10[i] += out.s23;
-    A11[i] += out.s13;
+    A6[i] += out.tr;
     // The automaton's own share of the pair's strain (A8's split by compliance).
     const double share = 2.0 * w[i] / (w[i] + w[j]);
     E0[i] += share * out.e11;
@@ -580,7 +573,7 @@ SW_CLONES void Simulation::pair_forces() {
     const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
     for (int i = a0; i < a1; ++i) {
       A0[i] = A1[i] = A2[i] = A3[i] = A4[i] = A5[i] = 0.0;
-      A6[i] = A7[i] = A8[i] = A9[i] = A10[i] = A11[i] = 0.0;
+      A6[i] = 0.0;
       E0[i] = E1[i] = E2[i] = E3[i] = E4[i] = E5[i] = 0.0;
     }
     for (int s = 0; s < H; ++s) {
@@ -593,10 +586,10 @@ SW_CLONES void Simulation::pair_forces() {
         const int j = i + off;
         side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i], ux, uy, uz);
       }
-      for (int i = a0; i < a1; ++i) {
-        if (i >= run.a && i < run.b) continue;
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
         const int j = nb[base + i];
-        if (j < 0) continue;
         double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
         if constexpr (kPeriodic) {
           dx = wrap(dx, Lx, iLx);
@@ -635,10 +628,10 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict ox = omg_[o][0].data();
   double* __restrict oy = omg_[o][1].data();
   double* __restrict oz = omg_[o][2].data();
-  const double* __restrict sn1 = sn_[o].data();
-  const double* __restrict tx1 = tx_[o].data();
-  const double* __restrict ty1 = ty_[o].data();
-  const double* __restrict tz1 = tz_[o].data();
+  const double* __restrict sn1 = sn_.data();
+  const double* __restrict tx1 = tx_.data();
+  const double* __restrict ty1 = ty_.data();
+  const double* __restrict tz1 = tz_.data();
   const std::int32_t* __restrict nb = model_.neighbours.data();
   const double S = model_.lattice.contact_area;
   const double R = model_.lattice.radius;
@@ -657,17 +650,12 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict A4 = acc_[4].data();
   double* __restrict A5 = acc_[5].data();
   double* __restrict A6 = acc_[6].data();
-  double* __restrict A7 = acc_[7].data();
-  double* __restrict A8 = acc_[8].data();
-  double* __restrict A9 = acc_[9].data();
-  double* __restrict A10 = acc_[10].data();
-  double* __restrict A11 = acc_[11].data();
-  double* __restrict E0 = acc_[12].data();
-  double* __restrict E1 = acc_[13].data();
-  double* __restrict E2 = acc_[14].data();
-  double* __restrict E3 = acc_[15].data();
-  double* __restrict E4 = acc_[16].data();
-  double* __restrict E5 = acc_[17].data();
+  double* __restrict E0 = acc_[7].data();
+  double* __restrict E1 = acc_[8].data();
+  double* __restrict E2 = acc_[9].data();
+  double* __restrict E3 = acc_[10].data();
+  double* __restrict E4 = acc_[11].data();
+  double* __restrict E5 = acc_[12].data();
   const double* __restrict w = wa_.data();
   const double* __restrict escale = strain_scale_.data();
   const double inv_d = 1.0 / model_.lattice.diameter;
@@ -689,12 +677,7 @@ SW_CLONES void Simulation::integrate() {
     A3[i] += out.mx;
     A4[i] += out.my;
     A5[i] += out.mz;
-    A6[i] += out.s11;
-    A7[i] += out.s22;
-    A8[i] += out.s33;
-    A9[i] += out.s12;
-    A10[i] += out.s23;
-    A11[i] += out.s13;
+    A6[i] += out.tr;
     // The automaton's own share of the pair's strain (A8's split by compliance).
     const double share = 2.0 * w[i] / (w[i] + w[j]);
     E0[i] += share * out.e11;
@@ -721,10 +704,10 @@ SW_CLONES void Simulation::integrate() {
         // The owner's frame, as in pair_forces: the same bits.
         other(i, j, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j], ux, uy, uz);
       }
-      for (int i = a0; i < a1; ++i) {
-        if (i >= run.a && i < run.b) continue;
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
         const int j = nb[static_cast<size_t>(s) * n + i];
-        if (j < 0) continue;
         double dx = px[i] - px[j], dy = py[i] - py[j], dz = pz[i] - pz[j];
         if constexpr (kPeriodic) {
           dx = wrap(dx, Lx, iLx);
@@ -736,9 +719,8 @@ SW_CLONES void Simulation::integrate() {
     }
 #pragma omp simd
     for (int i = a0; i < a1; ++i) {
-      const double s11 = A6[i] * invV, s22 = A7[i] * invV, s33 = A8[i] * invV;
-      const double s12 = A9[i] * invV, s23 = A10[i] * invV, s13 = A11[i] * invV;
-      const double P = -(s11 + s22 + s33) / 3.0;  // A5
+      // A5 from the trace of A4's averaged stress (the full tensor: stress()).
+      const double P = -(A6[i] * invV) / 3.0;
       // Averaged strain tensor from the pairs' strains, its deviatoric part
       // and the equivalent (von Mises) strain sqrt(2/3 e:e).
       const double c = escale[i];
@@ -749,9 +731,6 @@ SW_CLONES void Simulation::integrate() {
       const double eps = std::sqrt(2.0 / 3.0 * (d1 * d1 + d2 * d2 + d3 * d3 + 2.0 * (e12 * e12 + e23 * e23 + e13 * e13)));
       Pout[i] = P;
       Eout[i] = eps;
-      (void)s12;
-      (void)s23;
-      (void)s13;
       Ppk[i] = P > Ppk[i] ? P : Ppk[i];
       Epk[i] = eps > Epk[i] ? eps : Epk[i];
       // Kick (A1) and drift.
@@ -800,16 +779,7 @@ SW_CLONES void Simulation::integrate() {
       const double fex = p_load * A.x(), fey = p_load * A.y(), fez = p_load * A.z();
       const double inv_a = 1.0 / A.norm();
       const double nx = -A.x() * inv_a, ny = -A.y() * inv_a, nz = -A.z() * inv_a;
-      const double s11 = (A6[i] + R * nx * fex) * invV;
-      const double s22 = (A7[i] + R * ny * fey) * invV;
-      const double s33 = (A8[i] + R * nz * fez) * invV;
-      const double s12 = (A9[i] + 0.5 * R * (nx * fey + ny * fex)) * invV;
-      const double s23 = (A10[i] + 0.5 * R * (ny * fez + nz * fey)) * invV;
-      const double s13 = (A11[i] + 0.5 * R * (nx * fez + nz * fex)) * invV;
-      const double P = -(s11 + s22 + s33) / 3.0;
-      (void)s12;
-      (void)s23;
-      (void)s13;
+      const double P = -((A6[i] + R * (nx * fex + ny * fey + nz * fez)) * invV) / 3.0;
       Pout[i] = P;
       Ppk[i] = std::max(loaded_peaks_[2 * k], P);
       const double im = im_a[i];
@@ -991,9 +961,9 @@ double Simulation::von_mises(int i) const {
 }
 
 std::array<double, 6> Simulation::stress(int i) const {
-  // Recomputed from the pair state of the fields' level (after the step the
-  // new pair state is in cur_, the positions of that level in 1 - cur_).
-  const int c = cur_, o = 1 - cur_;
+  // Recomputed from the pair state of the fields' level (the positions of
+  // that level are in 1 - cur_ after the step).
+  const int o = 1 - cur_;
   const int K = K_, H = K_ / 2, n = n_;
   const bool linear = options_.geometry == Geometry::kLinear;
   std::array<double, 6> s{0, 0, 0, 0, 0, 0};
@@ -1008,7 +978,7 @@ std::array<double, 6> Simulation::stress(int i) const {
       if (period_[a] > 0) dv[a] = wrap(dv[a], period_[a], 1.0 / period_[a]);
     const common::Vec3 nv = linear ? model_.lattice.unit[own ? d : d - H] : common::Vec3(dv / dv.norm());
     const double q = linear ? 0.5 * model_.lattice.diameter : 0.5 * dv.norm();
-    const common::Vec3 F = model_.lattice.contact_area * (sn_[c][bi] * nv + common::Vec3(tx_[c][bi], ty_[c][bi], tz_[c][bi]));
+    const common::Vec3 F = model_.lattice.contact_area * (sn_[bi] * nv + common::Vec3(tx_[bi], ty_[bi], tz_[bi]));
     s[0] += q * nv.x() * F.x();
     s[1] += q * nv.y() * F.y();
     s[2] += q * nv.z() * F.z();
@@ -1025,7 +995,7 @@ double Simulation::potential_energy() const {
   //   + sum_i V [D_i K_i theta_i^2 / (2 f_i) + P_i^2 / (2 M_i)],
   // beta = (w_i B_i + w_j B_j)/(w_i + w_j), B_i = D_i (K_i theta_i - a_i f_i P_i) - c_i a_i f_i P_i
   // (the accumulated many-body and pore parts of the pair force).
-  const int c = cur_, n = n_, H = K_ / 2;
+  const int n = n_, H = K_ / 2;
   const double S = model_.lattice.contact_area, V = model_.lattice.cell_volume;
   auto B = [&](int i) {
     const int t = model_.tissue[i];
@@ -1042,8 +1012,8 @@ double Simulation::potential_energy() const {
       const size_t bi = static_cast<size_t>(s) * n + i;
       const double wi = w_[ti], wj = w_[model_.tissue[j]];
       const double beta = (wi * B(i) + wj * B(j)) / (wi + wj);
-      const double d = sn_[c][bi] - beta;
-      const double t2 = tx_[c][bi] * tx_[c][bi] + ty_[c][bi] * ty_[c][bi] + tz_[c][bi] * tz_[c][bi];
+      const double d = sn_[bi] - beta;
+      const double t2 = tx_[bi] * tx_[bi] + ty_[bi] * ty_[bi] + tz_[bi] * tz_[bi];
       e += 0.5 * S * (wi + wj) * (d * d + t2);
     }
     e += V * D_[ti] * K_bulk_[ti] * theta_[i] * theta_[i] / (2.0 * f_[i]);

@@ -31,8 +31,8 @@
 // O(dt^2) error of the integrator (tests/shockwave/energy_test.cc).
 //
 // Determinism: every loop writes only its own automaton (and the bonds it
-// owns; pair state is double-buffered so both halves of a pair read the same
-// old state and compute identical bits); global sums use fixed blocks
+// owns: each pair's state is updated once, in place, by its owner; the other
+// half reads the new state in the next pass); global sums use fixed blocks
 // (reduce.h). Results are bit-identical for any number of OpenMP threads.
 #include <cstdint>
 #include <functional>
@@ -247,17 +247,19 @@ class Simulation {
   std::vector<std::uint8_t> poro_;
   // Per automaton.
   std::vector<double> f_, wa_;  ///< free-surface factor, compliance R/(2G) per automaton
-  std::array<std::vector<double>, 18> acc_;  ///< F (3), M (3), A4 sum (6), strain sum (6)
+  std::array<std::vector<double>, 13> acc_;  ///< F (3), M (3), trace of the A4 sum (1), strain sum (6)
   std::vector<double> strain_scale_;  ///< 3 / (number of pairs)
   std::vector<std::int32_t> constraint_of_;
   std::vector<double> loaded_peaks_;  ///< peaks of the loaded automata before the step
   std::vector<Row> rows_;
   std::vector<Run> runs_;  ///< [row * K + direction]
+  std::vector<std::int32_t> extra_;        ///< automata of the general path, by row and direction
+  std::vector<std::int32_t> extra_start_;  ///< [row * K + direction] -> first index into extra_
   int max_row_ = 0;
   std::vector<double> inv3G_a_, inv_mass_a_, inv_inertia_a_;  ///< per automaton
   std::vector<std::uint8_t> drained_;
   std::vector<double> pos_[2][3], vel_[2][3], omg_[2][3];
-  std::vector<double> sn_[2], tx_[2], ty_[2], tz_[2];  ///< pair state [s * n + owner], s < K/2
+  std::vector<double> sn_, tx_, ty_, tz_;  ///< pair state [s * n + owner], s < K/2 (in place)
   std::vector<double> theta_, zeta_, pore_, b_;
   std::vector<double> pressure_, distortional_;
   std::vector<double> peak_pressure_, peak_distortional_, peak_pore_;

@@ -119,14 +119,17 @@ int main(int argc, char** argv) {
       "      # a quick look (seconds): the first 10 us of a 0.33 mJ/mm^2 pulse on the 2 mm knee\n"
       "  arthrosim-shockwave --prepared prepared_coarse.h5 --model data/models/knee_parametric/coarse \\\n"
       "      --efd-mj-per-mm2 0.12 0.33 0.8 --out sw [--dry-run]\n"
-      "      # the seed's three runs at d = 1 mm (20-40 min each on one loaded core; --dry-run: the plan)\n"
+      "      # the seed's three runs at d = 1 mm (stepping about 3.5 CPU min each, 12 min wall with 2 threads on a\n"
+      "      # loaded 2-core machine; --dry-run: the plan)\n"
       "  paraview sw_efd0.33.xdmf                        # pressure, distortional strain, pore pressure per automaton\n"
       "  arthrosim-shockwave --prepared prepared_coarse.h5 --model data/models/knee_parametric/coarse \\\n"
       "      --automaton-diameter-mm 2 --effects mca_elastic pore_fluid filtration platen_compression \\\n"
       "      --out sw_stiff [--dry-run]   # slow compression between the cut faces: stiffness (minutes)\n"
       "  arthrosim-shockwave --geometry bar --bar-tissue cartilage --end-time-us 60 --pulse-rise-time-us 10 \\\n"
       "      --pulse-fall-time-us 10 --pulse-positive-duration-us 20 --pulse-tail-duration-us 0 --out sw_bar\n"
-      "      # under a second: the p-wave speed of a cartilage bar against Gassmann's undrained value\n");
+      "      # under a second: the p-wave speed of a cartilage bar against Gassmann's undrained value\n"
+      "Threads: OMP_NUM_THREADS (same bytes for any count); on a shared machine also\n"
+      "OMP_WAIT_POLICY=passive (threads waiting at a barrier sleep instead of spinning).\n");
   CLI11_PARSE(app, argc, argv);
   visitor.finish();
   common::set_log_program("arthrosim-shockwave");

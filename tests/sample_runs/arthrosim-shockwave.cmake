@@ -1,7 +1,8 @@
 # Sample runs of arthrosim-shockwave --help: the quick look at the 2 mm knee
 # (about 10 s on one core), the seed's three 1 mm runs and the compression as
 # plans (--dry-run: the model is built and the steps counted; the runs take
-# 20-40 min each, docs/shockwave.md), and the cartilage bar (under a second).
+# about 12 min each with 2 threads on the loaded machine, docs/shockwave.md
+# Performance), and the cartilage bar (under a second).
 add_test(NAME sample.arthrosim-shockwave.prepare_coarse
   COMMAND arthrosim-prepare --model ${CMAKE_SOURCE_DIR}/data/models/knee_parametric/coarse
           --out ${CMAKE_BINARY_DIR}/shockwave_sample_prepared_coarse.h5)
