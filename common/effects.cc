@@ -45,6 +45,14 @@ const std::vector<EffectInfo>& known_effects() {
        "cartilage layers as linear biphasic (u-p) volumes on their bones (docs/biphasic.md)"},
       {"penetration_contact", EffectStage::kBiphasic,
        "the penetration method's contact conditions from the overlap and stage 1's contact force"},
+      {"mca_elastic", EffectStage::kShockwave,
+       "movable cellular automata: linear-elastic pair law with the many-body term (A1-A8)"},
+      {"pore_fluid", EffectStage::kShockwave, "Biot pore fluid of the poroelastic tissues (A9-A10)"},
+      {"filtration", EffectStage::kShockwave, "Darcy filtration of the pore fluid between automata (A11-A12)"},
+      {"applicator_pulse", EffectStage::kShockwave,
+       "the shockwave pulse through the copper applicator, scaled to each EFD (eqs. 1-2)"},
+      {"platen_compression", EffectStage::kShockwave,
+       "slow compression of the knee between its cut faces (convergence, validation)"},
   };
   return kEffects;
 }
@@ -61,6 +69,7 @@ std::string_view to_string(EffectStage stage) {
     case EffectStage::kMusculoskeletal: return "musculoskeletal";
     case EffectStage::kSurface: return "surface";
     case EffectStage::kBiphasic: return "biphasic";
+    case EffectStage::kShockwave: return "shockwave";
   }
   return "";
 }

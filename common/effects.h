@@ -26,7 +26,7 @@ namespace arthrosim::common {
 class H5File;
 
 /// The stage whose scene block lists an effect.
-enum class EffectStage { kMusculoskeletal, kSurface, kBiphasic };
+enum class EffectStage { kMusculoskeletal, kSurface, kBiphasic, kShockwave };
 
 struct EffectInfo {
   std::string_view name;         ///< as written in a scene, e.g. "foundation_springs"
@@ -38,7 +38,7 @@ struct EffectInfo {
 const std::vector<EffectInfo>& known_effects();
 /// The entry for `name`, or nullptr when no such effect exists.
 const EffectInfo* find_effect(std::string_view name);
-/// "musculoskeletal", "surface" or "biphasic".
+/// "musculoskeletal", "surface", "biphasic" or "shockwave".
 std::string_view to_string(EffectStage stage);
 /// Comma-separated names of the effects of one stage (for error messages).
 std::string effect_names(EffectStage stage);
