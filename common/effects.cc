@@ -1,6 +1,7 @@
 #include "common/effects.h"
 
 #include <algorithm>
+#include <deque>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -10,10 +11,12 @@
 
 namespace arthrosim::common {
 
-const std::vector<EffectInfo>& known_effects() {
+namespace {
+
+std::vector<EffectInfo>& vocabulary() {
   // The one list of effect names. Descriptions follow issues 3-6 and seed
   // 002_3ffcc11eb7a447d9.txt ("Deformable Cartilage Model", "Contact Methods").
-  static const std::vector<EffectInfo> kEffects = {
+  static std::vector<EffectInfo> kEffects = {
       {"ligaments", EffectStage::kMusculoskeletal,
        "Blankevoort (1991) ligament bundles acting on tibia and patella"},
       {"muscles", EffectStage::kMusculoskeletal,
@@ -55,6 +58,25 @@ const std::vector<EffectInfo>& known_effects() {
        "slow compression of the knee between its cut faces (convergence, validation)"},
   };
   return kEffects;
+}
+
+}  // namespace
+
+const std::vector<EffectInfo>& known_effects() { return vocabulary(); }
+
+void register_effect(const std::string& name, EffectStage stage, const std::string& description) {
+  if (const EffectInfo* e = find_effect(name)) {
+    if (e->stage == stage) return;
+    throw std::logic_error("register_effect: '" + name + "' is already an effect of the " +
+                           std::string(to_string(e->stage)) + " stage");
+  }
+  // The names and descriptions live as long as the program (the vocabulary
+  // holds string_views).
+  static std::deque<std::string> storage;
+  storage.push_back(name);
+  const std::string_view n = storage.back();
+  storage.push_back(description);
+  vocabulary().push_back({n, stage, storage.back()});
 }
 
 const EffectInfo* find_effect(std::string_view name) {
