@@ -318,6 +318,10 @@ std::vector<bool> KinematicsFileReader::converged(Eigen::Index n) const {
   return valid;
 }
 
+double KinematicsFileReader::body_mass_kg() const {
+  return f_->has_attribute("/", "body_mass_kg") ? f_->attribute_double("/", "body_mass_kg") : 0.0;
+}
+
 std::optional<std::pair<std::vector<std::string>, Eigen::MatrixXd>> KinematicsFileReader::activations() const {
   if (!f_->exists(kActivations)) return std::nullopt;
   return std::make_pair(f_->read_strings("/muscles/names"), f_->read_matrix(kActivations));

@@ -85,6 +85,9 @@ class KinematicsFileReader {
   /// Per frame: true when COMAK converged there (/solver/status 0); all true
   /// for a file without status.
   std::vector<bool> converged(Eigen::Index frames) const;
+  /// The subject's mass (root attribute body_mass_kg) [kg]; 0 when the file
+  /// does not record it.
+  double body_mass_kg() const;
   /// Muscle names and activations (frames x muscles), or nullopt.
   std::optional<std::pair<std::vector<std::string>, Eigen::MatrixXd>> activations() const;
   /// The file (for generic listings: attributes, the force datasets under

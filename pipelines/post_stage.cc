@@ -1,6 +1,7 @@
 #include "pipelines/post_stage.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -16,10 +17,12 @@
 #include "common/scene.h"
 #include "musculoskeletal/kinematics_file.h"
 #include "pipelines/json.h"
+#include "pipelines/post_report.h"
+#include "pipelines/report.h"
+#include "pipelines/report_html.h"
 #include "pipelines/stages.h"
 #include "pipelines/surface_output.h"
 #include "pipelines/study.h"
-#include "pipelines/report.h"
 
 namespace arthrosim::pipelines {
 
@@ -114,6 +117,9 @@ StageDescriptor post_stage_descriptor() {
     }
     const std::filesystem::path kinematics = out / "kinematics.h5";
     s.optional_inputs.push_back({"kinematics.h5", kinematics, {"--kinematics", kinematics.string()}});
+    // The biphasic layers' section, when the plan runs that stage.
+    const std::filesystem::path biphasic = out / "biphasic.h5";
+    s.optional_inputs.push_back({"biphasic.h5", biphasic, {"--biphasic", biphasic.string()}});
     const common::OptionBlock& block = scene.block("post");
     s.options = block.canonical();
     add_path_inputs(block, s);
@@ -130,18 +136,24 @@ StageDescriptor post_stage_descriptor() {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+constexpr double kStandardGravity = 9.80665;  // [m/s^2], body weight = mass x g
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Every dataset under `group` (the contact group of a kinematics file or a
 // surface output) whose name contains "force" and has shape (n) or (n, 3)
-// with n = frames becomes a series (|F| for 3 columns), labelled by its path
+// with n = frames becomes a series (|F| for 3 columns), named by its path
 // below the group (docs/kinematics_file.md: force, medial_force,
 // lateral_force; cop, area and max_pressure are not forces and are skipped).
 // The frames' times: the kinematics clock (a surface output with imposed
 // kinematics starts with a seating ramp; its /trial_time puts its frames on
 // the kinematics file's clock).
-std::vector<report::Series> contact_series(const common::H5File& f, const std::string& group, const std::string& prefix) {
-  std::vector<report::Series> out;
+struct ForceSeries {
+  std::string stage, name;  ///< "stage 1" / "stage 2 gait"; "force |F|"
+  std::vector<double> x, y;  ///< [s], [N]
+  std::string label() const { return stage + " " + name; }
+};
+std::vector<ForceSeries> contact_series(const common::H5File& f, const std::string& group, const std::string& stage) {
+  std::vector<ForceSeries> out;
   if (!f.is_group(group) || !f.exists("/time")) return out;
   const Eigen::VectorXd t = f.read_vector(f.exists("/trial_time") ? "/trial_time" : "/time");
   std::function<void(const std::string&)> walk = [&](const std::string& g) {
@@ -153,14 +165,15 @@ std::vector<report::Series> contact_series(const common::H5File& f, const std::s
       }
       if (f.type(p) != common::H5Type::kDouble || name.find("force") == std::string::npos) continue;
       const auto d = f.dims(p);
-      report::Series s;
-      s.label = prefix + p.substr(group.size() + 1);
+      ForceSeries s;
+      s.stage = stage;
+      s.name = p.substr(group.size() + 1);
       if (d.size() == 1 && d[0] == t.size()) {
         const Eigen::VectorXd v = f.read_vector(p);
         s.y.assign(v.data(), v.data() + v.size());
       } else if (d.size() == 2 && d[0] == t.size() && d[1] == 3) {
         const Eigen::MatrixXd m = f.read_matrix(p);
-        s.label += " |F|";
+        s.name += " |F|";
         for (Eigen::Index i = 0; i < m.rows(); ++i) s.y.push_back(m.row(i).norm());
       } else {
         continue;
@@ -209,17 +222,12 @@ std::vector<AttrRow> attributes(const common::H5File& f, const std::string& labe
 }  // namespace
 
 PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::string& out_dir) {
+  namespace rh = report_html;
   const auto t_start = Clock::now();
   fs::create_directories(out_dir);
   PostSummary summary;
   std::vector<std::pair<std::string, double>> timing;  // post's own steps
-  struct Figure {
-    std::string id, caption, svg;
-  };
-  std::vector<Figure> figures;
-  auto add_figure = [&](const std::string& id, const std::string& caption, std::string svg) {
-    figures.push_back({id, caption, std::move(svg)});
-  };
+  post_report::KeyFigures key;
 
   if (in.surfaces.empty()) {
     summary.missing.push_back("no surface output (--surface): no deflection, strain, direction or split-line figures");
@@ -233,20 +241,30 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   }
 
   // ---- contact force (stage 1 kinematics, stage 2 surface outputs) ---------
-  std::vector<report::Series> force;
+  std::vector<ForceSeries> force;
   std::vector<AttrRow> attrs;
-  report::Json json;
+  json::Writer json;
   json.begin_object();
   json.value("schema", "arthrosim post summary 1");
   json.value("scene", in.scene_file);
+  // Stage-1 total force in the tibia frame (for the RMS difference) and its clock.
+  Eigen::VectorXd t1;
+  Eigen::MatrixXd F1;
+  std::vector<bool> converged1;
   if (!in.kinematics.empty()) {
     const auto t0 = Clock::now();
     const musculoskeletal::KinematicsFileReader kin(in.kinematics);
     const common::H5File& k = kin.file();
     const std::string group = musculoskeletal::KinematicsFileReader::kContactGroup;
-    auto s = contact_series(k, group, "stage 1 ");
+    auto s = contact_series(k, group, "stage 1");
     if (s.empty()) summary.missing.push_back("kinematics file " + in.kinematics + " has no " + group + " series over its frames");
     force.insert(force.end(), s.begin(), s.end());
+    if (const auto F = kin.tibiofemoral_force()) {
+      t1 = kin.time();
+      F1 = *F;
+      converged1 = kin.converged(t1.size());
+    }
+    if (kin.body_mass_kg() > 0) key.body_weight_N = kin.body_mass_kg() * kStandardGravity;
     auto a = attributes(k, "kinematics");
     attrs.insert(attrs.end(), a.begin(), a.end());
     timing.emplace_back("read kinematics", seconds_since(t0));
@@ -255,7 +273,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   for (const auto& [scenario, file] : in.surfaces) {
     const surface_output::Reader out(file);
     const common::H5File& f = out.file();
-    auto s = contact_series(f, surface_output::kContactGroup, "stage 2 " + scenario + " ");
+    auto s = contact_series(f, surface_output::kContactGroup, "stage 2 " + scenario);
     any_stage2 = any_stage2 || !s.empty();
     force.insert(force.end(), s.begin(), s.end());
     auto a = attributes(f, scenario);
@@ -265,20 +283,124 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     summary.missing.push_back(std::string("no surface output holds ") + surface_output::kContactGroup +
                               " (stage-2 contact force)");
   }
-  if (!force.empty()) add_figure("fig-contact", "Tibiofemoral contact force over the cycle (stage 1 vs stage 2)",
-                                 report::line_plot("Tibiofemoral contact force", "time [s]", "force [N]", force));
   json.begin_array("contact_force");
   for (const auto& s : force) {
-    json.begin_object().value("label", s.label).array("time_s", s.x).array("value_N", s.y).end_object();
+    json.begin_object().value("label", s.label()).array("time_s", s.x).array("value_N", s.y).end_object();
   }
   json.end_array();
+
+  // Forces in body weights when the kinematics file knows the subject's mass.
+  const bool in_bw = std::isfinite(key.body_weight_N);
+  const double to_plot = in_bw ? 1.0 / key.body_weight_N : 1.0;
+  std::vector<rh::Section> sections;
+  rh::Section stage1{"sec-force", "Tibiofemoral contact force", {}};
+  // Key frames: peaks of the total stage-1 force (the first series, "force"),
+  // else largest deflection and last frame.
+  std::vector<std::pair<std::string, double>> key_times;
+  if (!force.empty()) {
+    const auto& s = force.front();
+    const post_report::GaitPeaks g = post_report::gait_peaks(s.x, s.y);
+    if (g.found) {
+      key_times = {{"first peak", s.x[g.first]}, {"mid-stance", s.x[g.trough]}, {"second peak", s.x[g.second]}};
+      if (s.stage == "stage 1" && in_bw) {
+        key.peak1_bw = s.y[g.first] * to_plot, key.peak2_bw = s.y[g.second] * to_plot;
+        key.trough_bw = s.y[g.trough] * to_plot;
+        key.peak1_s = s.x[g.first], key.peak2_s = s.x[g.second];
+        double medial = post_report::kNaN, lateral = post_report::kNaN;
+        for (const auto& o : force) {
+          if (o.stage != s.stage || o.y.size() != s.y.size()) continue;
+          if (o.name.rfind("medial_force", 0) == 0) medial = o.y[g.first];
+          if (o.name.rfind("lateral_force", 0) == 0) lateral = o.y[g.first];
+        }
+        if (medial + lateral > 0) key.medial_share_peak1 = medial / (medial + lateral);
+      }
+    }
+  }
+  if (!force.empty()) {
+    rh::LinePlot p;
+    p.id = "fig-contact";
+    p.title = "Tibiofemoral contact force";
+    p.caption = std::string("Stage 1 (COMAK, solid lines) against stage 2 (deformable surfaces: total dashed, medial "
+                            "dash-dot, lateral dotted), on the trial's clock; |F| of each force dataset") +
+                (in_bw ? ", in body weights (BW = " + rh::significant(key.body_weight_N) + " N)." : ", in newtons.") +
+                " Click a legend entry to hide its line; drag to zoom.";
+    p.x_label = "time [s]";
+    p.y_label = in_bw ? "force [BW]" : "force [N]";
+    std::map<std::string, int> stage2_colour;
+    for (const auto& s : force) {
+      rh::Line l;
+      l.label = s.name, l.group = s.stage, l.x = s.x;
+      for (double v : s.y) l.y.push_back(v * to_plot);
+      const bool stage1 = s.stage == "stage 1";
+      // Stage 1 solid; stage 2 dashed (total), dash-dot (medial), dotted (lateral).
+      const bool medial = s.name.rfind("medial", 0) == 0, lateral = s.name.rfind("lateral", 0) == 0;
+      l.dash = stage1 ? rh::Dash::kSolid : medial ? rh::Dash::kDashDot : lateral ? rh::Dash::kDot : rh::Dash::kDash;
+      // Colour: stage 1 by dataset (blue total, green medial, orange lateral),
+      // stage 2 by scenario (vermillion, purple, sky blue, ...).
+      if (stage1) {
+        l.colour = medial ? 2 : lateral ? 3 : 0;
+      } else {
+        const auto it = stage2_colour.emplace(s.stage, 0).first;
+        if (it->second == 0) it->second = std::array<int, 3>{1, 4, 5}[(stage2_colour.size() - 1) % 3];
+        l.colour = it->second;
+      }
+      p.lines.push_back(std::move(l));
+    }
+    stage1.blocks.push_back(std::move(p));
+    key.force_figure = "fig-contact";
+  }
+
+  // Stage 2 against stage 1 per scenario: peaks and the RMS difference of the
+  // superior-inferior force (y of the tibia frame, docs/knee_geometry.md), the
+  // seed's comparison (stage-1 frames inside the scenario's span).
+  for (const auto& [scenario, file] : in.surfaces) {
+    post_report::KeyFigures::Scenario ks;
+    ks.name = scenario;
+    const surface_output::Reader out(file);
+    const auto F2 = out.contact_force();
+    if (F2 && F2->values.rows() > 1) {
+      const Eigen::VectorXd t2 = out.trial_time();
+      if (t2.size() == F2->values.rows()) {
+        std::vector<double> x(t2.data(), t2.data() + t2.size()), y;
+        for (Eigen::Index i = 0; i < F2->values.rows(); ++i) y.push_back(F2->values.row(i).norm());
+        const post_report::GaitPeaks g = post_report::gait_peaks(x, y);
+        if (g.found && in_bw && !key_times.empty() && std::abs(x[g.first] - key_times[0].second) < 0.1 &&
+            std::abs(x[g.second] - key_times[2].second) < 0.1) {
+          ks.peak1_bw = y[g.first] * to_plot, ks.peak2_bw = y[g.second] * to_plot;
+        }
+        if (F1.rows() > 0) {
+          const study::SeriesDifference d = study::compare_series(
+              study::TimeSeries{t2, F2->values.col(1), {}}, study::TimeSeries{t1, F1.col(1), converged1});
+          if (d.compared > 0 && d.mean_norm_ref > 0) ks.rms_si = d.rms / d.mean_norm_ref, ks.rms_frames = d.compared;
+        }
+      }
+    }
+    key.scenarios.push_back(ks);
+  }
+
   // The seed's accuracy rule per step of every scenario with mesh contact
   // (/solver/penetration_ratio, docs/surface_output.md), on the trial clock
   // like the forces: steps with active contacts only, as the stage checks it.
-  std::vector<report::Series> ratio_series;
-  std::vector<std::vector<std::string>> rule_rows;
+  rh::LinePlot rule_plot;
+  rule_plot.id = "fig-accuracy-rule";
+  rule_plot.title = "The seed's accuracy rule per step";
+  rule_plot.caption = "Largest interpenetration over largest deflection of any surface, per step with active contacts "
+                      "(solid: every contact; dotted: the unfaded contacts only, without the faces next to a rim), "
+                      "and the run's limit (grey).";
+  rule_plot.x_label = "time [s]";
+  rule_plot.y_label = "interpenetration / deflection [-]";
+  rh::Table rule_table;
+  rule_table.id = "tab-accuracy-rule";
+  rule_table.title = "Accuracy rule of the mesh contact";
+  rule_table.caption = "Per step in contact: largest interpenetration over largest deflection of any surface (the "
+                       "seed's rule asks for at most the limit). The last three columns take only the unfaded "
+                       "contacts, i.e. leave out the faces next to a rim where the contact fades out (docs/contact.md, "
+                       "\"The seed's accuracy rule\").";
+  rule_table.header = {"scenario", "steps in contact", "median ratio", "max ratio", "limit", "steps over the limit",
+                       "median ratio, unfaded", "max ratio, unfaded", "steps over, unfaded"};
   json.begin_array("accuracy_rule");
-  for (const auto& [scenario, file] : in.surfaces) {
+  for (std::size_t si_ = 0; si_ < in.surfaces.size(); ++si_) {
+    const auto& [scenario, file] = in.surfaces[si_];
     const std::optional<surface_output::PenetrationSeries> pen = surface_output::Reader(file).penetration();
     if (!pen) continue;
     const Eigen::VectorXd& t = pen->time;
@@ -291,9 +413,9 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     // its rows).
     const bool has_unfaded = pen->has_unfaded;
     const Eigen::VectorXd& ri = pen->unfaded_ratio;
-    report::Series s, si;
-    s.label = "stage 2 " + scenario;
-    si.label = "stage 2 " + scenario + ", unfaded contacts";
+    rh::Line s, si;
+    s.label = scenario, s.group = "stage 2", s.colour = std::array<int, 3>{1, 4, 5}[si_ % 3];
+    si.label = scenario + ", unfaded contacts", si.group = "stage 2", si.colour = s.colour, si.dash = rh::Dash::kDot;
     std::vector<double> in_contact, unfaded;
     int over = 0, unfaded_over = 0;
     for (Eigen::Index i = 0; i < t.size(); ++i) {
@@ -316,53 +438,43 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     json.begin_object().value("scenario", scenario).value("steps_in_contact", static_cast<int>(m))
         .value("median_ratio", median).value("max_ratio", max_ratio);
     if (has_limit) json.value("limit", limit).value("steps_over_limit", over);
-    std::string i_median = "(not recorded)", i_max = "-", i_over = "-";
+    rh::Cell i_median = std::string("(not recorded)"), i_max = std::string("-"), i_over = std::string("-");
     if (has_unfaded) {
       const double im = median_of(unfaded), ix = *std::max_element(unfaded.begin(), unfaded.end());
       json.value("median_unfaded_ratio", im).value("max_unfaded_ratio", ix);
       if (has_limit) json.value("steps_over_limit_unfaded", unfaded_over);
-      i_median = report::number(im);
-      i_max = report::number(ix);
-      if (has_limit) i_over = std::to_string(unfaded_over);
+      i_median = im;
+      i_max = ix;
+      if (has_limit) i_over = static_cast<long long>(unfaded_over);
     }
     json.end_object();
-    rule_rows.push_back({scenario, std::to_string(m), report::number(median), report::number(max_ratio),
-                         has_limit ? report::number(limit) : std::string("(not recorded)"),
-                         has_limit ? std::to_string(over) : std::string("-"), i_median, i_max, i_over});
-    if (has_limit && ratio_series.empty()) {
-      report::Series lim;
-      lim.label = "limit " + report::number(limit);
+    rule_table.rows.push_back({scenario, static_cast<long long>(m), median, max_ratio,
+                               has_limit ? rh::Cell(limit) : rh::Cell(std::string("(not recorded)")),
+                               has_limit ? rh::Cell(static_cast<long long>(over)) : rh::Cell(std::string("-")), i_median,
+                               i_max, i_over});
+    auto& ks = key.scenarios[si_];
+    ks.rule_max_ratio = max_ratio, ks.rule_steps = static_cast<int>(m), ks.rule_figure = rule_plot.id;
+    if (has_limit) ks.rule_limit = limit, ks.rule_steps_over = over;
+    if (has_limit && rule_plot.lines.empty()) {
+      rh::Line lim;
+      lim.label = "limit " + rh::significant(limit);
       lim.x = {s.x.front(), s.x.back()};
       lim.y = {limit, limit};
-      ratio_series.push_back(std::move(lim));
+      lim.dash = rh::Dash::kDot, lim.colour = -1;
+      rule_plot.lines.push_back(std::move(lim));
     }
-    ratio_series.push_back(std::move(s));
-    if (has_unfaded) ratio_series.push_back(std::move(si));
+    rule_plot.lines.push_back(std::move(s));
+    if (has_unfaded) rule_plot.lines.push_back(std::move(si));
   }
   json.end_array();
-  if (!rule_rows.empty())
-    add_figure("fig-accuracy-rule", "The seed's accuracy rule per step: largest interpenetration / largest deflection "
-                                    "(steps with active contacts; 'unfaded': without the contacts next to a rim)",
-               report::line_plot("Interpenetration / deflection", "time [s]", "ratio", ratio_series));
-  // Key frames: peaks of the total stage-1 force, else largest deflection and last frame.
-  std::vector<std::pair<std::string, double>> key_times;
-  if (!force.empty()) {
-    const auto& s = force.front();
-    const double t0 = s.x.front(), T = s.x.back() - s.x.front();
-    auto arg = [&](double a, double b, bool mx) {
-      int best = -1;
-      for (size_t i = 0; i < s.x.size(); ++i)
-        if (s.x[i] >= t0 + a * T && s.x[i] <= t0 + b * T && (best < 0 || (mx ? s.y[i] > s.y[best] : s.y[i] < s.y[best])))
-          best = static_cast<int>(i);
-      return best;
-    };
-    const int p1 = arg(0.0, 0.3, true), p2 = arg(0.3, 0.65, true);
-    if (p1 >= 0 && p2 >= 0) {
-      int mid = p1;
-      for (int i = p1; i <= p2; ++i)
-        if (s.y[i] < s.y[mid]) mid = i;
-      key_times = {{"first peak", s.x[p1]}, {"mid-stance", s.x[mid]}, {"second peak", s.x[p2]}};
-    }
+  if (!rule_table.rows.empty()) {
+    rh::Section sec{"sec-accuracy-rule", "Accuracy rule of the mesh contact", {}};
+    sec.blocks.push_back(std::move(rule_plot));
+    sec.blocks.push_back(std::move(rule_table));
+    if (!stage1.blocks.empty()) sections.push_back(std::move(stage1));
+    sections.push_back(std::move(sec));
+  } else if (!stage1.blocks.empty()) {
+    sections.push_back(std::move(stage1));
   }
 
   // ---- scenarios --------------------------------------------------------------
@@ -380,7 +492,9 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
         .end_object();
   }
   json.begin_array("scenarios");
-  for (const auto& [scenario, file] : in.surfaces) {
+  for (std::size_t si_ = 0; si_ < in.surfaces.size(); ++si_) {
+    const auto& [scenario, file] = in.surfaces[si_];
+    auto& ks = key.scenarios[si_];
     auto t0 = Clock::now();
     const SurfaceField field = read_surface_field(file, opt.view_surface);
     const NodeDirections nd = average_node_directions(field);
@@ -396,8 +510,13 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     oc.file = file;
     oc.nodes = static_cast<int>(field.mesh.V.rows());
     oc.frames = static_cast<int>(field.e1.rows());
-    const Eigen::MatrixXi quads = field.mesh.Q;
     const std::string sid = "fig-" + std::to_string(summary.scenarios.size());
+    rh::Section sec{"sec-scenario-" + std::to_string(si_), "Scenario " + scenario + ": deflection, strain and directions", {}};
+    sec.blocks.push_back(rh::Text{"Surface output " + file + " (surface " + opt.view_surface + ", " +
+                                      std::to_string(oc.nodes) + " nodes, " + std::to_string(oc.frames) +
+                                      " frames). The 2D maps show the nodes facing the viewer in the post stage's view "
+                                      "(docs/post.md, section 2); the 3D view shows the whole surface.",
+                                  {}, false});
     // Key frames of this scenario.
     std::vector<std::pair<std::string, int>> frames;
     auto nearest = [&](double t) {
@@ -435,33 +554,98 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
       frames.emplace_back("largest deflection", static_cast<int>(fmax));
       if (fmax != field.e1.rows() - 1) frames.emplace_back("last frame", static_cast<int>(field.e1.rows() - 1));
     }
+    // Visible nodes in the view (the 2D maps), the whole surface in 3D.
+    std::vector<Eigen::Index> shown;
+    for (Eigen::Index i = 0; i < view.nodes.rows(); ++i)
+      if (view.visible[i]) shown.push_back(i);
+    Eigen::MatrixX2d shown_xy(shown.size(), 2);
+    for (std::size_t i = 0; i < shown.size(); ++i) shown_xy.row(i) = view.nodes.row(shown[i]) * 1e3;
+    const Eigen::MatrixX2d outline_mm = view.outline * 1e3;
+    auto field_map = [&](const std::string& id, const std::string& title, const std::string& caption,
+                         const Eigen::VectorXd& v, const std::string& unit) {
+      rh::MapPlot m;
+      m.id = id, m.title = title, m.caption = caption;
+      m.outlines.push_back({"outline", outline_mm, true, rh::Dash::kSolid, -1});
+      rh::Points pts;
+      pts.label = title, pts.unit = unit, pts.xy = shown_xy, pts.values.resize(shown.size());
+      for (std::size_t i = 0; i < shown.size(); ++i) pts.values(i) = v(shown[i]);
+      m.points.push_back(std::move(pts));
+      return m;
+    };
+    rh::SurfacePlot surf;
+    surf.id = sid + "-surface";
+    surf.title = scenario + ": fields on the surface (3D)";
+    surf.caption = "Drag to rotate, scroll to zoom; the menu chooses the field and key frame. Model frame "
+                   "(docs/knee_geometry.md), mm.";
+    surf.nodes_mm = field.mesh.V * 1e3;
+    surf.triangles.resize(2 * field.mesh.Q.rows(), 3);
+    for (Eigen::Index q = 0; q < field.mesh.Q.rows(); ++q) {
+      surf.triangles.row(2 * q) << field.mesh.Q(q, 0), field.mesh.Q(q, 1), field.mesh.Q(q, 2);
+      surf.triangles.row(2 * q + 1) << field.mesh.Q(q, 0), field.mesh.Q(q, 2), field.mesh.Q(q, 3);
+    }
+    auto values = [](const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); };
     json.begin_object().value("scenario", scenario).value("file", file).value("nodes", oc.nodes).value("frames", oc.frames);
     json.begin_array("key_frames");
     for (size_t kf = 0; kf < frames.size(); ++kf) {
       const auto& [name, k] = frames[kf];
       const std::string t = report::number(field.time(k));
+      const Eigen::VectorXd e1 = field.e1.row(k).transpose();
+      const bool summary_frame = kf == 0;  // first peak, or the largest deflection
+      if (summary_frame) {
+        ks.deflection_when = name, ks.e1_max = e1.maxCoeff(), ks.e1_min = e1.minCoeff();
+        ks.deflection_figure = sid + "-e1-0";
+      }
       if (field.deflection.size() > 0) {
         const Eigen::VectorXd v = field.deflection.row(k).transpose() * 1e3;
-        add_figure(sid + "-deflection-" + std::to_string(kf), scenario + ": deflection at " + name + " (t = " + t + " s)",
-                   report::field_map(scenario + " deflection, " + name, view.nodes, quads, v, "mm"));
+        const std::string id = sid + "-deflection-" + std::to_string(kf);
+        sec.blocks.push_back(field_map(id, scenario + ": deflection, " + name + " (t = " + t + " s)",
+                                       "Deflection along the surface normal (positive outward).", v, "mm"));
+        surf.fields.push_back({"deflection, " + name + " (t = " + t + " s)", "mm", values(v)});
+        if (summary_frame) ks.deflection_max_mm = v.cwiseAbs().maxCoeff(), ks.deflection_figure = id;
         json.begin_object().value("name", name).value("time_s", field.time(k)).value("deflection_max_mm", v.maxCoeff())
-            .value("deflection_min_mm", v.minCoeff()).value("e1_max", field.e1.row(k).maxCoeff())
-            .value("e1_min", field.e1.row(k).minCoeff()).end_object();
+            .value("deflection_min_mm", v.minCoeff()).value("e1_max", e1.maxCoeff())
+            .value("e1_min", e1.minCoeff()).end_object();
       } else {
-        json.begin_object().value("name", name).value("time_s", field.time(k)).value("e1_max", field.e1.row(k).maxCoeff())
-            .value("e1_min", field.e1.row(k).minCoeff()).end_object();
+        json.begin_object().value("name", name).value("time_s", field.time(k)).value("e1_max", e1.maxCoeff())
+            .value("e1_min", e1.minCoeff()).end_object();
       }
-      const Eigen::VectorXd e1 = field.e1.row(k).transpose();
-      add_figure(sid + "-e1-" + std::to_string(kf), scenario + ": first principal strain e1 at " + name + " (t = " + t + " s)",
-                 report::field_map(scenario + " e1, " + name, view.nodes, quads, e1, "strain"));
+      sec.blocks.push_back(field_map(sid + "-e1-" + std::to_string(kf),
+                                     scenario + ": first principal strain e1, " + name + " (t = " + t + " s)",
+                                     "First principal Green-Lagrange strain of the mid-surface.", e1, "strain [-]"));
+      surf.fields.push_back({"e1, " + name + " (t = " + t + " s)", "strain [-]", values(e1)});
     }
     json.end_array();
+    if (!surf.fields.empty()) sec.blocks.push_back(std::move(surf));
     if (field.deflection.size() == 0) summary.missing.push_back(scenario + ": no deflection dataset in " + file);
-    Eigen::VectorXd w = nd.magnitude;
-    for (Eigen::Index i = 0; i < w.size(); ++i)
-      if (!usable[i]) w(i) = 0;
-    add_figure(sid + "-directions", scenario + ": time-averaged magnitude-weighted e1 directions (segment length ~ sqrt of mean |e1|)",
-               report::direction_map(scenario + " averaged e1 directions", view.outline, view.nodes, ang, w));
+    // Averaged directions: segment length ~ sqrt of the time-averaged |e1|,
+    // at most 700 segments (every k-th usable node), the longest 0.9 of the
+    // mean spacing they would have on the outline's box.
+    {
+      std::vector<Eigen::Index> use;
+      double wmax = 0;
+      for (Eigen::Index i = 0; i < view.nodes.rows(); ++i)
+        if (usable[i] && std::isfinite(ang(i)) && nd.magnitude(i) > 0) use.push_back(i), wmax = std::max(wmax, nd.magnitude(i));
+      const std::size_t stride = std::max<std::size_t>(1, (use.size() + 699) / 700);
+      const Eigen::Vector2d box = outline_mm.colwise().maxCoeff() - outline_mm.colwise().minCoeff();
+      const std::size_t n = (use.size() + stride - 1) / stride;
+      const double L = n > 0 ? 0.9 * std::sqrt(box.x() * box.y() / double(n)) : 1.0;
+      rh::Segments seg;
+      seg.label = "averaged e1 lines", seg.colour = 0;
+      seg.centres.resize(n, 2), seg.angle_rad.resize(n), seg.length.resize(n);
+      for (std::size_t j = 0, i = 0; i < use.size(); i += stride, ++j) {
+        seg.centres.row(j) = view.nodes.row(use[i]) * 1e3;
+        seg.angle_rad(j) = ang(use[i]);
+        seg.length(j) = L * std::sqrt(nd.magnitude(use[i]) / wmax);
+      }
+      rh::MapPlot m;
+      m.id = sid + "-directions";
+      m.title = scenario + ": time-averaged e1 directions";
+      m.caption = "Magnitude-weighted time average of the first principal strain direction per node (axial; "
+                  "segment length ~ sqrt of the mean |e1|).";
+      m.outlines.push_back({"outline", outline_mm, true, rh::Dash::kSolid, -1});
+      m.segments.push_back(std::move(seg));
+      sec.blocks.push_back(std::move(m));
+    }
     json.value("mean_coherence", nd.coherence.mean()).value("mean_abs_e1", nd.magnitude.mean());
     if (!opt.splitline_map.empty()) {
       t0 = Clock::now();
@@ -473,11 +657,36 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
       oc.stats = c.stats;
       oc.outline_mean_distance_m = reg.outline_mean_distance;
       oc.averaging_radius_m = c.radius;
-      add_figure(sid + "-overlay", scenario + ": registered split-line map (red) over the model's averaged directions (blue)",
-                 report::overlay(scenario + " registered split lines", view.outline, reg.warped_outline, c.points,
-                                 c.map_angle, c.model_angle));
-      add_figure(sid + "-error", scenario + ": acute angle between model and map lines per sample",
-                 report::error_map(scenario + " angle error", view.outline, c.points, c.error_deg));
+      const Eigen::MatrixX2d pts_mm = c.points * 1e3;
+      // Segment length: the median spacing of the samples.
+      const double spacing = c.radius > 0 ? c.radius * 1e3 : 1.0;
+      rh::MapPlot ov;
+      ov.id = sid + "-overlay";
+      ov.title = scenario + ": registered split-line map against the model";
+      ov.caption = "The map registered onto the model's outline by Coherent Point Drift (its outline dashed) and, at "
+                   "every map sample, the map's line and the model's averaged line.";
+      ov.outlines.push_back({"model outline", outline_mm, true, rh::Dash::kSolid, -1});
+      ov.outlines.push_back({"map outline (registered)", reg.warped_outline * 1e3, true, rh::Dash::kDash, 1});
+      rh::Segments ms, mo;
+      ms.label = "map lines", ms.colour = 1, ms.centres = pts_mm, ms.angle_rad = c.map_angle;
+      ms.length = Eigen::VectorXd::Constant(pts_mm.rows(), spacing);
+      mo.label = "model lines", mo.colour = 0, mo.centres = pts_mm, mo.angle_rad = c.model_angle;
+      mo.length = Eigen::VectorXd::Constant(pts_mm.rows(), spacing);
+      ov.segments = {ms, mo};
+      sec.blocks.push_back(std::move(ov));
+      rh::MapPlot em;
+      em.id = sid + "-error";
+      em.title = scenario + ": angle between model and map lines";
+      em.caption = "Acute angle per map sample (0-90 deg); hollow: no model node within the averaging radius.";
+      em.outlines.push_back({"model outline", outline_mm, true, rh::Dash::kSolid, -1});
+      rh::Points ep;
+      ep.label = "angle error", ep.unit = "deg", ep.xy = pts_mm, ep.values = c.error_deg, ep.lo = 0, ep.hi = 90;
+      em.points.push_back(std::move(ep));
+      sec.blocks.push_back(std::move(em));
+      for (const auto& r : c.stats)
+        if (r.region == "all" || c.stats.size() == 1)
+          ks.angle_mean_deg = r.mean_deg, ks.angle_samples = r.covered, ks.angle_figure = sid + "-error";
+      ks.angle_threshold_deg = opt.comparison.threshold_rad * 180.0 / std::numbers::pi;
       json.begin_object("registration")
           .value("affine_status", common::to_string(reg.affine.status))
           .value("affine_iterations", reg.affine.iterations)
@@ -498,8 +707,32 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     }
     json.end_object();
     summary.scenarios.push_back(oc);
+    sections.push_back(std::move(sec));
   }
   json.end_array();
+  if (!opt.splitline_map.empty() && !summary.scenarios.empty()) {
+    rh::Section sec{"sec-splitlines", "Split-line comparison", {}};
+    rh::Table t;
+    t.id = "tab-splitlines";
+    t.title = "Angle between the model's averaged e1 lines and the registered map";
+    t.caption = "Map: " + opt.splitline_map.string() +
+                ". Acute angle between the model's averaged first principal strain line and the registered map line, "
+                "per sample (docs/post.md, section 4).";
+    const double thr = opt.comparison.threshold_rad * 180.0 / std::numbers::pi;
+    t.header = {"scenario", "region", "samples", "covered", "mean [deg]", "median [deg]",
+                "within " + rh::significant(thr) + " deg [%]", "outline distance after registration [mm]",
+                "averaging radius [mm]"};
+    for (const auto& s : summary.scenarios)
+      for (const auto& r : s.stats)
+        t.rows.push_back({s.scenario, r.region, static_cast<long long>(r.samples), static_cast<long long>(r.covered),
+                          r.mean_deg, r.median_deg, 100.0 * r.fraction_within, s.outline_mean_distance_m * 1e3,
+                          s.averaging_radius_m * 1e3});
+    sec.blocks.push_back(std::move(t));
+    sections.push_back(std::move(sec));
+  }
+  // Later stages, when their files are given.
+  if (!in.biphasic.empty()) sections.push_back(post_report::biphasic_section(in.biphasic));
+  if (!in.shockwave.empty()) sections.push_back(post_report::shockwave_section(in.shockwave));
   json.value("angle_threshold_deg", opt.comparison.threshold_rad * 180.0 / std::numbers::pi);
   json.array("missing", summary.missing);
   timing.emplace_back("post total (before writing)", seconds_since(t_start));
@@ -509,78 +742,48 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
   json.begin_array("input_attributes");
   for (const auto& a : attrs) json.begin_object().value("file", a.file).value("object", a.object).value("key", a.key).value("value", a.value).end_object();
   json.end_array();
-  std::vector<std::string> ids;
-  for (const auto& f : figures) ids.push_back(f.id);
+
+  // ---- report.html ------------------------------------------------------------------
+  rh::Report rep;
+  rep.title = "arthrosim report";
+  rep.header = {"Scene: " + (in.scene_file.empty() ? std::string("(none)") : in.scene_file)};
+  if (map.synthetic) rep.banner = "The split-line map is SYNTHETIC (a documented test map, not measured data): its angles say nothing about cartilage.";
+  rep.summary = post_report::summary_rows(key);
+  {
+    rh::Section inputs{"sec-inputs", "Missing inputs", {}};
+    if (summary.missing.empty()) inputs.blocks.push_back(rh::Text{"None.", {}, false});
+    else inputs.blocks.push_back(rh::Text{"", summary.missing, true});
+    sections.insert(sections.begin(), std::move(inputs));
+  }
+  {
+    rh::Section sec{"sec-statistics", "Solver statistics and timing", {}};
+    rh::Table a;
+    a.id = "tab-attributes";
+    a.title = "Attributes of the input files (as the stages wrote them)";
+    a.header = {"file", "object", "attribute", "value"};
+    for (const auto& r : attrs) a.rows.push_back({r.file, r.object, r.key, r.value});
+    if (a.rows.empty()) sec.blocks.push_back(rh::Text{"No input file carries attributes.", {}, false});
+    else sec.blocks.push_back(std::move(a));
+    rh::Table tp;
+    tp.id = "tab-timing";
+    tp.title = "Timing of this post run";
+    tp.header = {"step", "seconds"};
+    for (const auto& [k, v] : timing) tp.rows.push_back({k, v});
+    sec.blocks.push_back(std::move(tp));
+    sections.push_back(std::move(sec));
+  }
+  rep.sections = std::move(sections);
+  const std::vector<std::string> ids = rh::figure_ids(rep);
   json.array("figures", ids);
   json.end_object();
 
-  // ---- report.html (XHTML) ---------------------------------------------------------
-  std::string h;
-  h += "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<!DOCTYPE html>\n<html xmlns=\"http://www.w3.org/1999/xhtml\">\n<head>"
-       "<meta charset=\"UTF-8\"/><title>arthrosim post report</title><style>"
-       "body{font-family:sans-serif;max-width:1000px;margin:auto;padding:1em}figure{display:inline-block;margin:0.5em;"
-       "vertical-align:top}figcaption{max-width:460px;font-size:0.9em}table{border-collapse:collapse;margin:0.5em 0}"
-       "td,th{border:1px solid #bbb;padding:2px 6px;font-size:0.9em}.missing{color:#a00}</style></head>\n<body>\n";
-  h += "<h1>arthrosim post report</h1>\n<p>Scene: " + report::escape(in.scene_file.empty() ? "(none)" : in.scene_file) + "</p>\n";
-  if (map.synthetic) h += "<p><strong>The split-line map is SYNTHETIC (a documented test map, not measured data).</strong></p>\n";
-  h += "<h2>Missing inputs</h2>\n";
-  if (summary.missing.empty()) {
-    h += "<p>None.</p>\n";
-  } else {
-    h += "<ul>";
-    for (const auto& m : summary.missing) h += "<li class=\"missing\">" + report::escape(m) + "</li>";
-    h += "</ul>\n";
-  }
-  if (!opt.splitline_map.empty() && !summary.scenarios.empty()) {
-    h += "<h2>Split-line comparison</h2>\n<p>Map: " + report::escape(opt.splitline_map.string()) +
-         ". Acute angle between the model's averaged first principal strain line and the registered map line, per sample.</p>\n";
-    std::vector<std::vector<std::string>> rows;
-    for (const auto& s : summary.scenarios)
-      for (const auto& r : s.stats)
-        rows.push_back({s.scenario, r.region, std::to_string(r.samples), std::to_string(r.covered), report::number(r.mean_deg),
-                        report::number(r.median_deg), report::number(r.fraction_within),
-                        report::number(s.outline_mean_distance_m * 1e3), report::number(s.averaging_radius_m * 1e3)});
-    h += report::table({"scenario", "region", "samples", "covered", "mean [deg]", "median [deg]",
-                        "fraction within " + report::number(opt.comparison.threshold_rad * 180.0 / std::numbers::pi) + " deg",
-                        "outline distance after registration [mm]", "averaging radius [mm]"},
-                       rows);
-  }
-  if (!rule_rows.empty()) {
-    h += "<h2>Accuracy rule of the mesh contact</h2>\n<p>Per step in contact: largest interpenetration over largest "
-         "deflection of any surface (the seed's rule asks for at most the limit, 0.1 by default). The last three "
-         "columns take only the unfaded contacts, i.e. leave out the faces next to a rim where the contact fades out "
-         "(docs/contact.md, \"The seed's accuracy rule\").</p>\n";
-    h += report::table({"scenario", "steps in contact", "median ratio", "max ratio", "limit", "steps over the limit",
-                        "median ratio, unfaded", "max ratio, unfaded", "steps over, unfaded"},
-                       rule_rows);
-  }
-  h += "<h2>Figures</h2>\n<ol>";
-  for (const auto& f : figures) h += "<li><a href=\"#" + f.id + "\">" + report::escape(f.caption) + "</a></li>";
-  h += "</ol>\n";
-  for (const auto& f : figures) {
-    h += "<figure id=\"" + f.id + "\">" + f.svg + "<figcaption>" + report::escape(f.caption) + "</figcaption></figure>\n";
-  }
-  h += "<h2>Solver statistics and timing (from the input files)</h2>\n";
-  {
-    std::vector<std::vector<std::string>> rows;
-    for (const auto& a : attrs) rows.push_back({a.file, a.object, a.key, a.value});
-    if (rows.empty()) h += "<p>No input file carries attributes.</p>"; else h += report::table({"file", "object", "attribute", "value"}, rows);
-  }
-  h += "\n<h2>Timing of this post run</h2>\n";
-  {
-    std::vector<std::vector<std::string>> rows;
-    for (const auto& [k, v] : timing) rows.push_back({k, report::number(v)});
-    h += report::table({"step", "seconds"}, rows);
-  }
-  h += "\n</body>\n</html>\n";
-
-  summary.report_path = (fs::path(out_dir) / "report.html").string();
+  summary.report_path = rh::write(rep, out_dir).string();
   summary.summary_path = (fs::path(out_dir) / "summary.json").string();
-  for (const auto& [path, text] : {std::pair{summary.report_path, h}, std::pair{summary.summary_path, json.str() + "\n"}}) {
-    std::ofstream out(path, std::ios::binary);
-    if (!out) throw InputError(path, 0, "cannot write the output file");
-    out << text;
-    if (!out) throw InputError(path, 0, "write failed");
+  {
+    std::ofstream out(summary.summary_path, std::ios::binary);
+    if (!out) throw InputError(summary.summary_path, 0, "cannot write the output file");
+    out << json.str() << "\n";
+    if (!out) throw InputError(summary.summary_path, 0, "write failed");
   }
   summary.figures = ids;
   return summary;

@@ -1,7 +1,7 @@
 #pragma once
 // arthrosim-post driver (docs/post.md): reads the deformable-surface outputs of one or
 // more scenarios, optionally the kinematics file and a split-line map, and writes
-// DIR/report.html (self-contained XHTML with inline SVG figures) and DIR/summary.json
+// DIR/report.html (pipelines/report_html.h; plotly.js beside it) and DIR/summary.json
 // (the same numbers). Optional inputs that are absent are listed in both files under
 // "missing"; they never stop the run.
 #include <filesystem>
@@ -42,6 +42,8 @@ PostOptions post_from_scene(const common::Scene& scene);
 struct PostInputs {
   std::vector<std::pair<std::string, std::string>> surfaces;  ///< (scenario, file)
   std::string kinematics;  ///< empty = none
+  std::vector<std::pair<std::string, std::string>> biphasic;  ///< (label, biphasic.h5); empty = none
+  std::vector<std::string> shockwave;                           ///< shockwave run files; empty = none
   std::string scene_file;  ///< for the report header
 };
 

@@ -12,6 +12,9 @@ PACKAGES=(
   # Sanitizer suite and fuzzing (scripts/sanitize.sh): clang with libFuzzer
   # and the sanitizer runtimes, its OpenMP, the lld linker, llvm-symbolizer.
   clang-14 libclang-rt-14-dev libomp-14-dev lld-14 llvm-14
+  # The post report drawn in a real browser (tests/pipelines/report_html_test.cc,
+  # docs/post.md "Report"): headless Chromium renders it and checks every figure.
+  chromium
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -23,14 +23,18 @@ using namespace arthrosim;
 int main(int argc, char** argv) {
   CLI::App app{
       "arthrosim-post: split-line comparison and report of deformable-surface results (docs/post.md).\n"
-      "Writes DIR/report.html (self-contained, inline SVG) and DIR/summary.json. Missing optional inputs\n"
-      "(kinematics, map, deflection) are listed in the report instead of stopping the run."};
-  std::vector<std::string> surfaces;
+      "Writes DIR/report.html with DIR/plotly-gl3d.min.js beside it (interactive figures, opens offline from DIR)\n"
+      "and DIR/summary.json. Missing optional inputs (kinematics, map, deflection) are listed in the report\n"
+      "instead of stopping the run."};
+  std::vector<std::string> surfaces, biphasic, shockwave;
   std::string kinematics, map, scene_file, out, out_dir;
   double spacing = 0.0;
   app.add_option("--surface", surfaces,
                  "surface output of one scenario, NAME=FILE or FILE (name from the file's 'scenario' attribute); repeat");
   app.add_option("--kinematics", kinematics, "kinematics file of the musculoskeletal stage (contact force, key frames)");
+  app.add_option("--biphasic", biphasic,
+                 "output of the biphasic stage (biphasic.h5), NAME=FILE or FILE: adds its section; repeat");
+  app.add_option("--shockwave", shockwave, "a run file of the shockwave stage (<out>_efd<EFD>.h5): adds its section; repeat");
   app.add_option("--map", map, "split-line map (.svg or .csv); overrides the scene's post.splitline_map");
   app.add_option("--map-sample-spacing", spacing, "SVG maps: sample spacing along split lines [map units], 0 = auto")
       ->capture_default_str();
@@ -43,7 +47,10 @@ int main(int argc, char** argv) {
       "With your own runs' files:\n"
       "  arthrosim-post --surface osmotic=out/demo/surface_osmotic.h5 --map data/splitlines/synthetic_femur.csv \\\n"
       "      --scene data/scenes/osmotic.yaml --out out/post\n"
-      "  arthrosim-post --surface osmotic=F1.h5 --surface gait=F2.h5 --kinematics K.h5 --scene S.yaml --out DIR\n");
+      "  arthrosim-post --surface osmotic=F1.h5 --surface gait=F2.h5 --kinematics K.h5 --scene S.yaml --out DIR\n"
+      "Stage 1 with the biphasic and shockwave sections (a CTest, from the build folder after the biphasic samples):\n"
+      "  arthrosim-post --kinematics sample_runs/biphasic_kinematics.h5 --biphasic sample_runs/biphasic_five_frames.h5 \\\n"
+      "      --shockwave sample_runs/post_sw_bar_efd0.33.h5 --out sample_runs/post_stages\n");
   CLI11_PARSE(app, argc, argv);
   try {
     if (out.empty()) out = out_dir;
@@ -57,6 +64,12 @@ int main(int argc, char** argv) {
     if (!map.empty()) options.splitline_map = map;
     options.map_sample_spacing = spacing;
     inputs.kinematics = kinematics;
+    for (const auto& b : biphasic) {
+      const auto eq = b.find('=');
+      if (eq != std::string::npos) inputs.biphasic.emplace_back(b.substr(0, eq), b.substr(eq + 1));
+      else inputs.biphasic.emplace_back(std::filesystem::path(b).stem().string(), b);
+    }
+    inputs.shockwave = shockwave;
     for (const auto& s : surfaces) {
       const auto eq = s.find('=');
       std::string name, file;

@@ -1,9 +1,10 @@
-// arthrosim-post's report (pipelines/post_stage.h, pipelines/report.h): run on small
+// arthrosim-post's report (pipelines/post_stage.h, pipelines/report_html.h): run on small
 // HDF5 inputs written here (surface output of two scenarios, a kinematics file with
 // medial/lateral contact force) and the bundled SYNTHETIC map, then check with Python's
-// XML parser that report.html is well-formed, that every figure the contents list links
-// to exists and draws something, and that summary.json parses and lists the same figures.
-// A second run without optional inputs must still write a report that says what is missing.
+// XML parser that report.html is well-formed, that every link resolves, that every plot
+// has its figure spec, and that summary.json parses and lists the same figures; then draw
+// the report in headless Chromium (every figure draws). A run without optional inputs
+// must still write a report that says what is missing.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -16,6 +17,7 @@
 #include "common/hdf5.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/report.h"
+#include "tests/pipelines/chromium_check.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -96,32 +98,34 @@ void write_kinematics(const fs::path& path) {
   f.set_attribute("/", "stage", "comak");
 }
 
-// Python check: XML well-formed, ids unique, every #link has an element with that id containing an
-// <svg> with at least one drawing element, summary.json parses and lists the same ids.
+// Python check: XML well-formed, ids unique, every #link has an element with that id, the
+// plots (<figure> with a plot element) are summary.json's figures in order and each has a
+// figure spec with data, the summary block's links resolve, missing inputs are in the text.
 int check(const fs::path& dir, int min_figures) {
   const fs::path script = kDir / "check.py";
   std::ofstream(script) << R"PY(
 import json, sys, xml.etree.ElementTree as ET
 d, need = sys.argv[1], int(sys.argv[2])
 root = ET.parse(d + '/report.html').getroot()
-ns = {'h': 'http://www.w3.org/1999/xhtml', 's': 'http://www.w3.org/2000/svg'}
+H = '{http://www.w3.org/1999/xhtml}'
 all_ids = [e.get('id') for e in root.iter() if e.get('id')]
 assert len(all_ids) == len(set(all_ids)), ('duplicate ids', all_ids)
 ids = {e.get('id'): e for e in root.iter() if e.get('id')}
-links = [a.get('href')[1:] for a in root.iter('{http://www.w3.org/1999/xhtml}a') if (a.get('href') or '').startswith('#')]
-assert len(links) >= need, ('too few figures', len(links), need)
+links = [a.get('href')[1:] for a in root.iter(H + 'a') if (a.get('href') or '').startswith('#')]
 for l in links:
-    assert l in ids, ('missing figure', l)
-    svgs = list(ids[l].iter('{http://www.w3.org/2000/svg}svg'))
-    assert len(svgs) == 1, ('no svg in', l)
-    drawn = [e for e in svgs[0].iter() if e.tag.split('}')[1] in ('polygon', 'polyline', 'line', 'circle')]
-    assert drawn, ('empty figure', l)
+    assert l in ids, ('missing link target', l)
+plots = [f.get('id') for f in root.iter(H + 'figure') if f.get('class') in ('plot', 'map', 'surface')]
+assert len(plots) >= need, ('too few figures', len(plots), need)
+specs = json.loads(ids['report-figures'].text)
+assert [s['id'] for s in specs] == plots, ('figure specs differ', [s['id'] for s in specs], plots)
+for s in specs:
+    assert s['data'], ('figure without data', s['id'])
 s = json.load(open(d + '/summary.json'))
-assert s['figures'] == links, ('summary figures differ', s['figures'], links)
+assert s['figures'] == plots, ('summary figures differ', s['figures'], plots)
 text = ''.join(root.itertext())
 for m in s['missing']:
     assert m in text, ('missing input not reported', m)
-print('ok', len(links), 'figures,', len(s['missing']), 'missing')
+print('ok', len(plots), 'figures,', len(s['missing']), 'missing')
 )PY";
   const std::string cmd = "/usr/bin/python3 " + script.string() + " " + dir.string() + " " + std::to_string(min_figures);
   return std::system(cmd.c_str());
@@ -146,22 +150,29 @@ TEST(ReportRender, FullReportIsWellFormedAndComplete) {
   opt.view = ViewOptions{};  // along -z, y up: the grid's own plane
   opt.splitline_map = std::string(ARTHROSIM_SOURCE_DIR) + "/data/splitlines/synthetic_femur.csv";
   const PostSummary s = run_post(in, opt, (kDir / "full").string());
-  // contact + accuracy rule + 2 x (3 key frames x (deflection + e1) + directions + overlay + error)
-  EXPECT_EQ(s.figures.size(), 2u + 2u * (6u + 3u));
+  // contact + accuracy rule + 2 x (3 key frames x (deflection + e1) + 3D surface + directions + overlay + error)
+  EXPECT_EQ(s.figures.size(), 2u + 2u * (6u + 4u));
   ASSERT_EQ(s.scenarios.size(), 2u);
   EXPECT_TRUE(s.missing.empty());
   EXPECT_EQ(check(kDir / "full", 20), 0);
   const std::string html = slurp(kDir / "full" / "report.html");
   EXPECT_NE(html.find("SYNTHETIC"), std::string::npos);
   EXPECT_NE(html.find("first peak"), std::string::npos);  // key frames from the force peaks
-  EXPECT_NE(html.find("stage 1 medial_force |F|"), std::string::npos);
-  EXPECT_EQ(html.find("stage 1 cop"), std::string::npos);
-  EXPECT_EQ(html.find("stage 1 area"), std::string::npos);
+  const std::string json = slurp(kDir / "full" / "summary.json");
+  EXPECT_NE(json.find("\"label\": \"stage 1 medial_force |F|\""), std::string::npos);
+  EXPECT_EQ(json.find("stage 1 cop"), std::string::npos);
+  EXPECT_EQ(json.find("stage 1 area"), std::string::npos);
+  EXPECT_NE(json.find("\"label\": \"stage 2 gait force |F|\""), std::string::npos);
+  // In the page: the force legend groups by stage, stage 2 dashed.
+  EXPECT_NE(html.find("\"name\": \"medial_force |F|\""), std::string::npos);
+  EXPECT_NE(html.find("\"legendgroup\": \"stage 2 gait\""), std::string::npos);
+  EXPECT_NE(html.find("\"dash\": \"dash\""), std::string::npos);
   EXPECT_NE(html.find("total_s"), std::string::npos);     // solver statistics table
-  EXPECT_NE(html.find("stage 2 gait force |F|"), std::string::npos);
+  // The summary block: the accuracy rule fails (one step over 0.1), linked to its plot.
+  EXPECT_NE(html.find("<a href=\"#fig-accuracy-rule\">"), std::string::npos);
+  EXPECT_NE(html.find("class=\"fail\""), std::string::npos);
   // The accuracy rule over the three steps in contact (0.05, 0.2, 0.08; the first
   // step's 0.5 has no active contact and is not counted).
-  const std::string json = slurp(kDir / "full" / "summary.json");
   for (const char* item : {"\"steps_in_contact\": 3", "\"median_ratio\": 0.08", "\"max_ratio\": 0.2",
                            "\"limit\": 0.1", "\"steps_over_limit\": 1",
                            // The same over unfaded contacts (0.02, 0.12, 0.05).
@@ -194,8 +205,8 @@ TEST(ReportRender, KeyFramesOutsideTheRunAreReportedNotDrawn) {
   const PostSummary s = run_post(in, opt, (kDir / "short").string());
   // Trial clock -0.02 .. 0.28 s: the first peak (0.15 s) is covered, mid-stance
   // (about 0.33 s) and the second peak (0.5 s) are not.
-  // contact + accuracy rule + 1 key frame x (deflection + e1) + directions + overlay + error
-  EXPECT_EQ(s.figures.size(), 2u + 2u + 3u);
+  // contact + accuracy rule + 1 key frame x (deflection + e1) + 3D surface + directions + overlay + error
+  EXPECT_EQ(s.figures.size(), 2u + 2u + 4u);
   ASSERT_EQ(s.missing.size(), 2u);
   EXPECT_NE(s.missing[0].find("not the mid-stance"), std::string::npos) << s.missing[0];
   EXPECT_NE(s.missing[1].find("not the second peak at 0.5 s"), std::string::npos) << s.missing[1];
@@ -216,6 +227,28 @@ TEST(ReportRender, MissingOptionalInputsAreReportedNotFatal) {
   EXPECT_EQ(e.missing.size(), 3u);  // surfaces, kinematics, map
   EXPECT_TRUE(e.figures.empty());
   EXPECT_EQ(check(kDir / "empty", 0), 0);
+}
+
+// The full report drawn in a real browser: every figure draws (the page's own
+// check after Plotly.newPlot: no script error, every figure element of non-zero
+// size with its SVG traces or WebGL canvas).
+TEST(ReportRender, FullReportDrawsInHeadlessChromium) {
+  const std::string chromium = arthrosim::testing::chromium_path();
+  if (chromium.empty()) GTEST_SKIP() << arthrosim::testing::kNoChromium;
+  fs::create_directories(kDir);
+  write_surface(kDir / "surface_osmotic.h5", 0.0);
+  write_surface(kDir / "surface_gait.h5", 0.3, /*walking=*/true);
+  write_kinematics(kDir / "kinematics.h5");
+  PostInputs in;
+  in.surfaces = {{"osmotic", (kDir / "surface_osmotic.h5").string()}, {"gait", (kDir / "surface_gait.h5").string()}};
+  in.kinematics = (kDir / "kinematics.h5").string();
+  PostOptions opt;
+  opt.view = ViewOptions{};
+  opt.splitline_map = std::string(ARTHROSIM_SOURCE_DIR) + "/data/splitlines/synthetic_femur.csv";
+  const PostSummary s = run_post(in, opt, (kDir / "drawn").string());
+  const std::string check = arthrosim::testing::render_check(chromium, s.report_path);
+  EXPECT_EQ(check, "{\"ok\":true,\"figures\":" + std::to_string(s.figures.size()) + ",\"failed\":[],\"errors\":[]}")
+      << "see " << (kDir / "drawn" / "report.chromium.log");
 }
 
 TEST(ReportRender, JsonAndEscaping) {

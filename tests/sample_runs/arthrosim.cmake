@@ -34,6 +34,12 @@ if(EXISTS ${CMAKE_SOURCE_DIR}/pipelines/apps/arthrosim-prepare.cc)
   set_tests_properties(sample.arthrosim.demo_reuse PROPERTIES LABELS sample
     FIXTURES_REQUIRED arthrosim_demo
     PASS_REGULAR_EXPRESSION "prepare: skipping .* inputs, options and code unchanged.*arthrosim: finished: prepare reused, comak reused, surface.osmotic reused, surface.gait reused, surface.gait_osmotic reused, post reused")
+  # The demo's report drawn in headless Chromium: every figure draws
+  # (scripts/report_check.sh, the page's own check; skipped without chromium).
+  add_test(NAME sample.arthrosim.demo_report_drawn
+    COMMAND ${CMAKE_SOURCE_DIR}/scripts/report_check.sh ${_demo_out}/report.html)
+  set_tests_properties(sample.arthrosim.demo_report_drawn PROPERTIES LABELS sample TIMEOUT 150
+    FIXTURES_REQUIRED arthrosim_demo DEPENDS sample.arthrosim.demo_reuse SKIP_RETURN_CODE 77)
   # `--dry-run` on the same folder: says it would reuse, runs nothing.
   add_test(NAME sample.arthrosim.demo_dry_run
     COMMAND arthrosim run data/scenes/demo.yaml --out ${_demo_out} --dry-run ${_demo_short}

@@ -1,0 +1,242 @@
+#include "pipelines/post_report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "biphasic/output_file.h"
+#include "pipelines/shockwave_output.h"
+
+namespace arthrosim::pipelines::post_report {
+namespace {
+
+using report_html::significant;
+using report_html::SummaryRow;
+using report_html::Verdict;
+
+bool finite(double v) { return std::isfinite(v); }
+
+std::string pct(double fraction) { return significant(100.0 * fraction) + " %"; }
+
+Verdict in_range(double v, double lo, double hi) { return v >= lo && v <= hi ? Verdict::kPass : Verdict::kFail; }
+
+std::vector<double> to_vector(const Eigen::VectorXd& v, double scale = 1.0) {
+  std::vector<double> out(v.size());
+  for (Eigen::Index i = 0; i < v.size(); ++i) out[i] = scale * v(i);
+  return out;
+}
+
+}  // namespace
+
+GaitPeaks gait_peaks(const std::vector<double>& t, const std::vector<double>& y) {
+  GaitPeaks g;
+  if (t.empty() || t.size() != y.size()) return g;
+  const double t0 = t.front(), T = t.back() - t.front();
+  auto arg = [&](double a, double b, bool max) {
+    int best = -1;
+    for (std::size_t i = 0; i < t.size(); ++i)
+      if (t[i] >= t0 + a * T && t[i] <= t0 + b * T && (best < 0 || (max ? y[i] > y[best] : y[i] < y[best])))
+        best = static_cast<int>(i);
+    return best;
+  };
+  g.first = arg(0.0, 0.3, true);
+  g.second = arg(0.3, 0.65, true);
+  if (g.first < 0 || g.second < 0) return g;
+  g.trough = g.first;
+  for (int i = g.first; i <= g.second; ++i)
+    if (y[i] < y[g.trough]) g.trough = i;
+  // A peak is a local maximum inside the series and the trough lies below
+  // both: a window's edge (a run that covers only part of stance) is no peak.
+  const int n = static_cast<int>(y.size());
+  auto local_max = [&](int i) { return i > 0 && i < n - 1 && y[i] >= y[i - 1] && y[i] >= y[i + 1]; };
+  g.found = local_max(g.first) && local_max(g.second) && y[g.trough] < std::min(y[g.first], y[g.second]);
+  return g;
+}
+
+std::vector<SummaryRow> summary_rows(const KeyFigures& k) {
+  std::vector<SummaryRow> rows;
+  const std::string range = significant(kPeakLowBW) + "-" + significant(kPeakHighBW) +
+                            " BW (in vivo, instrumented implants; Kutzner et al. 2010, cited by the seed)";
+  if (finite(k.peak1_bw) && finite(k.peak2_bw)) {
+    rows.push_back({"stage 1 first peak of the tibiofemoral force",
+                    significant(k.peak1_bw) + " BW at " + significant(k.peak1_s) + " s", range,
+                    in_range(k.peak1_bw, kPeakLowBW, kPeakHighBW), k.force_figure});
+    rows.push_back({"stage 1 second peak", significant(k.peak2_bw) + " BW at " + significant(k.peak2_s) + " s", range,
+                    in_range(k.peak2_bw, kPeakLowBW, kPeakHighBW), k.force_figure});
+    if (finite(k.trough_bw))
+      rows.push_back({"stage 1 double peak: mid-stance trough", significant(k.trough_bw) + " BW",
+                      "below 90 % of the lower peak (the seed: the characteristic double peak)",
+                      k.trough_bw < 0.9 * std::min(k.peak1_bw, k.peak2_bw) ? Verdict::kPass : Verdict::kFail,
+                      k.force_figure});
+  }
+  if (finite(k.medial_share_peak1))
+    rows.push_back({"stage 1 medial share at the first peak", pct(k.medial_share_peak1),
+                    "above 50 % (the seed: the majority through the medial compartment)",
+                    k.medial_share_peak1 > 0.5 ? Verdict::kPass : Verdict::kFail, k.force_figure});
+  for (const auto& s : k.scenarios) {
+    const std::string who = s.name + ": ";
+    if (finite(s.peak1_bw) && finite(s.peak2_bw)) {
+      std::string ref = range;
+      if (finite(k.peak1_bw)) ref = "stage 1: " + significant(k.peak1_bw) + " / " + significant(k.peak2_bw) + " BW; " + range;
+      rows.push_back({who + "stage 2 peaks", significant(s.peak1_bw) + " / " + significant(s.peak2_bw) + " BW", ref,
+                      in_range(s.peak1_bw, kPeakLowBW, kPeakHighBW) == Verdict::kPass &&
+                              in_range(s.peak2_bw, kPeakLowBW, kPeakHighBW) == Verdict::kPass
+                          ? Verdict::kPass
+                          : Verdict::kFail,
+                      k.force_figure});
+    }
+    if (finite(s.rms_si))
+      rows.push_back({who + "RMS difference to stage 1, superior-inferior force",
+                      pct(s.rms_si) + " (" + std::to_string(s.rms_frames) + " stage-1 frames)",
+                      "the seed: " + pct(kSeedRmsDifference) + " (deformable against solid surfaces); pass at or below",
+                      s.rms_si <= kSeedRmsDifference ? Verdict::kPass : Verdict::kFail, k.force_figure});
+    if (finite(s.rule_max_ratio)) {
+      std::string value = "max " + significant(s.rule_max_ratio) + " over " + std::to_string(s.rule_steps) + " steps";
+      if (finite(s.rule_limit)) value += ", " + std::to_string(s.rule_steps_over) + " over the limit";
+      rows.push_back({who + "accuracy rule (interpenetration / deflection per step)", value,
+                      finite(s.rule_limit) ? "at most " + significant(s.rule_limit) + " every step (the seed's rule)"
+                                           : std::string("limit not recorded in the file"),
+                      finite(s.rule_limit) ? (s.rule_steps_over == 0 ? Verdict::kPass : Verdict::kFail) : Verdict::kInfo,
+                      s.rule_figure});
+    }
+    if (finite(s.deflection_max_mm))
+      rows.push_back({who + "largest femoral deflection (" + s.deflection_when + ")", significant(s.deflection_max_mm) + " mm",
+                      "the seed: " + significant(kSeedDeflectionMm) + " mm at the first peak (its knee, its mesh)",
+                      Verdict::kInfo, s.deflection_figure});
+    if (finite(s.e1_max) && finite(s.e1_min))
+      rows.push_back({who + "first principal strain e1, largest / smallest (" + s.deflection_when + ")",
+                      pct(s.e1_max) + " / " + pct(s.e1_min),
+                      "the seed: " + pct(kSeedE1Max) + " / " + pct(kSeedE1Min) + " at the first peak", Verdict::kInfo,
+                      s.deflection_figure});
+    if (finite(s.angle_mean_deg))
+      rows.push_back({who + "split-line angle error, mean", significant(s.angle_mean_deg) + " deg over " +
+                                                                  std::to_string(s.angle_samples) + " samples",
+                      "below " + significant(s.angle_threshold_deg) +
+                          " deg (post.angle_threshold_deg; the seed compared the maps by eye)",
+                      s.angle_mean_deg < s.angle_threshold_deg ? Verdict::kPass : Verdict::kFail, s.angle_figure});
+  }
+  return rows;
+}
+
+report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files) {
+  report_html::Section sec;
+  sec.id = "sec-biphasic";
+  sec.title = "Biphasic layers";
+  sec.blocks.push_back(report_html::Text{
+      "Per layer and step (docs/biphasic.md, \"Output\"): the area in contact, the fluid load support (fluid "
+      "pressure over total normal stress, integrated over the contact), the largest tensile effective stress at a "
+      "contact vertex and the largest shear stress at the cartilage-bone interface.",
+      {}, false});
+  struct Quantity {
+    const char* key;
+    const char* title;
+    const char* axis;
+    double scale;
+  };
+  const Quantity qs[] = {{"area", "Contact area", "contact area [mm^2]", 1e6},
+                         {"fls", "Fluid load support", "fluid load support [%]", 100.0},
+                         {"tensile", "Largest tensile effective stress (contact)", "stress [MPa]", 1e-6},
+                         {"shear", "Largest shear stress (cartilage-bone interface)", "stress [MPa]", 1e-6}};
+  report_html::Table peaks;
+  peaks.id = "tab-biphasic";
+  peaks.title = "Biphasic layers: peaks over the run";
+  peaks.header = {"file", "layer", "steps", "largest contact area [mm^2]", "largest fluid load support [%]",
+                  "largest tensile stress [MPa]", "largest shear stress [MPa]", "unknowns", "factorisations"};
+  std::vector<report_html::LinePlot> plots;
+  for (const auto& q : qs) {
+    report_html::LinePlot p;
+    p.id = std::string("fig-biphasic-") + q.key;
+    p.title = q.title;
+    p.x_label = "time [s]";
+    p.y_label = q.axis;
+    plots.push_back(p);
+  }
+  int colour = 0;
+  for (const auto& [label, path] : files) {
+    const std::vector<biphasic::LayerSeries> layers = biphasic::read_layer_series(path);
+    for (const auto& l : layers) {
+      const Eigen::VectorXd* v[] = {&l.contact_area, &l.fluid_load_support, &l.max_tensile, &l.max_shear};
+      for (int k = 0; k < 4; ++k) {
+        report_html::Line line;
+        line.label = l.name;
+        line.group = files.size() > 1 ? label : "";
+        line.x = to_vector(l.time);
+        line.y = to_vector(*v[k], qs[k].scale);
+        line.colour = colour;
+        line.markers = l.time.size() < 30;
+        plots[k].lines.push_back(std::move(line));
+      }
+      auto mx = [](const Eigen::VectorXd& x, double s) { return x.size() ? s * x.maxCoeff() : kNaN; };
+      peaks.rows.push_back({label, l.name, static_cast<long long>(l.time.size()), mx(l.contact_area, 1e6),
+                            mx(l.fluid_load_support, 100.0), mx(l.max_tensile, 1e-6), mx(l.max_shear, 1e-6),
+                            static_cast<long long>(l.unknowns), static_cast<long long>(l.factorizations)});
+      ++colour;
+    }
+  }
+  for (auto& p : plots) sec.blocks.push_back(std::move(p));
+  sec.blocks.push_back(std::move(peaks));
+  return sec;
+}
+
+report_html::Section shockwave_section(const std::vector<std::string>& files) {
+  report_html::Section sec;
+  sec.id = "sec-shockwave";
+  sec.title = "Shockwave treatment";
+  sec.blocks.push_back(report_html::Text{
+      "Per run (docs/shockwave.md, \"Output\"): the volume of each tissue that met each regeneration criterion at "
+      "its peak (compressive stress, distortional strain, pore pressure, and all three), and the largest peaks.",
+      {}, false});
+  report_html::Table vol;
+  vol.id = "tab-shockwave";
+  vol.title = "Regeneration volumes per run and tissue";
+  vol.header = {"run", "EFD [mJ/mm^2]", "tissue", "volume [mm^3]", "compressive [mm^3]", "distortional [mm^3]",
+                "pore pressure [mm^3]", "all three [mm^3]", "largest peak pressure [MPa]",
+                "largest distortional strain"};
+  struct Point {
+    double efd;
+    double all_mm3;
+  };
+  std::vector<std::pair<std::string, std::vector<Point>>> by_tissue;
+  for (const auto& path : files) {
+    const ShockwaveFile f = read_shockwave_file(path);
+    const double efd = f.efd_j_per_m2 * 1e-3;  // J/m^2 -> mJ/mm^2
+    for (std::size_t t = 0; t < f.tissue_names.size(); ++t) {
+      double pmax = kNaN, smax = kNaN;
+      for (Eigen::Index i = 0; i < f.tissue.size(); ++i) {
+        if (f.tissue(i) != static_cast<int>(t)) continue;
+        if (i < f.peak_pressure.size()) pmax = std::isfinite(pmax) ? std::max(pmax, f.peak_pressure(i)) : f.peak_pressure(i);
+        if (i < f.peak_distortional_strain.size())
+          smax = std::isfinite(smax) ? std::max(smax, f.peak_distortional_strain(i)) : f.peak_distortional_strain(i);
+      }
+      const auto& v = f.volumes[t];
+      vol.rows.push_back({f.label, efd > 0 ? report_html::Cell(efd) : report_html::Cell(std::string("-")),
+                          f.tissue_names[t], v[0] * 1e9, v[1] * 1e9, v[2] * 1e9, v[3] * 1e9, v[4] * 1e9, pmax * 1e-6,
+                          smax});
+      if (efd > 0) {
+        auto it = std::find_if(by_tissue.begin(), by_tissue.end(), [&](const auto& p) { return p.first == f.tissue_names[t]; });
+        if (it == by_tissue.end()) it = by_tissue.insert(by_tissue.end(), {f.tissue_names[t], {}});
+        it->second.push_back({efd, v[4] * 1e9});
+      }
+    }
+  }
+  // Volume against EFD when at least two runs differ in EFD.
+  report_html::LinePlot p;
+  p.id = "fig-shockwave-volume";
+  p.title = "Volume meeting every regeneration criterion";
+  p.x_label = "energy flux density [mJ/mm^2]";
+  p.y_label = "volume [mm^3]";
+  int colour = 0;
+  for (auto& [tissue, pts] : by_tissue) {
+    std::sort(pts.begin(), pts.end(), [](const Point& a, const Point& b) { return a.efd < b.efd; });
+    if (pts.size() < 2) continue;
+    report_html::Line l;
+    l.label = tissue, l.colour = colour++, l.markers = true;
+    for (const auto& q : pts) l.x.push_back(q.efd), l.y.push_back(q.all_mm3);
+    p.lines.push_back(std::move(l));
+  }
+  if (!p.lines.empty()) sec.blocks.push_back(std::move(p));
+  sec.blocks.push_back(std::move(vol));
+  return sec;
+}
+
+}  // namespace arthrosim::pipelines::post_report
