@@ -245,8 +245,12 @@ class ShellModel : public numerics::TimeIntegrable {
   const Eigen::SparseMatrix<double>& mass_matrix() const { return mass_; }
   ShellModelStatistics& mutable_statistics() { return stats_; }
 
- private:
+  /// Adds a term (a ShellTerm of a registered surface term,
+  /// cartilage/surface_terms.h) and records `count` instances of its name in
+  /// the ledger when the name is an effect. The add_* methods use it.
   ShellTerm& register_term(std::unique_ptr<ShellTerm> term, long count);
+
+ private:
   void record(const std::string& name, long count);
   void build_pattern();
 

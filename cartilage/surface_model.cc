@@ -1,5 +1,7 @@
 #include "cartilage/surface_model.h"
 
+#include "cartilage/surface_terms.h"
+
 #include <algorithm>
 #include <Eigen/Geometry>
 #include <cmath>
@@ -36,30 +38,23 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
                                                 const std::vector<std::string>& effects, const BoneMotion& bone,
                                                 common::EffectLedger* ledger) {
   // Check the whole list first, so that an unsupported effect stops the run
-  // before anything is built or recorded.
+  // before anything is built or recorded. mesh_contact (two surfaces) and
+  // imposed_kinematics (the bone motion) are the stage's, not a term's.
   for (const std::string& e : effects) {
-    const bool supported = e == "foundation_springs" || e == "foundation_damping" || e == "osmotic_pressure" ||
-                           e == "periphery_fixed" || e == "inertia" || e == "imposed_kinematics" || e == "fixed_nodes" || e == "point_loads" ||
-                           e == "pressure" || e == "prescribed_displacement" || e == "mesh_contact";
-    if (!supported) {
-      if (!common::find_effect(e)) throw common::InputError("surface " + surface.name + ": unknown effect '" + e + "'");
-      throw common::InputError("surface " + surface.name + ": effect '" + e +
-                               "' is requested but the surface stage of this build cannot simulate it (it "
-                               "simulates foundation_springs, foundation_damping, osmotic_pressure, "
-                               "periphery_fixed, imposed_kinematics, inertia, and for generic meshes fixed_nodes, point_loads, pressure, "
-                               "prescribed_displacement); remove it from the scenario");
-    }
+    if (find_surface_term(e) || e == "imposed_kinematics" || e == "mesh_contact") continue;
+    if (!common::find_effect(e)) throw common::InputError("surface " + surface.name + ": unknown effect '" + e + "'");
+    std::string names;
+    for (const SurfaceTermInfo& t : surface_terms()) names += t.name + ", ";
+    throw common::InputError("surface " + surface.name + ": effect '" + e +
+                             "' is requested but the surface stage of this build cannot simulate it (it "
+                             "simulates " + names + "imposed_kinematics and mesh_contact); remove it from the "
+                             "scenario");
+  }
+  for (const std::string& e : effects) {
+    const SurfaceTermInfo* t = find_surface_term(e);
+    if (t && t->check) t->check(surface);
   }
   const GenericLoads& g = surface.generic;
-  for (const std::string& e : effects) {
-    const std::vector<int>* set = e == "fixed_nodes"               ? &g.fixed_nodes
-                                  : e == "point_loads"             ? &g.load_nodes
-                                  : e == "prescribed_displacement" ? &g.displaced_nodes
-                                                                   : nullptr;
-    if (set && set->empty())
-      throw common::InputError("surface " + surface.name + ": effect '" + e +
-                               "' is requested but its node set (box) holds no node of the mesh");
-  }
   const bool moving = std::find(effects.begin(), effects.end(), "imposed_kinematics") != effects.end();
   if (moving && bone.at_rest)
     throw common::InputError("surface " + surface.name +
@@ -82,56 +77,9 @@ std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, con
   if (moving && ledger) ledger->record("imposed_kinematics", 1, surface.name);
   // Order of construction follows the scenario's list; the terms are
   // independent (their sum is the residual).
+  const SurfaceTermContext context{*model, surface, parameters, bone, ramp};
   for (const std::string& e : effects) {
-    if (e == "foundation_springs") {
-      if (parameters.foundation_stiffness_per_node_N_m3.size() > 0) {
-        if (parameters.foundation_stiffness_per_node_N_m3.size() != mesh.num_nodes())
-          throw common::InputError("surface " + surface.name + ": " +
-                                   std::to_string(parameters.foundation_stiffness_per_node_N_m3.size()) +
-                                   " nodal foundation stiffnesses for " + std::to_string(mesh.num_nodes()) + " nodes");
-        model->add_foundation_springs(parameters.foundation_stiffness_per_node_N_m3, bone);
-      } else {
-        model->add_foundation_springs(parameters.foundation_stiffness_N_m3, bone);
-      }
-    } else if (e == "foundation_damping") {
-      model->add_foundation_damping(parameters.foundation_damping_N_s_m3, bone, true);
-    } else if (e == "osmotic_pressure") {
-      const double p = parameters.osmotic_pressure_Pa, T = parameters.osmotic_ramp_s;
-      model->add_pressure("osmotic_pressure", -1.0, [p, T](double t) {
-        if (!(T > 0) || t >= T) return p;
-        const double u = std::max(t, 0.0) / T;
-        return p * u * u * (3 - 2 * u);
-      });
-    } else if (e == "periphery_fixed") {
-      if (parameters.periphery_tie_N_m3 > 0)
-        model->add_periphery_tangential(parameters.periphery_tie_N_m3, bone);
-      else
-        model->add_periphery_fixed(bone);
-    } else if (e == "inertia") {
-      model->add_inertia();
-    } else if (e == "fixed_nodes") {
-      std::array<bool, 6> all;
-      all.fill(true);
-      model->fix_nodes("fixed_nodes", g.fixed_nodes, all);
-    } else if (e == "point_loads") {
-      std::vector<std::pair<int, Eigen::Vector3d>> loads;
-      for (int n : g.load_nodes) loads.emplace_back(n, g.total_force_N / static_cast<double>(g.load_nodes.size()));
-      model->add_point_loads("point_loads", std::move(loads), ramp);
-    } else if (e == "pressure") {
-      const double p = g.pressure_Pa;
-      model->add_pressure("pressure", 0.0, [p, ramp](double t) { return p * ramp(t); });
-    } else if (e == "prescribed_displacement") {
-      NodeConstraint c;
-      c.name = "prescribed_displacement";
-      c.nodes = g.displaced_nodes;
-      c.mask = {true, true, true, false, false, false};
-      const Eigen::VectorXd q0 = model->reference_state();
-      const Eigen::Vector3d u = g.displacement_m;
-      c.value = [q0, u, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
-        q6.head<3>() = q0.segment<3>(6 * node) + ramp(t) * u;
-      };
-      model->add_constraint(std::move(c));
-    }
+    if (const SurfaceTermInfo* t = find_surface_term(e)) t->build(context);
   }
   return model;
 }

@@ -1,6 +1,7 @@
 #include "common/effects.h"
 
 #include <algorithm>
+#include <deque>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -10,10 +11,12 @@
 
 namespace arthrosim::common {
 
-const std::vector<EffectInfo>& known_effects() {
+namespace {
+
+std::vector<EffectInfo>& vocabulary() {
   // The one list of effect names. Descriptions follow issues 3-6 and seed
   // 002_3ffcc11eb7a447d9.txt ("Deformable Cartilage Model", "Contact Methods").
-  static const std::vector<EffectInfo> kEffects = {
+  static std::vector<EffectInfo> kEffects = {
       {"ligaments", EffectStage::kMusculoskeletal,
        "Blankevoort (1991) ligament bundles acting on tibia and patella"},
       {"muscles", EffectStage::kMusculoskeletal,
@@ -45,8 +48,35 @@ const std::vector<EffectInfo>& known_effects() {
        "cartilage layers as linear biphasic (u-p) volumes on their bones (docs/biphasic.md)"},
       {"penetration_contact", EffectStage::kBiphasic,
        "the penetration method's contact conditions from the overlap and stage 1's contact force"},
+      {"mca_elastic", EffectStage::kShockwave,
+       "movable cellular automata: linear-elastic pair law with the many-body term (A1-A8)"},
+      {"pore_fluid", EffectStage::kShockwave, "Biot pore fluid of the poroelastic tissues (A9-A10)"},
+      {"filtration", EffectStage::kShockwave, "Darcy filtration of the pore fluid between automata (A11-A12)"},
+      {"applicator_pulse", EffectStage::kShockwave,
+       "the shockwave pulse through the copper applicator, scaled to each EFD (eqs. 1-2)"},
+      {"platen_compression", EffectStage::kShockwave,
+       "slow compression of the knee between its cut faces (convergence, validation)"},
   };
   return kEffects;
+}
+
+}  // namespace
+
+const std::vector<EffectInfo>& known_effects() { return vocabulary(); }
+
+void register_effect(const std::string& name, EffectStage stage, const std::string& description) {
+  if (const EffectInfo* e = find_effect(name)) {
+    if (e->stage == stage) return;
+    throw std::logic_error("register_effect: '" + name + "' is already an effect of the " +
+                           std::string(to_string(e->stage)) + " stage");
+  }
+  // The names and descriptions live as long as the program (the vocabulary
+  // holds string_views).
+  static std::deque<std::string> storage;
+  storage.push_back(name);
+  const std::string_view n = storage.back();
+  storage.push_back(description);
+  vocabulary().push_back({n, stage, storage.back()});
 }
 
 const EffectInfo* find_effect(std::string_view name) {
@@ -61,6 +91,7 @@ std::string_view to_string(EffectStage stage) {
     case EffectStage::kMusculoskeletal: return "musculoskeletal";
     case EffectStage::kSurface: return "surface";
     case EffectStage::kBiphasic: return "biphasic";
+    case EffectStage::kShockwave: return "shockwave";
   }
   return "";
 }

@@ -26,7 +26,7 @@ namespace arthrosim::common {
 class H5File;
 
 /// The stage whose scene block lists an effect.
-enum class EffectStage { kMusculoskeletal, kSurface, kBiphasic };
+enum class EffectStage { kMusculoskeletal, kSurface, kBiphasic, kShockwave };
 
 struct EffectInfo {
   std::string_view name;         ///< as written in a scene, e.g. "foundation_springs"
@@ -34,11 +34,18 @@ struct EffectInfo {
   std::string_view description;  ///< one line for --help and docs
 };
 
-/// Every known effect, in documentation order.
+/// Every known effect, in documentation order (the list in effects.cc, then
+/// what register_effect added).
 const std::vector<EffectInfo>& known_effects();
+/// Adds an effect a stage registered (e.g. a surface term,
+/// cartilage::register_surface_term) to the vocabulary. A name already known
+/// for the same stage is left as it is; a name of another stage is a
+/// std::logic_error. Register before the scene schema is first used
+/// (pipelines::scene_schema() reads the vocabulary once).
+void register_effect(const std::string& name, EffectStage stage, const std::string& description);
 /// The entry for `name`, or nullptr when no such effect exists.
 const EffectInfo* find_effect(std::string_view name);
-/// "musculoskeletal", "surface" or "biphasic".
+/// "musculoskeletal", "surface", "biphasic" or "shockwave".
 std::string_view to_string(EffectStage stage);
 /// Comma-separated names of the effects of one stage (for error messages).
 std::string effect_names(EffectStage stage);

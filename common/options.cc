@@ -36,6 +36,10 @@ std::string_view unit_suffix(Unit unit) {
       return "_n_per_mm3";
     case U::kNewtonSecondPerCubicMillimetre:
       return "_n_s_per_mm3";
+    case U::kMicrosecond:
+      return "_us";
+    case U::kMillijoulePerSquareMillimetre:
+      return "_mj_per_mm2";
   }
   return "";
 }
@@ -55,6 +59,10 @@ double unit_to_si(Unit unit) {
       return units::n_per_mm3;
     case U::kNewtonSecondPerCubicMillimetre:
       return units::n_s_per_mm3;
+    case U::kMicrosecond:
+      return units::us;
+    case U::kMillijoulePerSquareMillimetre:
+      return units::mj_per_mm2;
     case U::kNone:
     case U::kSecond:
     case U::kHertz:
@@ -74,6 +82,7 @@ std::string_view si_unit_name(Unit unit) {
       return "rad";
     case U::kSecond:
     case U::kMillisecond:
+    case U::kMicrosecond:
       return "s";
     case U::kMegapascal:
       return "Pa";
@@ -85,6 +94,8 @@ std::string_view si_unit_name(Unit unit) {
       return "N/m^3";
     case U::kNewtonSecondPerCubicMillimetre:
       return "N s/m^3";
+    case U::kMillijoulePerSquareMillimetre:
+      return "J/m^2";
   }
   return "";
 }

@@ -68,6 +68,8 @@ enum class Unit {
   kKilogramPerCubicMetre,           ///< _kg_per_m3
   kNewtonPerCubicMillimetre,        ///< _n_per_mm3   -> N/m^3   (x 1e9)
   kNewtonSecondPerCubicMillimetre,  ///< _n_s_per_mm3 -> N s/m^3 (x 1e9)
+  kMicrosecond,                     ///< _us   -> s      (x 1e-6)
+  kMillijoulePerSquareMillimetre,   ///< _mj_per_mm2 -> J/m^2 (x 1e3)
 };
 
 /// Suffix (with leading underscore, "" for kNone), SI factor and SI unit name.
@@ -80,10 +82,13 @@ std::string_view si_unit_name(Unit unit);
 namespace units {
 inline constexpr double mm = 1e-3;
 inline constexpr double ms = 1e-3;
+inline constexpr double us = 1e-6;
 inline constexpr double deg = std::numbers::pi / 180.0;
 inline constexpr double mpa = 1e6;
 inline constexpr double n_per_mm3 = 1e9;
 inline constexpr double n_s_per_mm3 = 1e9;
+// 1 mJ/mm^2 = 1e-3 J / (1e-3 m)^2 = 1e3 J/m^2.
+inline constexpr double mj_per_mm2 = 1e3;
 }  // namespace units
 
 /// Closed range of a number or whole number, in the unit as written; for a

@@ -34,6 +34,9 @@ class Writer {
 
 /// A parsed JSON value.
 struct Value {
+  // Declared (not an aggregate): clang with libstdc++ would otherwise need
+  // std::pair<std::string, Value> complete inside this class.
+  Value() = default;
   enum class Kind { kNull, kBool, kNumber, kString, kArray, kObject } kind = Kind::kNull;
   bool boolean = false;
   double number = 0.0;

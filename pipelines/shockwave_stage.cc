@@ -7,11 +7,15 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/effects.h"
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/mesh_io.h"
 #include "common/progress.h"
+#include "common/scene.h"
+#include "pipelines/json.h"
+#include "pipelines/stages.h"
 #include "pipelines/shockwave_output.h"
 #include "shockwave/applicator_pulse.h"
 
@@ -94,17 +98,70 @@ std::vector<shockwave::Tissue> read_tissue_table(const fs::path& path) {
 }  // namespace
 
 const std::vector<std::pair<std::string, std::string>>& shockwave_effects() {
-  static const std::vector<std::pair<std::string, std::string>> k = {
-      {"mca_elastic", "movable cellular automata: linear-elastic pair law with the many-body term (A1-A8)"},
-      {"pore_fluid", "Biot pore fluid of the poroelastic tissues (A9-A10)"},
-      {"filtration", "Darcy filtration of the pore fluid between automata (A11-A12)"},
-      {"applicator_pulse", "the shockwave pulse through the copper applicator, scaled to each EFD (eqs. 1-2)"},
-      {"platen_compression", "slow compression of the knee between its cut faces (convergence, validation)"},
-  };
+  // The stage's part of the effect vocabulary (common/effects.cc).
+  static const std::vector<std::pair<std::string, std::string>> k = [] {
+    std::vector<std::pair<std::string, std::string>> v;
+    for (const common::EffectInfo& e : common::known_effects())
+      if (e.stage == common::EffectStage::kShockwave) v.emplace_back(std::string(e.name), std::string(e.description));
+    return v;
+  }();
   return k;
 }
 
-ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& o, const std::string& source) {
+void ShockwaveStageOptions::declare(common::OptionVisitor& v) {
+  using common::Unit;
+  v.effect_list("effects", effects, "shockwave",
+                "physics terms: mca_elastic (required), pore_fluid (Biot, A9-A10), filtration (Darcy, A11-A12; "
+                "needs pore_fluid), and the loading: applicator_pulse or platen_compression")
+      .required();
+  v.text("geometry", geometry, "knee|bar",
+         "knee: the prepared knee in its capsule; bar: a laterally periodic bar of one tissue, the pulse on one "
+         "end, for checking the p-wave speed against the closed forms");
+  v.text("bar_tissue", bar_tissue, "cortical|cancellous|cartilage|fibrocartilage|fibrous|capsule_shell",
+         "bar: its tissue");
+  v.number("bar_length_mm", bar_length_m, Unit::kMillimetre, {10, 1000}, "bar: its length");
+  v.text("lattice", lattice, "fcc|sc", "packing of the automata");
+  v.number("automaton_diameter_mm", automaton_diameter_m, Unit::kMillimetre, {0.3, 5.0}, "automaton diameter d (the seed's 1 mm)");
+  v.number("femur_cut_mm", femur_cut_m, Unit::kMillimetre, {5, 200}, "femur kept up to this distance above the joint line");
+  v.number("tibia_cut_mm", tibia_cut_m, Unit::kMillimetre, {5, 200}, "tibia kept down to this distance below the joint line");
+  v.number("capsule_margin_mm", capsule_margin_m, Unit::kMillimetre, {0, 50}, "fibrous tissue around the bones' extent");
+  v.number("shell_thickness_mm", shell_thickness_m, Unit::kMillimetre, {0.3, 20}, "capsule shell thickness");
+  v.number("cortical_thickness_mm", cortical_thickness_m, Unit::kMillimetre, {0.3, 20}, "cortical shell thickness of the bones");
+  v.text("applicator_face", applicator_face, "-x|+x|-z|+z", "capsule box face the applicator lies on (-z: medial, right knee)");
+  v.number_list("applicator_centre_mm", applicator_centre_m, Unit::kMillimetre, {3, 3},
+                "applicator centre (model frame); default: over the medial meniscus");
+  v.number("applicator_size_mm", applicator_size_m, Unit::kMillimetre, {1, 100}, "edge of the square copper plate");
+  v.number("applicator_thickness_mm", applicator_thickness_m, Unit::kMillimetre, {0.1, 10}, "copper plate thickness");
+  v.number_list("efd_mj_per_mm2", efd_j_per_m2, Unit::kMillijoulePerSquareMillimetre, {1, 20},
+                "energy flux densities (seed eq. 2), one run each (the seed's 0.12, 0.33, 0.8)");
+  v.number("efd_impedance", efd_impedance, Unit::kNone, {1e5, 1e8},
+           "acoustic impedance rho c [Pa s/m] the EFD is quoted in (water, 1.5e6)");
+  v.number("pulse_rise_time_us", pulse_rise_time_s, Unit::kMicrosecond, {0.01, 1000}, "rise of the pressure pulse, 0 to peak");
+  v.number("pulse_fall_time_us", pulse_fall_time_s, Unit::kMicrosecond, {0.01, 1000}, "fall at the end of the positive phase");
+  v.number("pulse_positive_duration_us", pulse_positive_duration_s, Unit::kMicrosecond, {0.02, 10000}, "positive phase");
+  v.number("pulse_tail_duration_us", pulse_tail_duration_s, Unit::kMicrosecond, {0, 10000}, "negative tail (0: none)");
+  v.number("pulse_tail_fraction", pulse_tail_fraction, Unit::kNone, {0, 1}, "peak of the tail / peak of the pulse");
+  v.number("end_time_us", end_time_s, Unit::kMicrosecond, {1, 1e6}, "simulated time per run");
+  v.number("output_interval_us", output_interval_s, Unit::kMicrosecond, {0.01, 1e6}, "time between written frames");
+  v.flag("write_frames", write_frames, "write the fields per frame (false: peaks and volumes only)");
+  v.number("time_step_safety", time_step_safety, Unit::kNone, {0.01, 1}, "time step / stability limit");
+  v.number("fluid_bulk_modulus_mpa", fluid_bulk_modulus_pa, Unit::kMegapascal, {1, 1e5}, "pore fluid bulk modulus (saline 2400)");
+  v.number("fluid_density_kg_per_m3", fluid_density, Unit::kKilogramPerCubicMetre, {100, 3000}, "pore fluid density");
+  v.number("fluid_viscosity", fluid_viscosity, Unit::kNone, {1e-5, 1}, "pore fluid viscosity [Pa s] (water at 37 C)");
+  v.path("tissue_table", tissue_table, "CSV replacing Table 1 (docs/shockwave.md, \"Tissues\")");
+  v.number("compression_displacement_mm", compression_displacement_m, Unit::kMillimetre, {0.001, 5},
+           "platen_compression: downward displacement of the femur's cut face");
+  v.number("compression_time_us", compression_time_s, Unit::kMicrosecond, {10, 1e6}, "platen_compression: time of the ramp");
+  v.number("compression_damping", compression_damping, Unit::kNone, {0, 1e7},
+           "platen_compression: mass damping [1/s] (0: about critical for the knee's lowest mode)");
+  v.number("compressive_stress_min_mpa", compressive_stress_min_pa, Unit::kMegapascal, {0, 100}, "regeneration: P above this");
+  v.number("distortional_strain_min", distortional_strain_min, Unit::kNone, {0, 1}, "regeneration: strain from");
+  v.number("distortional_strain_max", distortional_strain_max, Unit::kNone, {0, 1}, "regeneration: strain to");
+  v.number("pore_pressure_min_mpa", pore_pressure_min_pa, Unit::kMegapascal, {0, 100}, "regeneration: pore pressure from");
+  v.number("pore_pressure_max_mpa", pore_pressure_max_pa, Unit::kMegapascal, {0, 100}, "regeneration: pore pressure to");
+}
+
+void check_shockwave_options(const ShockwaveStageOptions& o, const std::string& source) {
   for (const std::string& e : o.effects) {
     bool known = false;
     for (const auto& [name, doc] : shockwave_effects()) known |= name == e;
@@ -123,6 +180,27 @@ ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& o, const std::
     throw common::InputError(source, 0, "expected one loading among the effects: applicator_pulse or platen_compression");
   if (!(o.distortional_strain_min <= o.distortional_strain_max) || !(o.pore_pressure_min_pa <= o.pore_pressure_max_pa))
     throw common::InputError(source, 0, "expected the regeneration ranges' minimum <= maximum");
+}
+
+ShockwaveStageOptions shockwave_from_scene(const common::Scene& scene) {
+  if (!scene.has_block("shockwave"))
+    throw common::InputError(scene.file.string(), 0, "expected a 'shockwave' block with its effects, found none");
+  ShockwaveStageOptions o = common::read_options<ShockwaveStageOptions>(scene.block("shockwave"));
+  const int line = scene.block_line("shockwave");
+  check_shockwave_options(o, scene.file.string() + (line > 0 ? ":" + std::to_string(line) : std::string()) +
+                                 ": shockwave block");
+  return o;
+}
+
+std::vector<std::string> shockwave_run_labels(const ShockwaveStageOptions& o) {
+  if (wants(o, "platen_compression")) return {"compression"};
+  std::vector<std::string> labels;
+  for (double efd : o.efd_j_per_m2) labels.push_back("efd" + number(efd * 1e-3));
+  return labels;
+}
+
+ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& o, const std::string& source) {
+  check_shockwave_options(o, source);
   ShockwaveModel sm;
   if (o.geometry == "bar") {
     // A laterally periodic bar (uniaxial strain) of one tissue, loaded on x = 0.
@@ -256,11 +334,13 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
   const bool compression = wants(o, "platen_compression");
 
   // One run per EFD (or the compression).
-  std::vector<double> runs = compression ? std::vector<double>{0.0} : o.efd_j_per_m2;
-  for (double efd : runs) {
+  const std::vector<double> runs = compression ? std::vector<double>{0.0} : o.efd_j_per_m2;
+  const std::vector<std::string> labels = shockwave_run_labels(o);
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    const double efd = runs[r];
     ShockwaveRunResult rr;
     rr.efd_j_per_m2 = efd;
-    rr.label = compression ? "compression" : "efd" + number(efd * 1e-3);
+    rr.label = labels[r];
     rr.file = fs::path(o.out.string() + "_" + rr.label + ".h5");
     std::unique_ptr<shockwave::PressurePulse> pulse;
     shockwave::Model run_model = m;  // constraints differ per run kind
@@ -537,6 +617,132 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     svg << "</svg>\n";
   }
   return result;
+}
+
+}  // namespace arthrosim::pipelines
+
+namespace arthrosim::pipelines {
+
+namespace {
+
+// Key outputs of one shockwave output folder (its summary JSON), by name.
+struct ShockwaveKeyOutput {
+  std::string name, unit, description;
+  double value = 0.0;
+};
+
+std::vector<ShockwaveKeyOutput> shockwave_key_outputs(const fs::path& summary) {
+  const json::Value doc = json::read(summary);
+  std::vector<ShockwaveKeyOutput> out;
+  const json::Value* runs = doc.get("runs");
+  if (runs == nullptr || runs->kind != json::Value::Kind::kArray)
+    throw common::InputError(summary.string(), 0, "expected an array 'runs', found none");
+  auto number_of = [&](const json::Value& v, const std::string& key) {
+    const json::Value* x = v.get(key);
+    if (x == nullptr || x->kind != json::Value::Kind::kNumber)
+      throw common::InputError(summary.string(), 0, "expected a number '" + key + "', found none");
+    return x->number;
+  };
+  for (const json::Value& r : runs->array) {
+    const json::Value* label = r.get("label");
+    const std::string run = label != nullptr ? label->string : "?";
+    const double stiffness = number_of(r, "stiffness_n_per_mm");
+    const double bar_speed = number_of(r, "bar_speed_m_per_s");
+    if (stiffness > 0)
+      out.push_back({"stiffness[" + run + "]", "N/mm", "force / displacement of the platen compression", stiffness});
+    if (bar_speed > 0) {
+      out.push_back({"bar_speed[" + run + "]", "m/s", "p-wave speed measured along the bar", bar_speed});
+      continue;
+    }
+    const json::Value* tissues = r.get("tissues");
+    if (tissues == nullptr) continue;
+    for (const char* tissue : {"cartilage", "fibrocartilage"}) {
+      const json::Value* t = tissues->get(tissue);
+      if (t == nullptr) continue;
+      const std::string at = "[" + run + "," + tissue + "]";
+      out.push_back({"max_peak_pressure" + at, "MPa", "largest peak hydrostatic pressure of the tissue",
+                     number_of(*t, "max_peak_pressure_mpa")});
+      out.push_back({"max_peak_distortional_strain" + at, "", "largest peak distortional strain of the tissue",
+                     number_of(*t, "max_peak_distortional_strain")});
+      out.push_back({"max_peak_pore_pressure" + at, "MPa", "largest peak pore pressure of the tissue",
+                     number_of(*t, "max_peak_pore_pressure_mpa")});
+      out.push_back({"regeneration_volume" + at, "mm^3", "volume where all three regeneration criteria held",
+                     number_of(*t, "all_mm3")});
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+StageDescriptor shockwave_stage_descriptor() {
+  StageDescriptor d;
+  d.name = "shockwave";
+  d.executable = "arthrosim-shockwave";
+  d.summary = "poroelastic movable cellular automata: a shockwave pulse through the knee (or a bar), per EFD";
+  d.block = block_schema<ShockwaveStageOptions>("shockwave",
+                                                "effects and options of the shockwave stage (docs/shockwave.md)");
+  d.outputs = {"shockwave"};
+  for (const auto& [name, doc] : shockwave_effects()) d.effects.push_back({name, "shockwave", doc});
+  d.check = [](const common::Scene& scene) {
+    if (scene.has_block("shockwave")) shockwave_from_scene(scene);
+  };
+  d.no_runs = "a 'shockwave' block with its effects";
+  d.runs = [](const common::Scene& scene, const fs::path& out) {
+    std::vector<StageStep> runs;
+    if (!scene.has_block("shockwave")) return runs;
+    const common::OptionBlock& block = scene.block("shockwave");
+    const ShockwaveStageOptions o = common::read_options<ShockwaveStageOptions>(block);
+    const fs::path stem = out / "shockwave";
+    StageStep s;
+    s.name = "shockwave";
+    s.executable = "arthrosim-shockwave";
+    s.provides = {"shockwave"};
+    s.origin = "the shockwave block";
+    s.line = scene.block_line("shockwave");
+    if (o.geometry == "knee") {
+      // The knee of automata: the prepared bones and cartilage, the menisci
+      // of the model folder.
+      const fs::path prepared = out / "prepared.h5";
+      const fs::path model = scene_inputs(scene).model;
+      s.inputs.emplace_back("prepared.h5", prepared);
+      s.inputs.emplace_back("model", model);
+      s.arguments = {"--prepared", prepared.string(), "--model", model.string()};
+    }
+    s.options = block.canonical();
+    s.effects = block.list("effects");
+    add_path_inputs(block, s);
+    // The first output holds the effect ledger the runner checks.
+    for (const std::string& label : shockwave_run_labels(o)) s.outputs.push_back(stem.string() + "_" + label + ".h5");
+    s.outputs.push_back(stem.string() + "_summary.json");
+    s.arguments.insert(s.arguments.end(), {"--scene", scene.file.string(), "--out", stem.string()});
+    runs.push_back(std::move(s));
+    return runs;
+  };
+  d.key_outputs = [](const std::string&, const fs::path& dir, const fs::path& ref) {
+    const fs::path file = dir / "shockwave_summary.json", ref_file = ref / "shockwave_summary.json";
+    const std::vector<ShockwaveKeyOutput> a = shockwave_key_outputs(file), b = shockwave_key_outputs(ref_file);
+    std::vector<OutputMetric> metrics;
+    for (const ShockwaveKeyOutput& k : b) {
+      OutputMetric m;
+      m.name = k.name;
+      m.description = "|x - x_ref| / |x_ref|, x the " + k.description;
+      m.output_unit = k.unit;
+      const auto it = std::find_if(a.begin(), a.end(), [&](const ShockwaveKeyOutput& x) { return x.name == k.name; });
+      if (it == a.end()) {
+        m.note = "not in " + file.string();
+      } else {
+        m.output = it->value;
+        if (k.value != 0.0)
+          m.error = std::abs(it->value - k.value) / std::abs(k.value);
+        else
+          m.note = "the reference value is zero; a relative error is undefined";
+      }
+      metrics.push_back(m);
+    }
+    return metrics;
+  };
+  return d;
 }
 
 }  // namespace arthrosim::pipelines

@@ -7,6 +7,7 @@
 #include "pipelines/comak_stage.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/prepare.h"
+#include "pipelines/shockwave_stage.h"
 #include "pipelines/surface_stage.h"
 
 namespace arthrosim::pipelines {
@@ -18,6 +19,7 @@ const std::vector<StageDescriptor>& stages() {
       comak_stage_descriptor(),
       surface_stage_descriptor(),
       biphasic_stage_descriptor(),
+      shockwave_stage_descriptor(),
       post_stage_descriptor(),
   };
   return kStages;

@@ -4,6 +4,11 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <stdexcept>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -11,81 +16,150 @@
 #include <CLI/CLI.hpp>
 
 #include "common/log.h"
+#include "common/options.h"
 #include "pipelines/shockwave_stage.h"
+#include "pipelines/stages.h"
 
 using namespace arthrosim;
 
 namespace {
 
-std::string flag_name(const char* key) {
+std::string flag_name(std::string_view key) {
   std::string s = "--";
-  for (const char* c = key; *c; ++c) s += *c == '_' ? '-' : *c;
+  for (char c : key) s += c == '_' ? '-' : c;
   return s;
 }
 
-std::string shortest(double v) {
-  for (int p = 1; p <= 17; ++p) {
-    std::ostringstream s;
-    s.precision(p);
-    s << v;
-    if (std::stod(s.str()) == v) return s.str();
-  }
-  return std::to_string(v);
+std::string join(const std::vector<std::string>& v) {
+  std::string s;
+  for (const std::string& x : v) s += (s.empty() ? "" : " ") + x;
+  return s;
 }
 
 // Turns the stage's option declaration (ShockwaveStageOptions::declare) into
 // command-line options: --key-with-dashes VALUE in the unit of the key's
-// suffix, converted to SI after parsing.
-class CliVisitor {
+// suffix. apply() copies the options given on the command line into the
+// struct (converted to SI), over the defaults or the scene's block.
+class CliVisitor : public common::OptionVisitor {
  public:
   explicit CliVisitor(CLI::App& app) : app_(app) {}
-  void number(const char* key, double& si, pipelines::OptionUnit unit, double min, double max, const char* doc) {
-    auto written = std::make_shared<double>(si / unit.to_si);
-    app_.add_option(flag_name(key), *written, std::string(doc) + " [default " + shortest(*written) + "]")
-        ->check(CLI::Range(min, max));
-    finish_.push_back([&si, written, unit] { si = *written * unit.to_si; });
-  }
-  void number_list(const char* key, std::vector<double>& si, pipelines::OptionUnit unit, double min_len,
-                   double max_len, const char* doc) {
-    auto written = std::make_shared<std::vector<double>>();
-    std::string def;
-    for (double v : si) def += (def.empty() ? "" : " ") + shortest(v / unit.to_si);
-    app_.add_option(flag_name(key), *written, std::string(doc) + (def.empty() ? "" : " [default " + def + "]"))
-        ->expected(static_cast<int>(min_len), static_cast<int>(max_len));
-    finish_.push_back([&si, written, unit] {
-      if (written->empty()) return;
-      si.clear();
-      for (double v : *written) si.push_back(v * unit.to_si);
+  OptionVisitor& number(std::string_view key, double& si, common::Unit unit, common::Range range,
+                        std::string_view doc) override {
+    auto written = std::make_shared<double>(si / common::unit_to_si(unit));
+    CLI::Option* opt = app_.add_option(flag_name(key), *written,
+                                       std::string(doc) + " [default " + common::written_value(si, unit) + "]");
+    opt->check(CLI::Range(range.min, range.max));
+    apply_.push_back([&si, written, unit, opt] {
+      if (opt->count()) si = *written * common::unit_to_si(unit);
     });
+    return *this;
   }
-  void flag(const char* key, bool& value, const char* doc) {
-    app_.add_option(flag_name(key), value, std::string(doc) + " [default " + (value ? "true" : "false") + "]");
+  OptionVisitor& number(std::string_view key, std::optional<double>& si, common::Unit unit, common::Range range,
+                        std::string_view doc) override {
+    auto written = std::make_shared<double>(0.0);
+    CLI::Option* opt = app_.add_option(flag_name(key), *written, std::string(doc));
+    opt->check(CLI::Range(range.min, range.max));
+    apply_.push_back([&si, written, unit, opt] {
+      if (opt->count()) si = *written * common::unit_to_si(unit);
+    });
+    return *this;
   }
-  void text(const char* key, std::string& value, const char* choices, const char* doc) {
-    auto* opt = app_.add_option(flag_name(key), value, std::string(doc) + " [default " + value + "]");
-    if (*choices) {
-      std::vector<std::string> words;
-      std::stringstream ss(choices);
-      std::string w;
-      while (std::getline(ss, w, '|')) words.push_back(w);
-      opt->check(CLI::IsMember(words));
-    }
+  OptionVisitor& integer(std::string_view key, int& value, common::Range range, std::string_view doc) override {
+    auto given = std::make_shared<int>(value);
+    CLI::Option* opt =
+        app_.add_option(flag_name(key), *given, std::string(doc) + " [default " + std::to_string(value) + "]");
+    opt->check(CLI::Range(range.min, range.max));
+    apply_.push_back([&value, given, opt] {
+      if (opt->count()) value = *given;
+    });
+    return *this;
   }
-  void path(const char* key, std::filesystem::path& value, const char* doc) {
-    app_.add_option(flag_name(key), value, doc);
+  OptionVisitor& flag(std::string_view key, bool& value, std::string_view doc) override {
+    auto given = std::make_shared<bool>(value);
+    CLI::Option* opt = app_.add_option(flag_name(key), *given,
+                                       std::string(doc) + " [default " + (value ? "true" : "false") + "]");
+    apply_.push_back([&value, given, opt] {
+      if (opt->count()) value = *given;
+    });
+    return *this;
   }
-  void effect_list(const char* key, std::vector<std::string>& value, const char* doc) {
-    std::string def;
-    for (const std::string& e : value) def += (def.empty() ? "" : " ") + e;
-    app_.add_option(flag_name(key), value, std::string(doc) + " [default " + def + "]")->expected(1, 8);
+  OptionVisitor& text(std::string_view key, std::string& value, std::string_view choices,
+                      std::string_view doc) override {
+    auto given = std::make_shared<std::string>(value);
+    CLI::Option* opt = app_.add_option(flag_name(key), *given, std::string(doc) + " [default " + value + "]");
+    if (!choices.empty()) opt->check(CLI::IsMember(words(choices)));
+    apply_.push_back([&value, given, opt] {
+      if (opt->count()) value = *given;
+    });
+    return *this;
   }
-  void finish() {
-    for (auto& f : finish_) f();
+  OptionVisitor& path(std::string_view key, std::filesystem::path& value, std::string_view doc) override {
+    auto given = std::make_shared<std::filesystem::path>(value);
+    CLI::Option* opt = app_.add_option(flag_name(key), *given, std::string(doc));
+    apply_.push_back([&value, given, opt] {
+      if (opt->count()) value = *given;
+    });
+    return *this;
+  }
+  OptionVisitor& text_list(std::string_view key, std::vector<std::string>& value, std::string_view choices,
+                           std::string_view doc) override {
+    auto given = std::make_shared<std::vector<std::string>>();
+    CLI::Option* opt = app_.add_option(flag_name(key), *given, std::string(doc) + " [default " + join(value) + "]");
+    if (!choices.empty()) opt->check(CLI::IsMember(words(choices)));
+    apply_.push_back([&value, given, opt] {
+      if (opt->count()) value = *given;
+    });
+    return *this;
+  }
+  OptionVisitor& number_list(std::string_view key, std::vector<double>& si, common::Unit unit, common::Range length,
+                             std::string_view doc) override {
+    auto written = std::make_shared<std::vector<double>>();
+    std::vector<std::string> def;
+    for (double v : si) def.push_back(common::written_value(v, unit));
+    CLI::Option* opt = app_.add_option(flag_name(key), *written,
+                                       std::string(doc) + (def.empty() ? "" : " [default " + join(def) + "]"));
+    opt->expected(static_cast<int>(length.min), static_cast<int>(length.max));
+    apply_.push_back([&si, written, unit, opt] {
+      if (!opt->count()) return;
+      si.clear();
+      for (double v : *written) si.push_back(v * common::unit_to_si(unit));
+    });
+    return *this;
+  }
+  OptionVisitor& named_numbers(std::string_view key, std::map<std::string, double>&, common::Unit, common::Range,
+                               std::string_view) override {
+    throw std::logic_error("arthrosim-shockwave: no command-line form for the named numbers '" + std::string(key) +
+                           "'");
+  }
+  OptionVisitor& effect_list(std::string_view key, std::vector<std::string>& value, std::string_view,
+                             std::string_view doc) override {
+    auto given = std::make_shared<std::vector<std::string>>();
+    CLI::Option* opt = app_.add_option(flag_name(key), *given, std::string(doc) + " [default " + join(value) + "]");
+    opt->expected(1, 8);
+    apply_.push_back([&value, given, opt] {
+      if (opt->count()) value = *given;
+    });
+    return *this;
+  }
+  void apply() {
+    for (auto& f : apply_) f();
+  }
+
+ protected:
+  void choice_index(std::string_view key, const std::vector<std::string_view>&, int&, std::string_view) override {
+    throw std::logic_error("arthrosim-shockwave: no command-line form for the choice '" + std::string(key) + "'");
   }
 
  private:
+  static std::vector<std::string> words(std::string_view choices) {
+    std::vector<std::string> w;
+    std::stringstream ss{std::string(choices)};
+    std::string x;
+    while (std::getline(ss, x, '|')) w.push_back(x);
+    return w;
+  }
   CLI::App& app_;
-  std::vector<std::function<void()>> finish_;
+  std::vector<std::function<void()>> apply_;
 };
 
 }  // namespace
@@ -102,10 +176,14 @@ int main(int argc, char** argv) {
       "volumes-vs-EFD plot (SVG). Method, options, units, limits: docs/shockwave.md."};
   pipelines::ShockwaveStageOptions o;
   bool verbose = false, quiet = false, dry_run = false;
+  std::string scene_path;
   app.add_option("--prepared", o.prepared, "prepared-model HDF5 (arthrosim-prepare); not needed with --geometry bar");
   app.add_option("--model", o.model, "model folder with <name>_meniscus.{stl,obj,ply} (the menisci)");
   app.add_option("--out", o.out, "output stem: <stem>_efd<EFD>.h5/.xdmf per run, <stem>_summary.json, <stem>_volumes.svg")
       ->required();
+  app.add_option("--scene", scene_path,
+                 "scene YAML: its shockwave block gives effects and options (docs/scenes.md); a flag below wins "
+                 "over it");
   CliVisitor visitor(app);
   o.declare(visitor);
   app.add_flag("--dry-run", dry_run, "build the model and print what each run would take; simulate nothing");
@@ -128,14 +206,26 @@ int main(int argc, char** argv) {
       "  arthrosim-shockwave --geometry bar --bar-tissue cartilage --end-time-us 60 --pulse-rise-time-us 10 \\\n"
       "      --pulse-fall-time-us 10 --pulse-positive-duration-us 20 --pulse-tail-duration-us 0 --out sw_bar\n"
       "      # under a second: the p-wave speed of a cartilage bar against Gassmann's undrained value\n"
+      "  arthrosim run data/scenes/shockwave_bar.yaml --out out/shockwave_bar [--dry-run]\n"
+      "      # the same bar from its scene (the runner calls this program with --scene)\n"
+      "  arthrosim run data/scenes/shockwave.yaml --out out/shockwave --dry-run\n"
+      "      # the plan of the seed's three runs: prepare, then this stage with the scene's shockwave block\n"
       "Threads: OMP_NUM_THREADS (same bytes for any count); on a shared machine also\n"
       "OMP_WAIT_POLICY=passive (threads waiting at a barrier sleep instead of spinning).\n");
   CLI11_PARSE(app, argc, argv);
-  visitor.finish();
   common::set_log_program("arthrosim-shockwave");
   common::set_log_level(common::log_level_from_flags(verbose, quiet));
   std::vector<std::string> args(argv, argv + argc);
   try {
+    // Options: the defaults, then the scene's shockwave block, then the flags given.
+    if (!scene_path.empty()) {
+      pipelines::ShockwaveStageOptions from_scene = pipelines::shockwave_from_scene(pipelines::load_scene(scene_path));
+      from_scene.prepared = o.prepared;
+      from_scene.model = o.model;
+      from_scene.out = o.out;
+      o = from_scene;
+    }
+    visitor.apply();
     const pipelines::ShockwaveStageResult r = pipelines::run_shockwave_stage(o, args, !quiet, dry_run);
     if (dry_run) {
       std::printf("%d automata, %lld bonds; time step %.4g ns (stability limit %.4g ns, %s)\n", r.automata,

@@ -14,10 +14,13 @@ namespace arthrosim::common {
 namespace {
 
 TEST(EffectVocabulary, IsTheScenesVocabulary) {
-  std::set<std::string> ms, surface, biphasic;
+  std::set<std::string> ms, surface, biphasic, shockwave;
   for (const EffectInfo& e : known_effects()) {
     EXPECT_FALSE(e.description.empty()) << e.name;
-    auto& set = e.stage == EffectStage::kMusculoskeletal ? ms : e.stage == EffectStage::kSurface ? surface : biphasic;
+    auto& set = e.stage == EffectStage::kMusculoskeletal ? ms
+                : e.stage == EffectStage::kSurface       ? surface
+                : e.stage == EffectStage::kBiphasic      ? biphasic
+                                                         : shockwave;
     EXPECT_TRUE(set.insert(std::string(e.name)).second) << "duplicate " << e.name;
     EXPECT_EQ(find_effect(e.name), &e);
   }
@@ -29,6 +32,8 @@ TEST(EffectVocabulary, IsTheScenesVocabulary) {
                                             "fixed_nodes", "point_loads", "pressure",
                                             "prescribed_displacement"}));
   EXPECT_EQ(biphasic, (std::set<std::string>{"biphasic_layers", "penetration_contact"}));
+  EXPECT_EQ(shockwave, (std::set<std::string>{"mca_elastic", "pore_fluid", "filtration", "applicator_pulse",
+                                              "platen_compression"}));
   EXPECT_EQ(find_effect("foundation_spring"), nullptr);
   EXPECT_EQ(effect_names(EffectStage::kMusculoskeletal),
             "ligaments, muscles, tibiofemoral_contact, patellofemoral_contact");

@@ -343,7 +343,7 @@ TEST_F(SceneTest, OutputsNeedTheirBlocks) {
                6, 5, {"scenario 'gait' uses imposed_kinematics", "add 'trial: PATH'"});
   expect_error("model: ../models/knee\noutputs: [prepared_model, bogus]\n", 2, 27,
                {"'outputs': unknown item 'bogus'", "expected any of prepared_model, kinematics, surface, "
-                                                   "biphasic, report"});
+                                                   "biphasic, shockwave, report"});
 }
 
 TEST_F(SceneTest, PathsAndDuplicates) {
@@ -377,7 +377,8 @@ TEST_F(SceneTest, RepositoryRelativePaths) {
 
 TEST(SceneSchema, UnitSuffixesMatchUnitsAndDefaultsAreValid) {
   const std::vector<std::string> suffixes = {"_mm", "_deg", "_s", "_ms", "_mpa", "_hz",
-                                             "_kg_per_m3", "_n_per_mm3", "_n_s_per_mm3"};
+                                             "_kg_per_m3", "_n_per_mm3", "_n_s_per_mm3", "_us",
+                                             "_mj_per_mm2"};
   for (const OptionSpec* op : scene_schema().all()) {
     const OptionSpec& o = *op;
     const std::string key(o.key);

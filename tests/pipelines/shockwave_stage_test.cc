@@ -12,6 +12,7 @@
 #include "pipelines/prepare.h"
 #include "pipelines/shockwave_output.h"
 #include "pipelines/shockwave_stage.h"
+#include "pipelines/stages.h"
 
 namespace arthrosim::pipelines {
 namespace {
@@ -125,6 +126,49 @@ TEST(ShockwaveStage, BadOptions) {
   std::ofstream(table) << "name,density_kg_per_m3,shear_modulus_mpa,bulk_modulus_mpa,solid_bulk_modulus_mpa,porosity,"
                           "permeability_m2\ncartilage,800,4.3,4.16,3400,1.5,4.8e-18\n";
   expect_error(o, "porosity in (0, 1)");
+}
+
+// The scene block (the stage table): keys in their written units, the checks
+// with the scene's file, and the runner's plan (no stage is run).
+TEST(ShockwaveStage, SceneBlockAndPlan) {
+  const fs::path dir = fs::path(kDir) / "scene";
+  fs::create_directories(dir / "models" / "knee");
+  const std::string head = "model: models/knee\noutputs: [shockwave]\n";
+  const common::Scene scene = parse_scene(
+      head + "shockwave:\n  effects: [mca_elastic, pore_fluid, filtration, applicator_pulse]\n"
+             "  automaton_diameter_mm: 1.5\n  efd_mj_per_mm2: [0.12, 0.8]\n  end_time_us: 50\n",
+      dir / "s.yaml");
+  const ShockwaveStageOptions o = shockwave_from_scene(scene);
+  EXPECT_DOUBLE_EQ(o.automaton_diameter_m, 1.5e-3);
+  EXPECT_EQ(o.efd_j_per_m2, (std::vector<double>{0.12 * 1e3, 0.8 * 1e3}));
+  EXPECT_EQ(o.end_time_s, 50 * 1e-6);
+  EXPECT_EQ(o.pulse_tail_duration_s, ShockwaveStageOptions{}.pulse_tail_duration_s);  // the default
+  EXPECT_EQ(shockwave_run_labels(o), (std::vector<std::string>{"efd0.12", "efd0.8"}));
+  const std::vector<StageStep> plan = plan_stages(scene, dir / "out");
+  ASSERT_EQ(plan.size(), 2u);
+  EXPECT_EQ(plan[0].name, "prepare");
+  EXPECT_EQ(plan[1].name, "shockwave");
+  EXPECT_EQ(plan[1].executable, "arthrosim-shockwave");
+  EXPECT_EQ(plan[1].outputs.front(), dir / "out" / "shockwave_efd0.12.h5");  // holds the effect ledger
+  EXPECT_EQ(plan[1].effects, (std::vector<std::string>{"mca_elastic", "pore_fluid", "filtration", "applicator_pulse"}));
+  // The bar needs no prepared model: the stage runs alone.
+  const common::Scene bar = parse_scene(
+      head + "shockwave: {effects: [mca_elastic, applicator_pulse], geometry: bar}\n", dir / "bar.yaml");
+  const std::vector<StageStep> bar_plan = plan_stages(bar, dir / "out");
+  ASSERT_EQ(bar_plan.size(), 1u);
+  EXPECT_EQ(bar_plan[0].name, "shockwave");
+  // Refused when the scene is read, naming the file: no loading, an effect of another stage.
+  auto refused = [&](const std::string& text, const std::string& needle) {
+    try {
+      parse_scene(text, dir / "bad.yaml");
+      ADD_FAILURE() << "accepted: " << needle;
+    } catch (const common::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad.yaml"), std::string::npos) << e.what();
+    }
+  };
+  refused(head + "shockwave: {effects: [mca_elastic, pore_fluid]}\n", "one loading");
+  refused(head + "shockwave: {effects: [mca_elastic, applicator_pulse, inertia]}\n", "inertia");
 }
 
 }  // namespace

@@ -39,3 +39,16 @@ add_test(NAME sample.arthrosim-shockwave.too_coarse
           --automaton-diameter-mm 3 --dry-run --out ${CMAKE_BINARY_DIR}/sample_runs/sw_bad)
 set_tests_properties(sample.arthrosim-shockwave.too_coarse PROPERTIES LABELS sample TIMEOUT 60
   FIXTURES_REQUIRED shockwave_prepared_coarse WILL_FAIL TRUE)
+# Through the stage table: the bar scene run by `arthrosim run` (the runner
+# calls arthrosim-shockwave --scene and checks its effect ledger), and the
+# plan of the seed's three runs (prepare, then the stage).
+add_test(NAME sample.arthrosim-shockwave.scene_bar
+  COMMAND arthrosim run data/scenes/shockwave_bar.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/shockwave_bar_scene --jobs 1
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim-shockwave.scene_bar PROPERTIES LABELS sample TIMEOUT 120
+  PASS_REGULAR_EXPRESSION "finished: shockwave ran")
+add_test(NAME sample.arthrosim-shockwave.scene_plan
+  COMMAND arthrosim run data/scenes/shockwave.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/shockwave_scene --dry-run
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim-shockwave.scene_plan PROPERTIES LABELS sample TIMEOUT 60
+  PASS_REGULAR_EXPRESSION "plan: prepare shockwave")
