@@ -232,6 +232,23 @@ std::vector<LayerSeries> read_layer_series(const std::string& path) {
   const common::H5File f(path, common::H5File::Mode::kRead);
   std::vector<LayerSeries> out;
   const Eigen::VectorXd time = f.read_vector("/time");
+  const std::vector<std::string> region_names = f.read_strings("/regions/names");
+  // Region code of each step -> its name; a vertex index < 0 means no vertex.
+  auto where = [&](const std::string& dataset, const Eigen::VectorXi& code, const Eigen::VectorXi& vertex) {
+    std::vector<std::string> names(static_cast<size_t>(code.size()));
+    for (Eigen::Index i = 0; i < code.size(); ++i) {
+      if (i < vertex.size() && vertex[i] < 0) {
+        names[i] = "none";
+        continue;
+      }
+      if (code[i] < 0 || code[i] >= static_cast<int>(region_names.size()))
+        throw common::InputError(path, 0, "dataset " + dataset + ", step " + std::to_string(i) +
+                                 ": expected a region code in [0, " + std::to_string(region_names.size()) +
+                                 ") (/regions/names), found " + std::to_string(code[i]));
+      names[i] = region_names[static_cast<size_t>(code[i])];
+    }
+    return names;
+  };
   for (const std::string& name : f.read_strings("/layers/names")) {
     const std::string g = layer_group(name);
     LayerSeries s;
@@ -243,6 +260,10 @@ std::vector<LayerSeries> read_layer_series(const std::string& path) {
     s.max_shear = f.read_vector(g + "/series/max_shear_stress");
     s.max_tensile_region = f.read_vector_int(g + "/series/max_tensile_region");
     s.max_shear_region = f.read_vector_int(g + "/series/max_shear_region");
+    s.max_tensile_where = where(g + "/series/max_tensile_region", s.max_tensile_region,
+                                f.read_vector_int(g + "/series/max_tensile_vertex"));
+    s.max_shear_where = where(g + "/series/max_shear_region", s.max_shear_region,
+                              f.read_vector_int(g + "/series/max_shear_vertex"));
     s.factorizations = static_cast<int>(f.attribute_int(g, "factorizations"));
     s.solves = static_cast<int>(f.attribute_int(g, "solves"));
     s.unknowns = static_cast<int>(f.attribute_int(g, "unknowns"));

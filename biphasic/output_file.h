@@ -65,12 +65,16 @@ struct LayerSeries {
   Eigen::VectorXd time;
   Eigen::VectorXd contact_area, fluid_load_support, max_tensile, max_shear;
   Eigen::VectorXi max_tensile_region, max_shear_region;
+  /// Where the maxima are, by name (the file's /regions/names: central,
+  /// anterior, posterior, medial, lateral region of this layer's plate), per
+  /// step; "none" where no contact vertex is in tension.
+  std::vector<std::string> max_tensile_where, max_shear_where;
   int factorizations = 0, solves = 0, unknowns = 0;
   double factorization_s = 0.0, solve_s = 0.0;
 };
 
 /// Reads every layer's series (InputError naming the file and dataset when
-/// something is missing).
+/// something is missing or a region code is not in /regions/names).
 std::vector<LayerSeries> read_layer_series(const std::string& path);
 
 /// Difference of one key output between a run and a reference run.

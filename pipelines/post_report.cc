@@ -125,7 +125,8 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
   sec.blocks.push_back(report_html::Text{
       "Per layer and step (docs/biphasic.md, \"Output\"): the area in contact, the fluid load support (fluid "
       "pressure over total normal stress, integrated over the contact), the largest tensile effective stress at a "
-      "contact vertex and the largest shear stress at the cartilage-bone interface.",
+      "contact vertex and the largest shear stress at the cartilage-bone interface; the table names where each "
+      "largest stress is: the central, anterior, posterior, medial or lateral region of the layer's plate, and when.",
       {}, false});
   struct Quantity {
     const char* key;
@@ -141,7 +142,8 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
   peaks.id = "tab-biphasic";
   peaks.title = "Biphasic layers: peaks over the run";
   peaks.header = {"file", "layer", "steps", "largest contact area [mm^2]", "largest fluid load support [%]",
-                  "largest tensile stress [MPa]", "largest shear stress [MPa]", "unknowns", "factorisations"};
+                  "largest tensile stress [MPa]", "where (region of the plate, time)", "largest shear stress [MPa]",
+                  "where (region of the plate, time)", "unknowns", "factorisations"};
   std::vector<report_html::LinePlot> plots;
   for (const auto& q : qs) {
     report_html::LinePlot p;
@@ -167,9 +169,18 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
         plots[k].lines.push_back(std::move(line));
       }
       auto mx = [](const Eigen::VectorXd& x, double s) { return x.size() ? s * x.maxCoeff() : kNaN; };
+      // The region (named by the biphasic reader) and time of the step with the largest value.
+      auto where = [&](const Eigen::VectorXd& x, const std::vector<std::string>& names) -> std::string {
+        if (x.size() == 0 || names.size() != static_cast<size_t>(x.size())) return "-";
+        Eigen::Index i = 0;
+        x.maxCoeff(&i);
+        return names[static_cast<size_t>(i)] + " at " + significant(l.time[i]) + " s";
+      };
       peaks.rows.push_back({label, l.name, static_cast<long long>(l.time.size()), mx(l.contact_area, 1e6),
-                            mx(l.fluid_load_support, 100.0), mx(l.max_tensile, 1e-6), mx(l.max_shear, 1e-6),
-                            static_cast<long long>(l.unknowns), static_cast<long long>(l.factorizations)});
+                            mx(l.fluid_load_support, 100.0), mx(l.max_tensile, 1e-6),
+                            where(l.max_tensile, l.max_tensile_where), mx(l.max_shear, 1e-6),
+                            where(l.max_shear, l.max_shear_where), static_cast<long long>(l.unknowns),
+                            static_cast<long long>(l.factorizations)});
       ++colour;
     }
   }

@@ -22,6 +22,13 @@ add_test(NAME sample.arthrosim-post.stages
 set_tests_properties(sample.arthrosim-post.stages PROPERTIES LABELS sample TIMEOUT 60
   FIXTURES_REQUIRED "biphasic_five_frames;post_shockwave_bar" FIXTURES_SETUP post_stages
   PASS_REGULAR_EXPRESSION "wrote .*report.html \\(5 figures\\)")
+# The biphasic table names where the largest stresses are (a region of the
+# plate, through biphasic::read_layer_series), not a region code.
+add_test(NAME sample.arthrosim-post.stages_regions
+  COMMAND ${CMAKE_COMMAND} -E cat ${CMAKE_BINARY_DIR}/sample_runs/post_stages/report.html)
+set_tests_properties(sample.arthrosim-post.stages_regions PROPERTIES LABELS sample TIMEOUT 30
+  FIXTURES_REQUIRED post_stages
+  PASS_REGULAR_EXPRESSION "<td>(central|anterior|posterior|medial|lateral) at [0-9.]+ s</td>")
 add_test(NAME sample.arthrosim-post.stages_drawn
   COMMAND ${CMAKE_SOURCE_DIR}/scripts/report_check.sh ${CMAKE_BINARY_DIR}/sample_runs/post_stages/report.html)
 set_tests_properties(sample.arthrosim-post.stages_drawn PROPERTIES LABELS sample TIMEOUT 150
