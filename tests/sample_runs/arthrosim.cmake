@@ -119,3 +119,12 @@ add_test(NAME sample.arthrosim.set_gait_stance
   WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
 set_tests_properties(sample.arthrosim.set_gait_stance PROPERTIES LABELS sample
   PASS_REGULAR_EXPRESSION "with 1 setting\\(s\\) written to .*gait_stance/scene_set.yaml.*plan: prepare comak surface.gait\n")
+
+# The real subject's biphasic scenario: the plan is prepare -> comak -> biphasic
+# (a dry run; the short-window figures are in docs/biphasic.md, "The real subject").
+add_test(NAME sample.arthrosim.lenhart2015_biphasic_dry_run
+  COMMAND arthrosim run data/scenes/lenhart2015_biphasic.yaml
+          --out ${CMAKE_BINARY_DIR}/sample_runs/lenhart2015_biphasic --dry-run
+  WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
+set_tests_properties(sample.arthrosim.lenhart2015_biphasic_dry_run PROPERTIES LABELS sample TIMEOUT 60
+  PASS_REGULAR_EXPRESSION "plan: prepare comak biphasic\n.*dry run finished: prepare would run, comak would run, biphasic would run")
