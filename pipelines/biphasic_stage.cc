@@ -1,5 +1,6 @@
 #include "pipelines/biphasic_stage.h"
 
+#include <cstdio>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -103,6 +104,29 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
     if (forces[c].rows() != n) {
       throw common::InputError(path, 0, "dataset " + ds + ": expected " + std::to_string(n) + " frames, found " +
                                             std::to_string(forces[c].rows()));
+    }
+    // A model with one tibiofemoral contact pair writes zero split series
+    // beside a non-zero total: the layers would go unloaded without a word.
+    const char* kTotal = "/contact/tibiofemoral/force";
+    auto all_zero = [&](const char* split) {
+      if (!f.exists(split)) return true;
+      const Eigen::MatrixXd m = f.read_matrix(split, 3);
+      return m.size() == 0 || m.cwiseAbs().maxCoeff() == 0.0;
+    };
+    if (c != "patellofemoral" && f.exists(kTotal) && all_zero("/contact/tibiofemoral/medial_force") &&
+        all_zero("/contact/tibiofemoral/lateral_force")) {
+      const Eigen::MatrixXd total = f.read_matrix(kTotal, 3);
+      const double peak = total.rows() ? total.rowwise().norm().maxCoeff() : 0.0;
+      if (peak > 0.0) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.0f", peak);
+        throw common::InputError(
+            path, 0,
+            ds + " (and the other compartment's) is zero at every frame while " + kTotal + " reaches " + buf +
+                " N: stage 1's model has no medial/lateral split of the tibiofemoral contact (one contact pair), "
+                "and the penetration method scales each compartment to its own force (docs/biphasic.md, \"The real "
+                "subject\")");
+      }
     }
   }
   Eigen::VectorXi status = Eigen::VectorXi::Zero(n);

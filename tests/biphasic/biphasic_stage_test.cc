@@ -68,6 +68,9 @@ struct KinematicsSpec {
   std::vector<double> force_N = {50, 120, 200, 150, 30, 60};
   std::vector<int> status = {0, 0, 0, 0, 0, 0};
   bool with_medial_force = true;
+  /// Stage 1 without a medial/lateral split (one tibiofemoral pair): the split
+  /// series are zero, the total carries the force.
+  bool unsplit = false;
 };
 
 std::string write_kinematics(const std::string& file, const KinematicsSpec& k) {
@@ -91,6 +94,8 @@ std::string write_kinematics(const std::string& file, const KinematicsSpec& k) {
   f.write("/time", t);
   f.write_tensor3("/bodies/femur/X_W", {n, 4, 4}, femur);
   f.write_tensor3("/bodies/tibia/X_W", {n, 4, 4}, tibia);
+  if (k.unsplit) f.write("/contact/tibiofemoral/force", medial);
+  if (k.unsplit) medial.setZero();
   if (k.with_medial_force) f.write("/contact/tibiofemoral/medial_force", medial);
   f.write("/contact/tibiofemoral/lateral_force", lateral);
   f.write("/solver/status", Eigen::VectorXi(Eigen::Map<const Eigen::VectorXi>(k.status.data(), n)));
@@ -186,6 +191,28 @@ TEST(BiphasicStage, RefusesAKinematicsFileWithoutTheContactForceSeries) {
     ADD_FAILURE() << "no error";
   } catch (const common::InputError& e) {
     EXPECT_NE(std::string(e.what()).find("expected the contact-force series /contact/tibiofemoral/medial_force"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find(kinematics), std::string::npos);
+  }
+  EXPECT_FALSE(fs::exists(o.out));  // nothing written
+}
+
+// A model with one tibiofemoral pair (lenhart2015) gives zero split series and
+// a non-zero total: the layers would silently go unloaded, so it is refused.
+TEST(BiphasicStage, RefusesZeroSplitForcesWhenTheTotalIsNotZero) {
+  common::set_log_level(common::LogLevel::kError);
+  const std::string prepared = write_prepared("prepared_us.h5");
+  KinematicsSpec spec;
+  spec.unsplit = true;
+  const std::string kinematics = write_kinematics("kinematics_us.h5", spec);
+  const auto o = options(prepared, kinematics, "us.h5");
+  try {
+    pipelines::run_biphasic_stage(o);
+    ADD_FAILURE() << "no error";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/contact/tibiofemoral/medial_force (and the other compartment's) is zero at every frame while "
+                                         "/contact/tibiofemoral/force reaches 200 N"),
               std::string::npos)
         << e.what();
     EXPECT_NE(std::string(e.what()).find(kinematics), std::string::npos);
