@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "tests/test_support.h"
 #include "common/storage.h"
 #include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/knee_loads.h"
@@ -23,28 +24,10 @@ namespace {
 namespace fs = std::filesystem;
 const fs::path kTrialDir = fs::path(ARTHROSIM_SOURCE_DIR) / "data/trials/lenhart2015_overground17";
 
-std::string message_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(no exception)";
-}
+using test_support::message_of;
+using test_support::read_text;
 
-fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / ("external_loads_" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+fs::path scratch(const std::string& name) { return test_support::fresh_scratch_dir("external_loads_" + name); }
 
 TEST(ExternalLoads, ReadsTheBundledFile) {
   const ExternalLoadsSpec s = read_external_loads((kTrialDir / "overground_17_ext_loads.xml").string());

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "tests/test_support.h"
 #include "musculoskeletal/model_io.h"
 
 namespace arthrosim::musculoskeletal {
@@ -23,28 +24,10 @@ namespace fs = std::filesystem;
 const fs::path kModelDir = fs::path(ARTHROSIM_SOURCE_DIR) / "data/models/lenhart2015";
 const fs::path kOsim = kModelDir / "source/lenhart2015.osim";
 
-std::string message_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(no exception)";
-}
+using test_support::message_of;
+using test_support::read_text;
 
-fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / ("osim_import_" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+fs::path scratch(const std::string& name) { return test_support::fresh_scratch_dir("osim_import_" + name); }
 
 OsimImportOptions lenhart_options(bool wrapping) {
   OsimImportOptions o;
