@@ -400,6 +400,14 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
                          ": a contact force of " + std::to_string(r.force_N) +
                          " N but no overlap of the layers; no contact conditions this frame");
       }
+      r.unloaded_overlap_m2 = std::max(c[k].a.unloaded_overlap_area, c[k].b.unloaded_overlap_area);
+      if (r.unloaded_overlap_m2 > 0.0) {
+        ++result.unloaded_pair_frames;
+        common::log_warn("frame t = " + std::to_string(f.time_s) + " s, " + pairs[k].compartment +
+                         ": stage 1's contact force is 0 N but the layers overlap over " +
+                         std::to_string(r.unloaded_overlap_m2 * 1e6) +
+                         " mm^2; no contact conditions this frame (free-draining, no traction)");
+      }
       if (r.beyond_thickness_nodes > 0)
         common::log_warn("frame t = " + std::to_string(f.time_s) + " s, " + pairs[k].compartment + ": " +
                          std::to_string(r.beyond_thickness_nodes) +
