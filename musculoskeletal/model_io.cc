@@ -913,8 +913,12 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";
       throw InputError(prepared_path, 0, m.str());
     }
-    ContactSurface r = with_mesh(s, std::move(mesh), tv, prepared_path + ":" + groups);
-    if (labelled > 0 && labelled == static_cast<int>(it->second.size())) {
+    const bool parts_labelled = labelled > 0 && labelled == static_cast<int>(it->second.size());
+    ContactSurface base = s;
+    if (parts_labelled) base.lateral_M.setZero();  // the parts' labels, not a relabelling
+    ContactSurface r = with_mesh(base, std::move(mesh), tv, prepared_path + ":" + groups);
+    r.lateral_M = s.lateral_M;
+    if (parts_labelled) {
       // The prepare stage's own split (common/compartments.h), part by part.
       r.compartment = std::move(compartment);
       r.compartment_rule = "the prepared compartments " + parts_rule + " (prepare's split of " + file + ")";
