@@ -122,6 +122,13 @@ std::vector<StageStep> plan_stages(const common::Scene& scene, const std::filesy
 /// (label "<block>.<key>").
 void add_path_inputs(const common::OptionBlock& block, StageStep& step);
 
+/// Files a run reads because an input names them (the .mot files of a
+/// trial.yaml, a meshes.yaml manifest's meshes): each (label, file) that no
+/// input of `step` already covers (the same file, or a folder holding it) is
+/// added as an input, so editing it reruns the step. Empty paths are ignored.
+void add_referenced_inputs(StageStep& step,
+                           const std::vector<std::pair<std::string, std::filesystem::path>>& files);
+
 /// The scene's top-level keys.
 struct SceneInputs {
   std::string description;

@@ -20,10 +20,13 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <sstream>
 #include <string>
 
+#include "common/effects.h"
 #include "common/error.h"
+#include "common/hashing.h"
 #include "common/file_check.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
@@ -512,6 +515,138 @@ TEST_F(SafetyRunner, SigtermIsForwardedToTheStageAndTheLockNamesItsHolder) {
   ASSERT_TRUE(WIFEXITED(status));   // the runner ended on its own, after its stage
   EXPECT_EQ(WEXITSTATUS(status), 3);  // with the stage reported as failed
   if (alive(stage)) ::kill(stage, SIGKILL);
+}
+
+
+// ---- 1. complete input identity -------------------------------------------
+
+// A fake stage program for the runner: writes its --out file (a fixed text,
+// so an unchanged rerun writes the same bytes); arthrosim-comak's output
+// starts with an HDF5 file holding an empty effect ledger (the runner checks
+// it), arthrosim-prepare also writes prepared.xdmf.
+constexpr const char* kFakeStage = R"SH(#!/bin/sh
+stage="$(basename "$0")"; out=""; prev=""
+for a in "$@"; do case "$prev" in --out) out="$a" ;; esac; prev="$a"; done
+if [ "$stage" = arthrosim-comak ]; then cp "$SAFETY_FAKE_LEDGER" "$out"; echo comak >> "$out";
+else echo "$stage" > "$out"; echo xdmf > "${out%.h5}.xdmf"; fi
+)SH";
+
+// Before: the runner hashed the trial and model paths only, so the .mot and
+// ExternalLoads files a trial.yaml names outside its folder (and the data
+// file the XML names), and a manifest's meshes outside the model folder,
+// could change without rerunning anything. Fake stages: only the runner's
+// plan and stamps are under test, so this takes well under a second.
+TEST(SafetyInputs, EditingEachReferencedFileRerunsItsStep) {
+  const fs::path root = scratch("inputs");
+  const fs::path trial = fs::path(ARTHROSIM_SOURCE_DIR) / "data/trials/lenhart2015_overground17";
+  for (const char* d : {"bin", "scenes", "models/knee", "meshes", "trials/walk", "shared/xml", "shared/grf", "ledger"})
+    fs::create_directories(root / d);
+  for (const char* s : {"arthrosim-prepare", "arthrosim-comak"}) {
+    std::ofstream(root / "bin" / s) << kFakeStage;
+    fs::permissions(root / "bin" / s, fs::perms::owner_all);
+  }
+  {
+    common::H5File f((root / "ledger/comak.h5").string(), common::H5File::Mode::kTruncate);
+    common::write_effect_ledger(f, common::EffectLedger("comak"));
+  }
+  setenv("SAFETY_FAKE_LEDGER", (root / "ledger/comak.h5").c_str(), 1);
+  // The trial: its description in trials/walk, its files elsewhere.
+  std::string yaml = slurp(trial / "trial.yaml");
+  const auto replace = [](std::string& s, const std::string& from, const std::string& to) {
+    const std::size_t at = s.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    s.replace(at, from.size(), to);
+  };
+  replace(yaml, "kinematics_file: overground_17_ik.mot", "kinematics_file: ../../shared/ik.mot");
+  replace(yaml, "external_loads_file: overground_17_ext_loads.xml", "external_loads_file: ../../shared/xml/ext.xml");
+  std::ofstream(root / "trials/walk/trial.yaml") << yaml;
+  std::string xml = slurp(trial / "overground_17_ext_loads.xml");
+  replace(xml, "<datafile>overground_17_grf.mot</datafile>", "<datafile>../grf/grf.mot</datafile>");
+  std::ofstream(root / "shared/xml/ext.xml") << xml;
+  fs::copy_file(trial / "overground_17_ik.mot", root / "shared/ik.mot");
+  fs::copy_file(trial / "overground_17_grf.mot", root / "shared/grf/grf.mot");
+  // The model: a manifest whose cartilage meshes live outside its folder.
+  std::ofstream(root / "models/knee/meshes.yaml")
+      << "unit: mm\nbones:\n  femur: {file: femur_bone.stl}\n  tibia: {file: tibia_bone.stl}\n"
+         "cartilage:\n  femur: {file: ../../meshes/femur_cartilage.stl, bone: femur}\n"
+         "  tibia: {file: ../../meshes/tibia_cartilage.stl, bone: tibia}\n";
+  for (const char* m : {"models/knee/femur_bone.stl", "models/knee/tibia_bone.stl", "meshes/femur_cartilage.stl",
+                        "meshes/tibia_cartilage.stl"})
+    fs::copy_file(kCoarse / (fs::path(m).filename() == "tibia_cartilage.stl" ? fs::path("tibia_medial_cartilage.stl")
+                                                                              : fs::path(m).filename()),
+                  root / m);
+  const fs::path scene_file = root / "scenes/s.yaml";
+  std::ofstream(scene_file) << "model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\n"
+                               "comak: {effects: [ligaments, muscles]}\n";
+  const common::Scene scene = load_scene(scene_file);
+
+  RunnerOptions options;
+  options.out_dir = root / "out";
+  options.stage_dir = root / "bin";
+  const auto outcome = [&](bool dry) {
+    options.dry_run = dry;
+    std::ostringstream log;
+    const RunReport r = run_scene(scene, options, log);
+    EXPECT_EQ(r.status, RunStatus::kOk) << log.str();
+    std::map<std::string, std::pair<StageStatus, std::string>> m;
+    for (const StageOutcome& o : r.stages) m[o.name] = {o.status, o.reason};
+    return m;
+  };
+  auto first = outcome(false);
+  ASSERT_EQ(first["prepare"].first, StageStatus::kRan);
+  ASSERT_EQ(first["comak"].first, StageStatus::kRan);
+  auto same = outcome(true);
+  EXPECT_EQ(same["prepare"].first, StageStatus::kWouldSkip) << same["prepare"].second;
+  EXPECT_EQ(same["comak"].first, StageStatus::kWouldSkip) << same["comak"].second;
+
+  struct Edit {
+    const char* file;
+    const char* stage;  // the step that must rerun
+    const char* label;  // the input its reason names
+  };
+  for (const Edit& e : {Edit{"shared/ik.mot", "comak", "trial kinematics"},
+                        Edit{"shared/xml/ext.xml", "comak", "trial external loads"},
+                        Edit{"shared/grf/grf.mot", "comak", "trial external loads data"},
+                        Edit{"meshes/tibia_cartilage.stl", "prepare", "model mesh tibia_cartilage"}}) {
+    SCOPED_TRACE(e.file);
+    std::ofstream(root / e.file, std::ios::app) << "\n";  // one byte more
+    auto dry = outcome(true);
+    EXPECT_EQ(dry[e.stage].first, StageStatus::kWouldRun);
+    EXPECT_NE(dry[e.stage].second.find("input changed: " + std::string(e.label)), std::string::npos)
+        << dry[e.stage].second;
+    if (std::string(e.stage) == "comak")
+      EXPECT_EQ(dry["prepare"].first, StageStatus::kWouldSkip) << dry["prepare"].second;
+    auto rerun = outcome(false);  // restamp
+    EXPECT_EQ(rerun[e.stage].first, StageStatus::kRan);
+    auto after = outcome(true);
+    EXPECT_EQ(after["prepare"].first, StageStatus::kWouldSkip) << after["prepare"].second;
+    EXPECT_EQ(after["comak"].first, StageStatus::kWouldSkip) << after["comak"].second;
+  }
+}
+
+// Before: `model: /usr` hashed every file below it (11 GB) with no output.
+TEST(SafetyInputs, HashingAHugeFolderIsRefusedAtItsLimit) {
+  const fs::path dir = scratch("huge");
+  for (int i = 0; i < 12; ++i) std::ofstream(dir / ("f" + std::to_string(i))) << std::string(1000, 'x');
+  common::HashLimits few;
+  few.max_files = 10;
+  const std::string files = error_of([&] { common::sha256_path(dir, few); });
+  EXPECT_NE(files.find(dir.string()), std::string::npos) << files;
+  EXPECT_NE(files.find("more than 10 files"), std::string::npos) << files;
+  common::HashLimits small;
+  small.max_bytes = 5000;
+  const std::string bytes = error_of([&] { common::sha256_path(dir, small); });
+  EXPECT_NE(bytes.find("more than 5000 bytes"), std::string::npos) << bytes;
+  EXPECT_EQ(error_of([&] { common::sha256_path(dir); }), "");  // within the default limits
+  // A system folder fails at the default file limit after a walk, not a hash
+  // of gigabytes (a generous 20 s for a loaded machine; ~0.1 s idle).
+  if (fs::is_directory("/usr/lib")) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::string usr = error_of([&] { common::sha256_path("/usr"); });
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_NE(usr.find("more than 10000 files"), std::string::npos) << usr;
+    EXPECT_LT(s, 20.0);
+  }
 }
 
 }  // namespace
