@@ -95,6 +95,10 @@ struct StageDescriptor {
   /// What the scene lacks when runs() gives no run, for messages (e.g. "a
   /// 'surface' block with at least one scenario").
   std::string no_runs;
+  /// Its program takes --allow-partial (goes on with an incomplete input
+  /// from another stage, saying so at the top of its output); `arthrosim run
+  /// --allow-partial` passes the flag to the runs of such stages.
+  bool takes_allow_partial = false;
   /// The key outputs of run `run` (a name from runs()) for accuracy studies:
   /// its outputs in `dir` against the reference run's in `ref_dir`. Empty for
   /// a stage without a key output of its own (prepare: its resolution shows

@@ -14,6 +14,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <thread>
@@ -432,6 +433,38 @@ TEST(SafetyAtomic, KilledRerunKeepsTheCompleteSurfaceOutput) {
   EXPECT_EQ(slurp(dir / "surface_moving.xdmf").find(".partial"), std::string::npos);
 }
 
+// Before: a shockwave rerun truncated <stem>_efd<EFD>.h5 at its start, so a
+// kill destroyed the complete result of the earlier run.
+TEST(SafetyAtomic, KilledShockwaveRerunKeepsTheCompleteRunFile) {
+  const fs::path dir = scratch("atomic_shockwave");
+  const std::string shockwave =
+      (kBin / "arthrosim-shockwave").string() + " --quiet --geometry bar --out " + (dir / "sw").string();
+  const auto [status, printed] = run(shockwave + " --end-time-us 5");
+  ASSERT_EQ(status, 0) << printed;
+  const fs::path out = dir / "sw_efd0.33.h5";
+  ASSERT_TRUE(fs::exists(out)) << printed;
+  ASSERT_FALSE(fs::exists(common::partial_name(out)));
+  const std::string complete = slurp(out), summary = slurp(dir / "sw_summary.json");
+
+  const pid_t child = ::fork();
+  if (child == 0) {
+    // 100 ms of simulated time: minutes; killed well before.
+    ::execl("/bin/sh", "sh", "-c", ("exec " + shockwave + " --end-time-us 100000").c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const bool started = wait_until([&] { return fs::exists(common::partial_name(out)); }, 30);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ::kill(child, SIGKILL);
+  int st = 0;
+  ::waitpid(child, &st, 0);
+  ASSERT_TRUE(WIFSIGNALED(st)) << "the rerun finished before it was killed";
+  EXPECT_TRUE(started) << "the rerun wrote no " << common::partial_name(out);
+  EXPECT_TRUE(slurp(out) == complete) << out << " changed";  // untouched (binary: not printed)
+  EXPECT_EQ(slurp(dir / "sw_summary.json"), summary);        // untouched
+  const common::H5File partial(common::partial_name(out).string(), common::H5File::Mode::kRead);
+  EXPECT_FALSE(partial.exists("/effects"));  // the killed run never finished its file
+}
+
 class SafetyRunner : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -517,6 +550,37 @@ TEST_F(SafetyRunner, SigtermIsForwardedToTheStageAndTheLockNamesItsHolder) {
   if (alive(stage)) ::kill(stage, SIGKILL);
 }
 
+
+// Before: `arthrosim run` had no --allow-partial, so a user could not go on
+// with a killed COMAK run's kinematics through the runner.
+TEST(SafetyPartial, RunPassesAllowPartialToTheStagesThatTakeIt) {
+  const fs::path dir = scratch("allow_partial");
+  const fs::path scene_file = dir / "s.yaml";
+  std::ofstream(scene_file) << "model: " << kCoarse.string() << "\ntrial: " << ARTHROSIM_SOURCE_DIR
+                            << "/data/trials/synthetic_gait\noutputs: [report]\n"
+                               "comak: {effects: [ligaments, muscles]}\nsurface:\n  scenarios:\n"
+                               "    gait: {effects: [foundation_springs, imposed_kinematics, mesh_contact]}\n";
+  const common::Scene scene = load_scene(scene_file);
+  RunnerOptions options;
+  options.out_dir = dir / "out";
+  const auto flagged = [&] {
+    std::vector<std::string> runs;
+    for (const StageStep& s : runner_plan(scene, options))
+      if (std::find(s.arguments.begin(), s.arguments.end(), "--allow-partial") != s.arguments.end())
+        runs.push_back(s.name);
+    return runs;
+  };
+  EXPECT_EQ(flagged(), std::vector<std::string>{});
+  options.allow_partial = true;
+  EXPECT_EQ(flagged(), (std::vector<std::string>{"surface.gait", "post"}));
+  // Every stage that says it takes the flag does (its program's --help).
+  for (const StageDescriptor& d : stages()) {
+    if (!d.takes_allow_partial) continue;
+    const auto [status, help] = run((kBin / d.executable).string() + " --help");
+    EXPECT_EQ(status, 0) << help;
+    EXPECT_NE(help.find("--allow-partial"), std::string::npos) << d.executable;
+  }
+}
 
 // ---- 1. complete input identity -------------------------------------------
 
