@@ -35,10 +35,12 @@
 #include "common/scene_edit.h"
 #include "musculoskeletal/model.h"
 #include "musculoskeletal/model_io.h"
+#include "pipelines/biphasic_stage.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/prepare.h"
 #include "pipelines/runner.h"
 #include "pipelines/stages.h"
+#include "pipelines/study.h"
 #include "pipelines/surface_stage.h"
 
 namespace arthrosim::pipelines {
@@ -580,6 +582,43 @@ TEST(SafetyPartial, RunPassesAllowPartialToTheStagesThatTakeIt) {
     EXPECT_EQ(status, 0) << help;
     EXPECT_NE(help.find("--allow-partial"), std::string::npos) << d.executable;
   }
+}
+
+// Before: the biphasic stage and the accuracy study read a kinematics file of
+// format_version 99 (or of another kind) as if it were current.
+TEST(SafetyVersions, BiphasicStageAndStudyCheckTheKinematicsVersion) {
+  const fs::path dir = scratch("versions_biphasic");
+  const auto [prepared, kinematics] = write_two_layer_case((dir / "case").string());
+  const fs::path v99 = dir / "kinematics_v99.h5", foreign = dir / "kinematics_foreign.h5";
+  fs::copy_file(kinematics, v99);
+  fs::copy_file(kinematics, foreign);
+  {
+    common::H5File f(v99.string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "format_version", 99);
+  }
+  {
+    common::H5File f(foreign.string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "format", "some other file");
+  }
+  for (const fs::path& k : {v99, foreign}) {
+    SCOPED_TRACE(k.string());
+    const auto [status, printed] = run((kBin / "arthrosim-biphasic").string() + " --quiet --layers femur tibia_medial --prepared " + prepared +
+                                       " --kinematics " + k.string() + " --out " + (dir / "out.h5").string());
+    EXPECT_NE(status, 0) << printed;
+    EXPECT_NE(printed.find(k.string()), std::string::npos) << printed;
+    EXPECT_FALSE(fs::exists(dir / "out.h5"));
+    const std::string study = error_of([&] { study::comak_metrics(k, kinematics); });
+    EXPECT_NE(study.find(k.string()), std::string::npos) << study;
+  }
+  // File, version found, version read.
+  const auto [status, printed] = run((kBin / "arthrosim-biphasic").string() + " --quiet --layers femur tibia_medial --prepared " + prepared +
+                                     " --kinematics " + v99.string() + " --out " + (dir / "out.h5").string());
+  EXPECT_NE(printed.find("format_version 99; this build reads version 1"), std::string::npos) << printed;
+  EXPECT_NE(error_of([&] { study::comak_metrics(kinematics, v99); }).find("format_version 99"), std::string::npos);
+  EXPECT_NE(error_of([&] { study::comak_metrics(foreign, kinematics); }).find("found format 'some other file'"),
+            std::string::npos);
+  // The canonical case itself passes.
+  EXPECT_EQ(error_of([&] { study::comak_metrics(kinematics, kinematics); }), "");
 }
 
 // ---- 1. complete input identity -------------------------------------------
