@@ -10,7 +10,9 @@
 #include <set>
 #include <sstream>
 
+#include "common/effects.h"
 #include "common/error.h"
+#include "common/hdf5.h"
 #include "common/hashing.h"
 #include "common/scene.h"
 #include "common/scene_edit.h"
@@ -297,6 +299,7 @@ Plan plan_cohort(const Cohort& cohort, const fs::path& out_dir, const fs::path& 
             if (std::find(j.inputs.begin(), j.inputs.end(), f) == j.inputs.end()) j.inputs.push_back(f);
         for (const fs::path& o : step.outputs) j.outputs.push_back(o.string());
         for (const auto& [k, v] : step.options) j.options += k + "\t" + v + "\n";
+        j.check_effects = step.effects.has_value();
         if (step.effects) j.effects = *step.effects;
         plan.jobs.push_back(std::move(j));
       }
@@ -348,12 +351,27 @@ std::string plan_json(const Cohort& cohort, const Plan& plan, const fs::path& st
         .array("inputs", j.inputs)
         .array("outputs", j.outputs)
         .value("options", j.options)
+        .value("check_effects", j.check_effects)
         .array("effects", j.effects)
         .end_object();
   }
   w.end_array();
   w.end_object();
   return w.str() + "\n";
+}
+
+std::string check_effects(const fs::path& file, const std::vector<std::string>& requested, std::string& built) {
+  try {
+    const common::H5File h5(file.string(), common::H5File::Mode::kRead);
+    const common::EffectLedger ledger = common::read_effect_ledger(h5);
+    for (const common::EffectTotal& t : ledger.totals())
+      built += (built.empty() ? "" : ", ") + t.effect + " " + std::to_string(t.count);
+    std::string names;
+    for (const std::string& e : ledger.unrequested(requested)) names += (names.empty() ? "" : ", ") + e;
+    return names.empty() ? "" : "built effect(s) the scene did not ask for: " + names;
+  } catch (const InputError& e) {
+    return std::string("has no readable effect ledger: ") + e.what();
+  }
 }
 
 // ---- the cohort report --------------------------------------------------------

@@ -83,7 +83,11 @@ struct Job {
   std::vector<std::string> inputs;
   std::vector<std::string> outputs;  ///< relative to the output folder: runs/<subject>/<setting>/...
   std::string options;               ///< the options it reads, one "key\tvalue" line each
-  std::vector<std::string> effects;  ///< the effects the scene asks for (empty: not a physics stage)
+  /// For a run that builds physics terms: the effects the scene asks for;
+  /// the workflow checks its output's effect ledger against them, as the
+  /// runner does (check_effects).
+  bool check_effects = false;
+  std::vector<std::string> effects;
 };
 
 struct Plan {
@@ -112,6 +116,13 @@ std::string plan_json(const Cohort& cohort, const Plan& plan, const std::filesys
 /// Writes `text` to `file` unless the file already holds exactly it
 /// (atomically: a temporary file renamed over it). True when written.
 bool write_if_changed(const std::filesystem::path& file, const std::string& text);
+
+/// The runner's check of a physics stage's output (pipelines/runner.h): the
+/// effect ledger of `file` lists only terms of `requested`. Returns "" when
+/// it does, else why not (an unrequested term, or no readable ledger).
+/// `built` receives the ledger's totals ("ligaments 76, muscles 13").
+std::string check_effects(const std::filesystem::path& file, const std::vector<std::string>& requested,
+                          std::string& built);
 
 /// The cohort report from OUT/plan.json and the stages' output files under
 /// OUT: DIR/cohort.csv (one row per subject x setting, one column per key

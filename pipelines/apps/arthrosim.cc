@@ -218,7 +218,8 @@ int main(int argc, char** argv) {
   cohort->add_option("--workflow", workflow_dir,
                      "folder of the Snakefile (default: $ARTHROSIM_WORKFLOW_DIR, else workflow/ of the repository "
                      "holding this program)");
-  cohort->allow_extras();
+  std::vector<std::string> snakemake_args;
+  cohort->add_option("SNAKEMAKE_ARGS", snakemake_args, "after `--`: arguments passed to snakemake unchanged");
 
   CLI::App* cohort_report = app.add_subcommand(
       "cohort-report", "the cohort report from OUT/plan.json and the runs' output files (the workflow's last job)");
@@ -228,12 +229,27 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   cohort_report->add_option("--out", report_out, "report folder (cohort.csv, report.html)")->required();
 
+  CLI::App* check_effects = app.add_subcommand(
+      "cohort-check-effects", "the runner's effect-ledger check of one stage output (run by workflow/Snakefile)");
+  std::string effects_file;
+  std::vector<std::string> effects_requested;
+  check_effects->add_option("FILE", effects_file, "a stage's HDF5 output")->required()->check(CLI::ExistingFile);
+  check_effects->add_option("--effects", effects_requested, "the effects the scene asks for")->delimiter(',');
+
   pl::ImportOsimCommand import_osim;
   pl::add_import_osim_command(app, import_osim);
 
   CLI11_PARSE(app, argc, argv);
 
   if (import_osim.app->parsed()) return pl::run_import_osim_command(import_osim);
+  if (check_effects->parsed()) {
+    std::string built;
+    const std::string problem = pl::cohort::check_effects(effects_file, effects_requested, built);
+    std::cout << effects_file << ": effects built: " << (built.empty() ? "none" : built) << "\n";
+    if (problem.empty()) return 0;
+    std::cerr << "arthrosim cohort-check-effects: " << effects_file << ": error: " << problem << "\n";
+    return 1;
+  }
   if (cohort_report->parsed()) {
     try {
       const int rows = pl::cohort::write_cohort_report(report_plan, report_out);
@@ -273,7 +289,7 @@ int main(int argc, char** argv) {
         command.insert(command.end(), {"--cores", std::to_string(cohort_cores)});
       }
       if (cohort_dry_run) command.push_back("--dry-run");
-      for (const std::string& extra : cohort->remaining()) command.push_back(extra);
+      for (const std::string& extra : snakemake_args) command.push_back(extra);
       // Last: --config takes every following word up to the next option.
       command.insert(command.end(), {"--config", "plan=" + plan_file.string()});
     } catch (const cm::InputError& e) {
