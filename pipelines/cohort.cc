@@ -220,18 +220,13 @@ bool write_if_changed(const fs::path& file, const std::string& text) {
 
 namespace {
 
-// The files an input stands for: a folder's regular files (sorted, recursive),
-// a file itself; a relative path (another job's output) as written.
-std::vector<std::string> input_files(const fs::path& p) {
-  if (p.is_relative()) return {p.string()};
-  if (fs::is_directory(p)) {
-    std::vector<std::string> files;
-    for (const auto& e : fs::recursive_directory_iterator(p))
-      if (e.is_regular_file()) files.push_back(e.path().string());
-    std::sort(files.begin(), files.end());
-    return files;
-  }
-  return {p.string()};
+// A folder's regular files, recursive, sorted.
+std::vector<std::string> files_in(const fs::path& dir) {
+  std::vector<std::string> files;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) files.push_back(e.path().string());
+  std::sort(files.begin(), files.end());
+  return files;
 }
 
 }  // namespace
@@ -294,11 +289,15 @@ Plan plan_cohort(const Cohort& cohort, const fs::path& out_dir, const fs::path& 
         j.executable = step.executable;
         j.executable_sha256 = sha_of(step.executable);
         j.arguments = step.arguments;
-        for (const auto& [label, path] : step.inputs)
-          for (const std::string& f : input_files(path))
-            if (std::find(j.inputs.begin(), j.inputs.end(), f) == j.inputs.end()) j.inputs.push_back(f);
+        for (const auto& [label, path] : step.inputs) {
+          const std::string p = path.string();
+          if (std::find(j.inputs.begin(), j.inputs.end(), p) != j.inputs.end()) continue;
+          j.inputs.push_back(p);
+          if (path.is_absolute() && !plan.folders.count(p) && fs::is_directory(path)) plan.folders[p] = files_in(path);
+        }
         for (const fs::path& o : step.outputs) j.outputs.push_back(o.string());
         for (const auto& [k, v] : step.options) j.options += k + "\t" + v + "\n";
+        j.options_sha256 = common::sha256_hex(j.options);
         j.check_effects = step.effects.has_value();
         if (step.effects) j.effects = *step.effects;
         plan.jobs.push_back(std::move(j));
@@ -338,6 +337,9 @@ std::string plan_json(const Cohort& cohort, const Plan& plan, const fs::path& st
         .value("dir", r.dir)
         .end_object();
   w.end_array();
+  w.begin_object("folders");
+  for (const auto& [folder, files] : plan.folders) w.array(folder, files);
+  w.end_object();
   w.begin_array("jobs");
   for (const Job& j : plan.jobs) {
     w.begin_object()
@@ -350,7 +352,7 @@ std::string plan_json(const Cohort& cohort, const Plan& plan, const fs::path& st
         .array("arguments", j.arguments)
         .array("inputs", j.inputs)
         .array("outputs", j.outputs)
-        .value("options", j.options)
+        .value("options_sha256", j.options_sha256)
         .value("check_effects", j.check_effects)
         .array("effects", j.effects)
         .end_object();
@@ -531,6 +533,12 @@ int write_cohort_report(const fs::path& plan_file, const fs::path& report_dir) {
   for (const Row& r : rows)
     if (std::find(subjects.begin(), subjects.end(), r.subject) == subjects.end()) subjects.push_back(r.subject);
   for (std::size_t c = 0; c < columns.size(); ++c) {
+    bool any = false;
+    for (const Row& r : rows) {
+      auto it = r.values.find(c);
+      any = any || (it != r.values.end() && std::isfinite(it->second));
+    }
+    if (!any) continue;  // nothing to draw (the table and its notes say why)
     rh::LinePlot p;
     p.id = "metric-" + std::to_string(c);
     p.title = columns[c].name;

@@ -17,6 +17,7 @@
 // through each stage's key_outputs (the readers the accuracy study uses) plus
 // the peak tibiofemoral force of stage 1 (musculoskeletal/kinematics_file.h).
 #include <filesystem>
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -78,11 +79,13 @@ struct Job {
   std::string executable;  ///< "arthrosim-surface"
   std::string executable_sha256;
   std::vector<std::string> arguments;
-  /// Every file it reads: outputs of other jobs (relative to the cohort's
-  /// output folder) and the files of its input folders (absolute).
+  /// Every file or folder it reads: outputs of other jobs (relative to the
+  /// cohort's output folder), input files and folders (absolute; a folder's
+  /// files are listed once in Plan::folders).
   std::vector<std::string> inputs;
   std::vector<std::string> outputs;  ///< relative to the output folder: runs/<subject>/<setting>/...
   std::string options;               ///< the options it reads, one "key\tvalue" line each
+  std::string options_sha256;        ///< of `options` (plan.json holds this, a rerun trigger)
   /// For a run that builds physics terms: the effects the scene asks for;
   /// the workflow checks its output's effect ledger against them, as the
   /// runner does (check_effects).
@@ -101,6 +104,10 @@ struct Plan {
     std::string dir;
   };
   std::vector<Run> runs;
+  /// Every input folder of a job with its regular files (recursive, sorted):
+  /// the workflow's inputs are files, so a file changed inside a model or
+  /// trial folder reruns the jobs that read it.
+  std::map<std::string, std::vector<std::string>> folders;
 };
 
 /// Writes OUT/scenes/<subject>/<setting>.yaml for every subject x setting

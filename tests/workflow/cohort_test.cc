@@ -118,10 +118,11 @@ TEST(CohortFile, GridNamesAndPlanComeFromTheStageTable) {
   const Job& comak = plan.jobs[5];
   EXPECT_EQ(comak.subject, "a");
   EXPECT_EQ(comak.outputs, std::vector<std::string>{"runs/a/" + grid[1].name + "/kinematics.h5"});
-  // Folder inputs are their files; other jobs' outputs stay relative.
-  EXPECT_NE(std::find(comak.inputs.begin(), comak.inputs.end(),
-                      (kSource / "data/trials/synthetic_gait/ik.mot").string()),
-            comak.inputs.end());
+  // Folder inputs are listed with their files; other jobs' outputs stay relative.
+  const std::string trial = (kSource / "data/trials/synthetic_gait").string();
+  EXPECT_NE(std::find(comak.inputs.begin(), comak.inputs.end(), trial), comak.inputs.end());
+  ASSERT_EQ(plan.folders.count(trial), 1u);
+  EXPECT_EQ(plan.folders.at(trial), (std::vector<std::string>{trial + "/grf.mot", trial + "/ik.mot", trial + "/trial.yaml"}));
   EXPECT_NE(std::find(comak.inputs.begin(), comak.inputs.end(), "runs/a/" + grid[1].name + "/prepared.h5"),
             comak.inputs.end());
   EXPECT_NE(plan.jobs[13].options.find("scene.trial.end_s\t0.1"), std::string::npos) << plan.jobs[13].options;
@@ -211,6 +212,9 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
   EXPECT_EQ(peak_force["a/osmotic_pressure_mpa-0.1"], peak_force["a/osmotic_pressure_mpa-0.2"]);
   EXPECT_NE(peak_force["a/osmotic_pressure_mpa-0.1"], peak_force["b/osmotic_pressure_mpa-0.1"]);
   EXPECT_TRUE(fs::exists(out / "report/report.html"));
+  // Every plot of the report draws in headless Chromium (exit 77: no chromium).
+  const Result drawn = run((kSource / "scripts/report_check.sh").string() + " " + (out / "report/report.html").string());
+  if (drawn.status != 77) EXPECT_EQ(drawn.status, 0) << drawn.output;
 
   const auto before = outputs(out);
   const Result second = run(command);
