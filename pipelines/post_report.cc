@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 
 #include "biphasic/output_file.h"
@@ -189,6 +190,35 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
   return sec;
 }
 
+std::string seed_conclusion_text(const std::vector<std::pair<std::string, std::vector<EfdVolume>>>& by_tissue) {
+  // Seed 001 (seeds/001_8413b035bc6d0ea6.txt, Conclusions): below 0.3 mJ/mm^2
+  // the regeneration conditions "are not formed", above it they are. Read
+  // here as: every run below the threshold has a volume meeting all three
+  // criteria at most a tenth of the smallest such volume of the runs above it,
+  // and that smallest volume is not zero.
+  constexpr double kThreshold = 0.3;  // [mJ/mm^2]
+  std::string text;
+  for (const auto& [tissue, pts] : by_tissue) {
+    double below = -1.0, above = -1.0;  // largest below, smallest above; -1 = no run
+    for (const EfdVolume& q : pts) {
+      if (q.efd < kThreshold) below = std::max(below, q.all_mm3);
+      else if (q.efd > kThreshold) above = above < 0.0 ? q.all_mm3 : std::min(above, q.all_mm3);
+    }
+    if (below < 0.0 || above < 0.0) continue;
+    const bool reproduced = above > 0.0 && below <= 0.1 * above;
+    char line[400];
+    std::snprintf(line, sizeof line,
+                  "%s: the largest volume meeting all three criteria below 0.3 mJ/mm^2 is %.4g mm^3, the smallest above "
+                  "it %.4g mm^3: the seed's conclusion (conditions formed only above 0.3 mJ/mm^2) is %s. ",
+                  tissue.c_str(), below, above, reproduced ? "reproduced" : "not reproduced");
+    text += line;
+  }
+  if (!text.empty())
+    text += "(Criterion: every run below 0.3 mJ/mm^2 reaches at most a tenth of the smallest volume of the runs above "
+            "it, and that volume is not zero; docs/shockwave.md.)";
+  return text;
+}
+
 report_html::Section shockwave_section(const std::vector<std::string>& files) {
   report_html::Section sec;
   sec.id = "sec-shockwave";
@@ -203,11 +233,7 @@ report_html::Section shockwave_section(const std::vector<std::string>& files) {
   vol.header = {"run", "EFD [mJ/mm^2]", "tissue", "volume [mm^3]", "compressive [mm^3]", "distortional [mm^3]",
                 "pore pressure [mm^3]", "all three [mm^3]", "largest peak pressure [MPa]",
                 "largest distortional strain"};
-  struct Point {
-    double efd;
-    double all_mm3;
-  };
-  std::vector<std::pair<std::string, std::vector<Point>>> by_tissue;
+  std::vector<std::pair<std::string, std::vector<EfdVolume>>> by_tissue;
   for (const auto& path : files) {
     const ShockwaveFile f = read_shockwave_file(path);
     const double efd = f.efd_j_per_m2 * 1e-3;  // J/m^2 -> mJ/mm^2
@@ -238,7 +264,7 @@ report_html::Section shockwave_section(const std::vector<std::string>& files) {
   p.y_label = "volume [mm^3]";
   int colour = 0;
   for (auto& [tissue, pts] : by_tissue) {
-    std::sort(pts.begin(), pts.end(), [](const Point& a, const Point& b) { return a.efd < b.efd; });
+    std::sort(pts.begin(), pts.end(), [](const EfdVolume& a, const EfdVolume& b) { return a.efd < b.efd; });
     if (pts.size() < 2) continue;
     report_html::Line l;
     l.label = tissue, l.colour = colour++, l.markers = true;
@@ -247,6 +273,8 @@ report_html::Section shockwave_section(const std::vector<std::string>& files) {
   }
   if (!p.lines.empty()) sec.blocks.push_back(std::move(p));
   sec.blocks.push_back(std::move(vol));
+  if (const std::string verdict = seed_conclusion_text(by_tissue); !verdict.empty())
+    sec.blocks.push_back(report_html::Text{verdict, {}, false});
   return sec;
 }
 

@@ -74,6 +74,18 @@ std::vector<report_html::SummaryRow> summary_rows(const KeyFigures& k);
 /// `files`: (label, path).
 report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files);
 
+/// One shockwave run's volume meeting every regeneration criterion.
+struct EfdVolume {
+  double efd;      ///< energy flux density [mJ/mm^2]
+  double all_mm3;  ///< volume meeting all three criteria [mm^3]
+};
+
+/// Whether runs per tissue reproduce seed 001's conclusion (regeneration
+/// conditions formed only above 0.3 mJ/mm^2): one sentence per tissue with
+/// runs on both sides of 0.3 mJ/mm^2 and the criterion used; empty without
+/// such runs.
+std::string seed_conclusion_text(const std::vector<std::pair<std::string, std::vector<EfdVolume>>>& by_tissue);
+
 /// Shockwave runs (docs/shockwave.md) through read_shockwave_file: the
 /// regeneration volumes per tissue and run, the largest peaks, and the volume
 /// meeting every criterion against the energy flux density.

@@ -111,7 +111,8 @@ StageDescriptor post_stage_descriptor() {
     s.provides = {"report"};
     s.origin = "the post stage";
     const std::vector<common::BlockInstance>& scenarios = scene.instances("surface");
-    if (scenarios.empty()) s.unavailable = "a 'surface' block with at least one scenario";
+    if (scenarios.empty() && !scene.has_block("shockwave") && !scene.has_block("biphasic"))
+      s.unavailable = "a 'surface' block with at least one scenario, a 'biphasic' or a 'shockwave' block";
     for (const common::BlockInstance& sc : scenarios) {
       const std::filesystem::path file = out / ("surface_" + sc.name + ".h5");
       s.inputs.emplace_back(file.filename().string(), file);
@@ -122,6 +123,13 @@ StageDescriptor post_stage_descriptor() {
     // The biphasic layers' section, when the plan runs that stage.
     const std::filesystem::path biphasic = out / "biphasic.h5";
     s.optional_inputs.push_back({"biphasic.h5", biphasic, {"--biphasic", biphasic.string()}});
+    // The shockwave stage's run files (one per energy flux density), when the
+    // plan runs that stage: their section and the volumes-vs-EFD plot.
+    if (const StageDescriptor* shockwave = find_stage("shockwave"); shockwave != nullptr && shockwave->runs)
+      for (const StageStep& run : shockwave->runs(scene, out))
+        for (const std::filesystem::path& file : run.outputs)
+          if (file.extension() == ".h5")
+            s.optional_inputs.push_back({file.filename().string(), file, {"--shockwave", file.string()}});
     const common::OptionBlock& block = scene.block("post");
     s.options = block.canonical();
     add_path_inputs(block, s);

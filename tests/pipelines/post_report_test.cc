@@ -61,5 +61,23 @@ TEST(PostReport, SummaryVerdicts) {
   EXPECT_TRUE(summary_rows(KeyFigures{}).empty());
 }
 
+// Seed 001's conclusion: conditions formed only above 0.3 mJ/mm^2. The
+// verdict follows the stated criterion (below <= a tenth of the smallest
+// volume above, which must not be zero) on each side of its boundary.
+TEST(PostReport, ShockwaveSeedConclusion) {
+  using Runs = std::vector<std::pair<std::string, std::vector<EfdVolume>>>;
+  const std::string yes = seed_conclusion_text(Runs{{"cartilage", {{0.12, 0.5}, {0.33, 5.0}, {0.8, 40.0}}}});
+  EXPECT_NE(yes.find("cartilage"), std::string::npos) << yes;
+  EXPECT_NE(yes.find("is reproduced"), std::string::npos) << yes;
+  // Just over a tenth of the smallest volume above: not reproduced.
+  const std::string no = seed_conclusion_text(Runs{{"menisci", {{0.12, 0.51}, {0.33, 5.0}, {0.8, 40.0}}}});
+  EXPECT_NE(no.find("not reproduced"), std::string::npos) << no;
+  // Nothing formed anywhere: not reproduced (the conditions must form above).
+  EXPECT_NE(seed_conclusion_text(Runs{{"menisci", {{0.12, 0.0}, {0.8, 0.0}}}}).find("not reproduced"),
+            std::string::npos);
+  // Runs on one side only: no statement.
+  EXPECT_TRUE(seed_conclusion_text(Runs{{"cartilage", {{0.33, 5.0}, {0.8, 40.0}}}}).empty());
+}
+
 }  // namespace
 }  // namespace arthrosim::pipelines::post_report

@@ -171,5 +171,33 @@ TEST(ShockwaveStage, SceneBlockAndPlan) {
   refused(head + "shockwave: {effects: [mca_elastic, applicator_pulse, inertia]}\n", "inertia");
 }
 
+// A scene asking for the report next to the runs: the post stage reads every
+// run file of the plan (its section and the volumes-vs-EFD plot), and needs
+// no surface block for that.
+TEST(ShockwaveStage, ReportTakesEveryRunOfThePlan) {
+  const fs::path dir = fs::path(kDir) / "scene_report";
+  fs::create_directories(dir / "models" / "knee");
+  const common::Scene scene = parse_scene(
+      "model: models/knee\noutputs: [shockwave, report]\n"
+      "shockwave: {effects: [mca_elastic, applicator_pulse], geometry: bar, efd_mj_per_mm2: [0.12, 0.8]}\n",
+      dir / "s.yaml");
+  const std::vector<StageStep> plan = plan_stages(scene, dir / "out");
+  ASSERT_EQ(plan.size(), 2u);
+  EXPECT_EQ(plan[0].name, "shockwave");
+  EXPECT_EQ(plan[1].name, "post");
+  std::vector<std::string> files;
+  for (std::size_t i = 0; i + 1 < plan[1].arguments.size(); ++i)
+    if (plan[1].arguments[i] == "--shockwave") files.push_back(plan[1].arguments[i + 1]);
+  EXPECT_EQ(files, (std::vector<std::string>{(dir / "out" / "shockwave_efd0.12.h5").string(),
+                                             (dir / "out" / "shockwave_efd0.8.h5").string()}));
+  // Without the runs in the plan the report has nothing to show: refused.
+  try {
+    parse_scene("model: models/knee\noutputs: [report]\n", dir / "bad.yaml");
+    ADD_FAILURE() << "a report without surface, biphasic or shockwave accepted";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("'shockwave' block"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace arthrosim::pipelines

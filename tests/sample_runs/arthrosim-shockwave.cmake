@@ -51,4 +51,4 @@ add_test(NAME sample.arthrosim-shockwave.scene_plan
   COMMAND arthrosim run data/scenes/shockwave.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/shockwave_scene --dry-run
   WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
 set_tests_properties(sample.arthrosim-shockwave.scene_plan PROPERTIES LABELS sample TIMEOUT 60
-  PASS_REGULAR_EXPRESSION "plan: prepare shockwave")
+  PASS_REGULAR_EXPRESSION "plan: prepare shockwave post")
