@@ -273,7 +273,11 @@ report_html::Section shockwave_section(const std::vector<std::string>& files) {
   }
   if (!p.lines.empty()) sec.blocks.push_back(std::move(p));
   sec.blocks.push_back(std::move(vol));
-  if (const std::string verdict = seed_conclusion_text(by_tissue); !verdict.empty())
+  // The seed's conclusion concerns cartilage and menisci (fibrocartilage) only.
+  std::vector<std::pair<std::string, std::vector<EfdVolume>>> seed_tissues;
+  for (const auto& entry : by_tissue)
+    if (entry.first == "cartilage" || entry.first == "fibrocartilage") seed_tissues.push_back(entry);
+  if (const std::string verdict = seed_conclusion_text(seed_tissues); !verdict.empty())
     sec.blocks.push_back(report_html::Text{verdict, {}, false});
   return sec;
 }
