@@ -3,7 +3,8 @@
 // stage table, and a tiny cohort run by Snakemake with the real stage
 // programs: 2 subjects x 2 settings on the bundled knee with short trial
 // windows runs; a second call runs nothing; editing one subject's trial
-// reruns that subject's trial-dependent stages only.
+// reruns that subject's trial-dependent stages only; a changed post option
+// reruns the post stage only.
 #include "pipelines/cohort.h"
 
 #include <gtest/gtest.h>
@@ -244,6 +245,22 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
   }
   // 2 comak, 2 post, the report and the target rule `all`.
   EXPECT_NE(third.output.find("6 of 6 steps (100%) done"), std::string::npos) << third.output;
+
+  // A changed option of one stage (post, for every subject) reruns that
+  // stage only: its options are a rule parameter, the scenes are not inputs.
+  std::string text = read_text(file);
+  text.replace(text.find("settings:"), 0, "set:\n  post.angle_threshold_deg: 15\n");
+  write(file, text);
+  const Result fourth = run(command);
+  ASSERT_EQ(fourth.status, 0) << fourth.output;
+  EXPECT_NE(fourth.output.find("6 of 6 steps (100%) done"), std::string::npos) << fourth.output;
+  for (const auto& [name, time] : outputs(out)) {
+    const std::string f = fs::path(name).filename().string();
+    if (f == "summary.json" || f == "report.html")
+      EXPECT_NE(time, after.at(name)) << name << " was not rerun";
+    if (f == "kinematics.h5" || f == "prepared.h5" || f == "surface_osmotic.h5")
+      EXPECT_EQ(time, after.at(name)) << name << " was rerun";
+  }
 }
 
 }  // namespace
