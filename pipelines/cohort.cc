@@ -383,6 +383,14 @@ namespace {
 
 std::string text_of(const json::Value* v) { return v != nullptr && v->kind == json::Value::Kind::kString ? v->string : ""; }
 
+// A CSV field, quoted when it holds a comma, a quote or a line break.
+std::string csv_field(const std::string& v) {
+  if (v.find_first_of(",\"\n") == std::string::npos) return v;
+  std::string q = "\"";
+  for (char c : v) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
 struct Column {
   std::string name, unit, description;
 };
@@ -474,12 +482,12 @@ int write_cohort_report(const fs::path& plan_file, const fs::path& report_dir) {
 
   // CSV: one row per subject x setting.
   std::string csv = "subject,setting";
-  for (const std::string& k : setting_keys) csv += "," + k;
-  for (const Column& c : columns) csv += "," + c.name + (c.unit.empty() ? "" : " [" + c.unit + "]");
+  for (const std::string& k : setting_keys) csv += "," + csv_field(k);
+  for (const Column& c : columns) csv += "," + csv_field(c.name + (c.unit.empty() ? "" : " [" + c.unit + "]"));
   csv += "\n";
   for (const Row& r : rows) {
     csv += r.subject + "," + r.setting;
-    for (const std::string& v : setting_values[r.setting]) csv += "," + v;
+    for (const std::string& v : setting_values[r.setting]) csv += "," + csv_field(v);
     for (std::size_t c = 0; c < columns.size(); ++c) {
       auto it = r.values.find(c);
       csv += "," + (it == r.values.end() || !std::isfinite(it->second) ? std::string() : report::number(it->second));
