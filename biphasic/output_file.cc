@@ -162,7 +162,7 @@ void OutputWriter::write_frames(const std::vector<double>& frame_times,
   const size_t nf = frames.size();
   for (size_t k = 0; k < impl_->compartments.size(); ++k) {
     const std::string g = "/frames/" + impl_->compartments[k];
-    Eigen::VectorXd force(nf), ga(nf), gb(nf), aa(nf), ab(nf);
+    Eigen::VectorXd force(nf), ga(nf), gb(nf), aa(nf), ab(nf), unloaded(nf);
     Eigen::VectorXi neg(nf), beyond(nf), skipped(nf);
     for (size_t i = 0; i < nf; ++i) {
       const CompartmentFrame& c = frames[i].at(k);
@@ -174,6 +174,7 @@ void OutputWriter::write_frames(const std::vector<double>& frame_times,
       neg[i] = c.negative_pressure_nodes;
       beyond[i] = c.beyond_thickness_nodes;
       skipped[i] = c.skipped_no_overlap;
+      unloaded[i] = c.unloaded_overlap_m2;
     }
     f.write(g + "/force_magnitude", force);
     f.write(g + "/gamma_a", ga);
@@ -183,6 +184,7 @@ void OutputWriter::write_frames(const std::vector<double>& frame_times,
     f.write(g + "/negative_pressure_nodes", neg);
     f.write(g + "/beyond_thickness_nodes", beyond);
     f.write(g + "/skipped_no_overlap", skipped);
+    f.write(g + "/unloaded_overlap_area", unloaded);
   }
   f.flush();
 }

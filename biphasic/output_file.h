@@ -24,6 +24,9 @@ struct CompartmentFrame {
   int negative_pressure_nodes = 0;   ///< both layers
   int beyond_thickness_nodes = 0;    ///< both layers
   int skipped_no_overlap = 0;        ///< 1 when |F| > 0 but no overlap
+  /// |F| = 0 while the layers overlap: largest overlap area of the two
+  /// layers [m^2], no contact conditions applied (0 otherwise).
+  double unloaded_overlap_m2 = 0.0;
 };
 
 class OutputWriter {

@@ -87,9 +87,14 @@ ContactConditions penetration_conditions(const PlacedSurface& self, const Placed
     ++c.contact_nodes;
   }
   const double denom = c.strain_integral.norm();
-  if (c.contact_nodes == 0 || !(denom > 0.0)) {
+  const bool unloaded = force_magnitude == 0.0 && c.contact_nodes > 0 && denom > 0.0;
+  if (c.contact_nodes == 0 || !(denom > 0.0) || unloaded) {
     // No overlap: nothing to apply. With a force that is a reported skip.
+    // No force: nothing to apply either (gamma = 0 would prescribe a fluid
+    // tension -sigma_E on an unloaded surface); reported when they overlap.
     c.skipped_no_overlap = force_magnitude > 0.0;
+    c.unloaded_overlap = unloaded;
+    c.unloaded_overlap_area = unloaded ? c.contact_area : 0.0;
     c.in_contact.assign(nv, 0);
     c.g_total.setZero();
     c.eta.setZero();

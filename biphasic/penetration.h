@@ -27,6 +27,9 @@
 // not state this, it is the natural choice of an exposed surface bathed in
 // synovial fluid (FEBio's sliding-biphasic contact does the same).
 //
+// A compartment whose measured force is zero gets no contact conditions even
+// where the layers overlap (ContactConditions::unloaded_overlap).
+//
 // Units SI; positions of both layers in one common frame (the world).
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -86,6 +89,13 @@ struct ContactConditions {
   /// True when |F| > 0 but the surfaces do not overlap: no contact conditions
   /// are applied for this frame (a reported skip, never a division by zero).
   bool skipped_no_overlap = false;
+  /// True when |F| = 0 but the surfaces overlap (stage 1 measured no load
+  /// where this geometry overlaps): eq 26 would give gamma = 0 and eq 17 a
+  /// fluid TENSION p = -sigma_E on an unloaded surface, so no contact
+  /// conditions are applied (free-draining, no traction); the overlap's area
+  /// is kept in unloaded_overlap_area. A reported skip.
+  bool unloaded_overlap = false;
+  double unloaded_overlap_area = 0.0;  ///< [m^2]
 };
 
 /// Rays from every node of `self` along -n, up to h_self + max h_other, hit

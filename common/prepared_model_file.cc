@@ -27,6 +27,11 @@ std::string PreparedModelReader::source_file(const std::string& surface) const {
   return f_->attribute_string(group(surface), "source_file");
 }
 
+std::string PreparedModelReader::compartment(const std::string& surface) const {
+  const std::string g = group(surface);
+  return f_->has_attribute(g, "compartment") ? f_->attribute_string(g, "compartment") : std::string();
+}
+
 PreparedModelReader::QuadSurface PreparedModelReader::quads(const std::string& name) const {
   const H5File& f = *f_;
   const std::string g = group(name) + "/quads/";

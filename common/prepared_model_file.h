@@ -27,6 +27,10 @@ class PreparedModelReader {
   std::string bone(const std::string& surface) const;
   /// The cartilage mesh file a surface was prepared from.
   std::string source_file(const std::string& surface) const;
+  /// "medial" or "lateral" for a part that prepare split from one mesh
+  /// (common/compartments.h), else "" (also for files written before the
+  /// attribute existed).
+  std::string compartment(const std::string& surface) const;
 
   /// The all-quad articular surface of the shell stage.
   struct QuadSurface {

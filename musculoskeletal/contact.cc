@@ -33,6 +33,9 @@ void check_surface(const std::string& pair, const char* role, const ContactSurfa
       m << "expected thickness >= 0 m, found " << s.thickness[i] << " at triangle " << i;
       fail(m.str());
     }
+  if (!s.compartment.empty() && static_cast<int>(s.compartment.size()) != s.mesh.num_triangles())
+    fail("expected " + std::to_string(s.mesh.num_triangles()) + " compartment labels (one per triangle), found " +
+         std::to_string(s.compartment.size()));
   for (int i = 0; i < s.mesh.num_triangles(); ++i)
     for (int k = 0; k < 3; ++k)
       if (s.mesh.F(i, k) < 0 || s.mesh.F(i, k) >= s.mesh.num_vertices())
@@ -322,6 +325,34 @@ void evaluate_contact(const ContactPair& pair, const Pose& X_WA, const Pose& X_W
   }
   if (!std::isfinite(r.force_on_target_W.sum()) || !std::isfinite(r.moment_on_target_W.sum()))
     throw common::NumericalError("contact pair '" + pair.name() + "': non-finite force");
+}
+
+CompartmentForces casting_force_by_compartment(const ContactPair& pair, const ContactResult& result) {
+  const std::vector<char>& label = pair.casting().compartment;
+  const int n = pair.casting().mesh.num_triangles();
+  if (label.empty())
+    throw common::InputError("contact pair '" + pair.name() +
+                             "': expected compartment labels on the casting surface, found none");
+  if (result.pressure.size() != n)
+    throw common::InputError("contact pair '" + pair.name() + "': expected a result with " + std::to_string(n) +
+                             " casting-triangle pressures, found " + std::to_string(result.pressure.size()));
+  CompartmentForces r;
+  double w[2] = {0.0, 0.0};
+  for (int i = 0; i < n; ++i) {
+    const double p = result.pressure[i];
+    if (!(p > 0.0)) continue;
+    const double pA = p * pair.casting_areas()[i];
+    const Vec3 c = pair.casting_centres().row(i).transpose();
+    const Vec3 f = -pA * Vec3(pair.casting_normals().row(i).transpose());
+    const bool lat = label[static_cast<std::size_t>(i)] != 0;
+    (lat ? r.lateral : r.medial) += f;
+    (lat ? r.lateral_cop : r.medial_cop) += pA * c;
+    (lat ? r.lateral_area : r.medial_area) += pair.casting_areas()[i];
+    w[lat ? 1 : 0] += pA;
+  }
+  if (w[0] > 0) r.medial_cop /= w[0];
+  if (w[1] > 0) r.lateral_cop /= w[1];
+  return r;
 }
 
 }  // namespace arthrosim::musculoskeletal

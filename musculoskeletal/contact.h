@@ -92,6 +92,19 @@ struct ContactSurface {
   /// frame="body", X_WB(0)^-1 for frame="reference"), so a replacement mesh
   /// in the file's frame (a prepared model) can be placed the same way.
   Pose X_BM = Pose::Identity();
+  /// A tibial cartilage surface holding both plateaus: per triangle 1 lateral,
+  /// 0 medial (the prepare stage's rule, common/compartments.h); empty when
+  /// the surface is one compartment (or a patellar/femoral one). Set by the
+  /// model loader (the model file's `split_lateral`, or the compartments of
+  /// the prepared parts it was assembled from); only reported, never used by
+  /// the contact itself (casting_force_by_compartment).
+  std::vector<char> compartment;
+  /// Medial-to-lateral direction in the mesh file's frame (the model file's
+  /// `split_lateral`); zero when not declared. Kept so a replacement mesh (a
+  /// prepared model) is split by the same rule.
+  Vec3 lateral_M = Vec3::Zero();
+  /// How `compartment` was made (written to the kinematics file).
+  std::string compartment_rule;
 };
 
 /// Constant part of a contact pair (geometry precomputed, tree built once).
@@ -145,6 +158,22 @@ struct ContactResult {
   Eigen::VectorXd pressure;                ///< per casting triangle [Pa]
   Eigen::VectorXd overlap;                 ///< per casting triangle [m]
 };
+
+/// The casting body's share of a pair's force per compartment of its
+/// surface (ContactSurface::compartment), in the CASTING body's frame:
+/// F_k = sum over the casting triangles i of compartment k of -p_i A_i n_i,
+/// the same terms whose sum is force_on_casting_W (so medial + lateral equals
+/// the total to round-off). cop_k = sum p_i A_i c_i / sum p_i A_i over those
+/// triangles (casting body frame; zero without contact); area_k = sum A_i
+/// with p_i > 0.
+struct CompartmentForces {
+  Vec3 medial = Vec3::Zero(), lateral = Vec3::Zero();
+  Vec3 medial_cop = Vec3::Zero(), lateral_cop = Vec3::Zero();
+  double medial_area = 0.0, lateral_area = 0.0;
+};
+/// InputError (naming the pair) when the casting surface has no compartment
+/// labels or the result does not belong to the pair.
+CompartmentForces casting_force_by_compartment(const ContactPair& pair, const ContactResult& result);
 
 /// Search statistics of one evaluation.
 struct ContactSearchStats {

@@ -29,8 +29,17 @@ ContactSummary summarize(const Model& model, const ModelData& data, int body, bo
     const ContactResult& r = data.contacts[i].result;
     const Eigen::Vector3d f_B = R_BW * r.force_on_casting_W;
     s.force += f_B;
+    // Compartments (docs/kinematics_file.md): a pair named after one takes
+    // its whole force there; a pair whose casting surface holds both plateaus
+    // splits per casting triangle (prepare's rule, common/compartments.h).
+    const bool named = contains(pair.name(), "medial") || contains(pair.name(), "lateral");
     if (split && contains(pair.name(), "medial")) s.medial_force += f_B;
     if (split && contains(pair.name(), "lateral")) s.lateral_force += f_B;
+    if (split && !named && !pair.casting().compartment.empty()) {
+      const CompartmentForces c = casting_force_by_compartment(pair, r);  // casting body == body
+      s.medial_force += c.medial;
+      s.lateral_force += c.lateral;
+    }
     s.area += r.contact_area;
     s.max_pressure = std::max(s.max_pressure, r.max_pressure);
     // Combined centre of pressure: the pairs' centres weighted by their
@@ -55,6 +64,26 @@ ContactSummary tibiofemoral_contact(const Model& model, const ModelData& data) {
 
 ContactSummary patellofemoral_contact(const Model& model, const ModelData& data) {
   return summarize(model, data, model.role_body("patella"), false);
+}
+
+std::string tibiofemoral_compartment_rule(const Model& model) {
+  const int tibia = model.role_body("tibia");
+  std::string rule;
+  for (const ContactPair& pair : model.contacts) {
+    if (pair.casting().body != tibia || tibia < 0) continue;
+    std::string how;
+    if (contains(pair.name(), "medial") || contains(pair.name(), "lateral")) {
+      how = std::string(contains(pair.name(), "medial") ? "medial" : "") +
+            (contains(pair.name(), "medial") && contains(pair.name(), "lateral") ? " and " : "") +
+            (contains(pair.name(), "lateral") ? "lateral" : "") + " by the pair's name";
+    } else if (!pair.casting().compartment.empty()) {
+      how = "per casting triangle: " + pair.casting().compartment_rule;
+    } else {
+      how = "not split (one compartment surface without split_lateral: counted in force only)";
+    }
+    rule += (rule.empty() ? "" : "; ") + pair.name() + ": " + how;
+  }
+  return rule;
 }
 
 struct KinematicsFileWriter::Impl {
@@ -229,6 +258,9 @@ void KinematicsFileWriter::finish(const ComakRunSummary& s, const common::Effect
   f.set_attribute("/", "frames_failed", s.failed);
   if (!s.stopped.empty()) f.set_attribute("/", "stopped", s.stopped);
   f.write("/solver/failed_frames", s.failed_frames);
+  if (f.exists(KinematicsFileReader::kContactGroup))
+    f.set_attribute(KinematicsFileReader::kContactGroup, "compartments",
+                    tibiofemoral_compartment_rule(w.problem.model()));
   f.set_attribute("/solver", "first_settle", s.first_settle.message);
   common::write_effect_ledger(f, ledger);
   if (!w.pair_names.empty() && !w.times.empty()) {

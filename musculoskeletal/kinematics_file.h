@@ -113,10 +113,18 @@ struct ContactSummary {
   double max_pressure = 0.0;  ///< [Pa]
 };
 
-/// Tibiofemoral (every pair cast from the tibia; medial/lateral by the pair
-/// name containing "medial"/"lateral") and patellofemoral (pairs cast from
-/// the patella) contact, expressed in the tibia resp. patella frame.
+/// Tibiofemoral (every pair cast from the tibia) and patellofemoral (pairs
+/// cast from the patella) contact, expressed in the tibia resp. patella
+/// frame. Tibiofemoral compartments: a pair whose name contains
+/// "medial"/"lateral" goes whole to that compartment; a pair with another
+/// name whose casting surface carries compartment labels (one tibial
+/// cartilage holding both plateaus, ContactSurface::compartment) is split per
+/// casting triangle (casting_force_by_compartment); other pairs count in the
+/// total only.
 ContactSummary tibiofemoral_contact(const Model& model, const ModelData& data);
 ContactSummary patellofemoral_contact(const Model& model, const ModelData& data);
+/// How tibiofemoral_contact splits the compartments, per pair (the
+/// attribute `compartments` of /contact/tibiofemoral).
+std::string tibiofemoral_compartment_rule(const Model& model);
 
 }  // namespace arthrosim::musculoskeletal

@@ -12,6 +12,7 @@
 #include <set>
 #include <sstream>
 
+#include "common/compartments.h"
 #include "common/error.h"
 #include "common/prepared_model_file.h"
 #include "common/hdf5.h"
@@ -498,6 +499,40 @@ Eigen::VectorXd read_thickness_csv(const Reader& rd, const XMLElement* e, const 
   return tt;
 }
 
+// Compartment labels of a surface holding both tibial plateaus, by prepare's
+// rule (common/compartments.h) on its mesh in the mesh file's frame.
+void label_compartments(ContactSurface& s, const common::TriangleMesh& mesh_M, const std::string& source) {
+  const common::CompartmentSplit split = common::split_medial_lateral(mesh_M, s.lateral_M);
+  std::ostringstream how;
+  const Vec3 u = s.lateral_M.normalized();
+  how << "split_lateral (" << u.x() << ", " << u.y() << ", " << u.z() << ") of '" << s.name << "' ("
+      << std::filesystem::path(source).filename().string() << "), ";
+  if (split.components >= 2)
+    how << split.components << " connected components";
+  else
+    how << "one connected piece cut at the 2-means plane";
+  how << ": " << split.medial_triangles() << " medial, " << split.lateral_triangles() << " lateral triangles";
+  if (split.medial_triangles() == 0 || split.lateral_triangles() == 0)
+    throw InputError(source, 0, "surface '" + s.name + "': split into medial and lateral compartments by " +
+                                    how.str() + ": expected triangles on both sides");
+  s.compartment = split.is_lateral;
+  s.compartment_rule = how.str();
+}
+
+// The model file's direction attribute: +x, -x, +y, -y, +z, -z or "x y z".
+Vec3 direction_attr(const Reader& rd, const XMLElement* e, const char* name) {
+  const std::string v = rd.attr(e, name);
+  static const std::map<std::string, Vec3> axes = {{"+x", Vec3::UnitX()}, {"-x", -Vec3::UnitX()},
+                                                   {"+y", Vec3::UnitY()}, {"-y", -Vec3::UnitY()},
+                                                   {"+z", Vec3::UnitZ()}, {"-z", -Vec3::UnitZ()}};
+  if (auto it = axes.find(v); it != axes.end()) return it->second;
+  const Vec3 d = rd.vec3(e, name, Vec3::Zero(), true);
+  if (!(d.norm() > 0))
+    rd.fail(e, std::string("attribute '") + name + "' expected a direction (+x, -x, +y, -y, +z, -z or three numbers "
+                                                   "not all zero), found '" + v + "'");
+  return d;
+}
+
 void read_surface(Context& c, const XMLElement* e) {
   const std::string n = c.rd.attr(e, "name");
   ContactSurface s;
@@ -534,9 +569,17 @@ void read_surface(Context& c, const XMLElement* e) {
   // Mesh coordinates given in the reference (model) frame move to the body
   // frame; xyz/rpy place the mesh file's frame in that frame (default identity).
   const Pose X = to_body(c, e, s.body) * c.rd.pose(e);
+  s.name = n;
+  if (c.rd.has(e, "split_lateral")) {
+    s.lateral_M = direction_attr(c.rd, e, "split_lateral");
+    try {
+      label_compartments(s, s.mesh, mesh);  // in the mesh file's frame, as prepare
+    } catch (const InputError& err) {
+      c.rd.fail(e, err.what());
+    }
+  }
   for (int i = 0; i < s.mesh.num_vertices(); ++i)
     s.mesh.V.row(i) = (X * Vec3(s.mesh.V.row(i).transpose())).transpose();
-  s.name = n;
   s.mesh_file = mesh;
   s.X_BM = X;
   if (!c.surfaces.emplace(n, std::move(s)).second) c.rd.fail(e, "duplicate surface '" + n + "'");
@@ -782,6 +825,11 @@ ContactSurface with_mesh(const ContactSurface& s, common::TriangleMesh mesh, con
   for (int t = 0; t < mesh.num_triangles(); ++t)
     r.thickness[t] =
         (vertex_thickness[mesh.F(t, 0)] + vertex_thickness[mesh.F(t, 1)] + vertex_thickness[mesh.F(t, 2)]) / 3.0;
+  // The model's labels belong to its own mesh: relabel the new one by the
+  // same rule (mesh still in the file frame here), or none.
+  r.compartment.clear();
+  r.compartment_rule.clear();
+  if (r.lateral_M.norm() > 0) label_compartments(r, mesh, r.mesh_file);
   for (int i = 0; i < mesh.num_vertices(); ++i) mesh.V.row(i) = (s.X_BM * Vec3(mesh.V.row(i).transpose())).transpose();
   r.mesh = std::move(mesh);
   return r;
@@ -832,9 +880,20 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
     common::TriangleMesh mesh;
     Eigen::VectorXd tv;
     std::string groups;
+    // Compartments of the parts prepare split from this file (all or none).
+    std::vector<char> compartment;
+    std::string parts_rule;
+    int labelled = 0;
     for (const std::string& part : it->second) {
       // Checked by the reader (indices in range, finite, thickness >= 0).
       const common::PreparedModelReader::TriangleSurface p = f.triangles(part);
+      const std::string comp = f.compartment(part);
+      if (comp == "medial" || comp == "lateral") {
+        ++labelled;
+        compartment.insert(compartment.end(), static_cast<std::size_t>(p.mesh.F.rows()), comp == "lateral" ? 1 : 0);
+        parts_rule += (parts_rule.empty() ? "" : " + ") + part + " (" + comp + ", " +
+                      std::to_string(p.mesh.F.rows()) + " triangles)";
+      }
       const int n0 = mesh.num_vertices(), t0 = mesh.num_triangles();
       mesh.V.conservativeResize(n0 + p.mesh.V.rows(), 3);
       mesh.V.bottomRows(p.mesh.V.rows()) = p.mesh.V;
@@ -854,7 +913,17 @@ PreparedSurfacesReport use_prepared_surfaces(Model& model, const std::string& pr
         << s.name << "' (" << s.mesh_file << "); expected <= 2 mm (prepared from another geometry?)";
       throw InputError(prepared_path, 0, m.str());
     }
-    return with_mesh(s, std::move(mesh), tv, prepared_path + ":" + groups);
+    const bool parts_labelled = labelled > 0 && labelled == static_cast<int>(it->second.size());
+    ContactSurface base = s;
+    if (parts_labelled) base.lateral_M.setZero();  // the parts' labels, not a relabelling
+    ContactSurface r = with_mesh(base, std::move(mesh), tv, prepared_path + ":" + groups);
+    r.lateral_M = s.lateral_M;
+    if (parts_labelled) {
+      // The prepare stage's own split (common/compartments.h), part by part.
+      r.compartment = std::move(compartment);
+      r.compartment_rule = "the prepared compartments " + parts_rule + " (prepare's split of " + file + ")";
+    }
+    return r;
   };
   return replace_contact_surfaces(model, make);
 }

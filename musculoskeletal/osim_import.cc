@@ -1245,6 +1245,17 @@ OsimImportSummary Importer::run(const std::string& out_dir) {
     note(w.kind, wn,
          o_.without_wrapping ? "omitted on request (--without-wrapping)" : "not used by an imported path", w.line);
   }
+  // One tibial cartilage mesh holds both plateaus: its compartments are told
+  // apart along the medial-lateral direction (docs/model_format.md,
+  // split_lateral). OpenSim's body frames have Z to the subject's right, so
+  // lateral is +Z for a right knee and -Z for a left one (the knee joint's
+  // suffix _r / _l); no attribute when the side is not known.
+  int tibial_surfaces = 0;
+  for (const auto& sn : surface_order) tibial_surfaces += surfaces[sn].body == knee.child_body;
+  const std::string& kj = o_.knee_joint;
+  const std::string lateral = kj.size() > 2 && kj.compare(kj.size() - 2, 2, "_r") == 0   ? "+z"
+                              : kj.size() > 2 && kj.compare(kj.size() - 2, 2, "_l") == 0 ? "-z"
+                                                                                          : "";
   for (const auto& sn : surface_order) {
     const SurfaceOut& s = surfaces[sn];
     Vec3 rpy = rpy_of(s.X_BM.linear());
@@ -1252,6 +1263,8 @@ OsimImportSummary Importer::run(const std::string& out_dir) {
       << "\" unit=\"m\" thickness_mm=\"" << num(s.h * 1e3) << "\"";
     if (!s.X_BM.isApprox(Pose::Identity(), 1e-15))
       u << " xyz=\"" << vec(s.X_BM.translation()) << "\" rpy=\"" << vec(rpy) << "\"";
+    if (s.body == knee.child_body && tibial_surfaces == 1 && !lateral.empty())
+      u << " split_lateral=\"" << lateral << "\"";
     u << "/>\n";
     ++sum.surfaces;
   }

@@ -105,8 +105,10 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
       throw common::InputError(path, 0, "dataset " + ds + ": expected " + std::to_string(n) + " frames, found " +
                                             std::to_string(forces[c].rows()));
     }
-    // A model with one tibiofemoral contact pair writes zero split series
-    // beside a non-zero total: the layers would go unloaded without a word.
+    // Zero split series beside a non-zero total (stage 1 could not split: a
+    // model with one tibial contact surface and no split_lateral, or a file
+    // from before the split existed): the layers would go unloaded without a
+    // word.
     const char* kTotal = "/contact/tibiofemoral/force";
     auto all_zero = [&](const char* split) {
       if (!f.exists(split)) return true;
@@ -123,9 +125,10 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
         throw common::InputError(
             path, 0,
             ds + " (and the other compartment's) is zero at every frame while " + kTotal + " reaches " + buf +
-                " N: stage 1's model has no medial/lateral split of the tibiofemoral contact (one contact pair), "
-                "and the penetration method scales each compartment to its own force (docs/biphasic.md, \"The real "
-                "subject\")");
+                " N: stage 1 did not split the tibiofemoral contact into compartments (a tibial contact surface holding "
+                "both plateaus needs split_lateral in the model, or prepared compartments; see the file's "
+                "/contact/tibiofemoral attribute 'compartments'), and the penetration method scales each compartment "
+                "to its own force (docs/biphasic.md, \"The real subject\")");
       }
     }
   }
@@ -396,6 +399,14 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
         common::log_warn("frame t = " + std::to_string(f.time_s) + " s, " + pairs[k].compartment +
                          ": a contact force of " + std::to_string(r.force_N) +
                          " N but no overlap of the layers; no contact conditions this frame");
+      }
+      r.unloaded_overlap_m2 = std::max(c[k].a.unloaded_overlap_area, c[k].b.unloaded_overlap_area);
+      if (r.unloaded_overlap_m2 > 0.0) {
+        ++result.unloaded_pair_frames;
+        common::log_warn("frame t = " + std::to_string(f.time_s) + " s, " + pairs[k].compartment +
+                         ": stage 1's contact force is 0 N but the layers overlap over " +
+                         std::to_string(r.unloaded_overlap_m2 * 1e6) +
+                         " mm^2; no contact conditions this frame (free-draining, no traction)");
       }
       if (r.beyond_thickness_nodes > 0)
         common::log_warn("frame t = " + std::to_string(f.time_s) + " s, " + pairs[k].compartment + ": " +

@@ -103,6 +103,7 @@ struct BiphasicStageResult {
   int frames_failed = 0;     ///< stage-1 frames whose solver failed (left out, reported)
   int steps = 0;
   int skipped_pair_frames = 0;  ///< (pair, frame) with a force but no overlap
+  int unloaded_pair_frames = 0;  ///< (pair, frame) with no force but an overlap (no conditions applied)
   std::vector<BiphasicLayerSummary> layers;
   std::vector<BiphasicKeyStep> key_steps;
   /// Mean fluid load support of each layer over the steps with contact.

@@ -9,6 +9,7 @@
 #include <set>
 #include <sstream>
 
+#include "common/compartments.h"
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "common/log.h"
@@ -301,45 +302,16 @@ void cast_thickness(const TriangleMesh& bone, bool bone_closed, const Points3& p
 
 std::pair<TriangleMesh, TriangleMesh> split_compartments(const TriangleMesh& mesh, const Vec3& lateral,
                                                          const std::string& source, std::string* how) {
-  const Vec3 u = lateral.normalized();
-  const Eigen::VectorXd area = common::triangle_areas(mesh);
-  const Points3 centroid = common::triangle_centroids(mesh);
+  // The rule stage 1 uses too (common/compartments.h).
+  const common::CompartmentSplit split = common::split_medial_lateral(mesh, lateral);
   const int nt = mesh.num_triangles();
-  Eigen::VectorXd proj(nt);
-  for (int t = 0; t < nt; ++t) proj[t] = centroid.row(t).dot(u);
-  int count = 0;
-  const std::vector<int> comp = common::connected_components(mesh, &count);
-  std::vector<char> is_lateral(nt, 0);
+  const std::vector<char>& is_lateral = split.is_lateral;
   std::ostringstream desc;
-  if (count >= 2) {
-    std::vector<double> carea(count, 0.0), cproj(count, 0.0);
-    for (int t = 0; t < nt; ++t) {
-      carea[comp[t]] += area[t];
-      cproj[comp[t]] += area[t] * proj[t];
-    }
-    for (int c = 0; c < count; ++c) cproj[c] /= carea[c];
-    std::vector<int> order(count);
-    std::iota(order.begin(), order.end(), 0);
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return carea[a] > carea[b]; });
-    const int a = order[0], b = order[1];
-    const double lat = std::max(cproj[a], cproj[b]), med = std::min(cproj[a], cproj[b]);
-    for (int t = 0; t < nt; ++t) is_lateral[t] = std::abs(cproj[comp[t]] - lat) < std::abs(cproj[comp[t]] - med);
-    desc << "by its " << count << " connected components (the two largest " << mm(lat - med, 3)
+  if (split.components >= 2) {
+    desc << "by its " << split.components << " connected components (the two largest " << mm(split.separation, 3)
          << " mm apart along the medial-lateral direction)";
   } else {
-    // One piece: 1-D 2-means of the area-weighted centroid projections.
-    double lo = proj.minCoeff(), hi = proj.maxCoeff();
-    double cut = 0.5 * (lo + hi);
-    for (int it = 0; it < 100; ++it) {
-      double w0 = 0, s0 = 0, w1 = 0, s1 = 0;
-      for (int t = 0; t < nt; ++t) (proj[t] > cut ? (w1 += area[t], s1 += area[t] * proj[t]) : (w0 += area[t], s0 += area[t] * proj[t]));
-      if (w0 <= 0 || w1 <= 0) break;
-      const double next = 0.5 * (s0 / w0 + s1 / w1);
-      if (next == cut) break;
-      cut = next;
-    }
-    for (int t = 0; t < nt; ++t) is_lateral[t] = proj[t] > cut;
-    desc << "by the plane normal to the medial-lateral direction at " << mm(cut, 4)
+    desc << "by the plane normal to the medial-lateral direction at " << mm(split.cut, 4)
          << " mm (one connected mesh: the cut follows triangle edges)";
   }
   std::vector<int> med_tris, lat_tris;

@@ -135,8 +135,9 @@ int main(int argc, char** argv) {
     common::refuse_output_over_inputs("arthrosim-biphasic", "--out", o.out,
                                       {{o.prepared, "--prepared"}, {o.kinematics, "--kinematics"}, {scene, "--scene"}});
     const pipelines::BiphasicStageResult r = pipelines::run_biphasic_stage(o);
-    std::printf("%d frames (%d left out: stage 1 failed), %d steps of %.4g ms, %d (pair, frame) skipped without overlap\n",
-                r.frames, r.frames_failed, r.steps, o.time_step_s * 1e3, r.skipped_pair_frames);
+    std::printf("%d frames (%d left out: stage 1 failed), %d steps of %.4g ms, %d (pair, frame) skipped without overlap, "
+                "%d without force\n",
+                r.frames, r.frames_failed, r.steps, o.time_step_s * 1e3, r.skipped_pair_frames, r.unloaded_pair_frames);
     for (const auto& l : r.layers)
       std::printf("  %-13s %5d/%5d quads %7d unknowns  factorised %d x in %.2f s, %d solves %.1f ms each; peak "
                   "fluid pressure %.3g MPa, tensile %.3g MPa, interface shear %.3g MPa\n",

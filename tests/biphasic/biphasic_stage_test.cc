@@ -198,8 +198,10 @@ TEST(BiphasicStage, RefusesAKinematicsFileWithoutTheContactForceSeries) {
   EXPECT_FALSE(fs::exists(o.out));  // nothing written
 }
 
-// A model with one tibiofemoral pair (lenhart2015) gives zero split series and
-// a non-zero total: the layers would silently go unloaded, so it is refused.
+// A kinematics file whose compartment series are zero at every frame while
+// the total is not (stage 1 could not split: one tibial surface without
+// split_lateral or prepared compartments, or an older file; constructed here):
+// the layers would silently go unloaded, so it is refused.
 TEST(BiphasicStage, RefusesZeroSplitForcesWhenTheTotalIsNotZero) {
   common::set_log_level(common::LogLevel::kError);
   const std::string prepared = write_prepared("prepared_us.h5");

@@ -17,6 +17,7 @@
 #include "common/storage.h"
 #include "musculoskeletal/comak.h"
 #include "musculoskeletal/gait_trial.h"
+#include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/model_io.h"
 #include "musculoskeletal/model_loads.h"
 #include "musculoskeletal/osim_import.h"
@@ -148,6 +149,29 @@ TEST(ComakLenhart, ResidualJacobianMatchesFiniteDifferences) {
 // "acceptable"), and the secondary coordinates near OpenSim-JAM's published
 // walking_values.sto (bounds 2 deg and 1.5 mm, inside the targets for
 // the walk; measured over the whole walk: docs/comak.md).
+// The model's one tibial cartilage (both plateaus) is labelled per triangle
+// by prepare's rule (common/compartments.h) from split_lateral="+z" (a right
+// knee in OpenSim's frames): two plateaus, the lateral one at larger z.
+TEST(ComakLenhart, OneTibialSurfaceIsLabelledByCompartment) {
+  const msk::Model& m = knee_model();
+  const int i = m.contact_index("tf_contact");
+  ASSERT_GE(i, 0);
+  const msk::ContactSurface& s = m.contacts[i].casting();
+  ASSERT_EQ(static_cast<int>(s.compartment.size()), s.mesh.num_triangles());
+  double z[2] = {0, 0};
+  int n[2] = {0, 0};
+  const auto c = arthrosim::common::triangle_centroids(s.mesh);
+  for (int t = 0; t < s.mesh.num_triangles(); ++t) {
+    const int side = s.compartment[t] ? 1 : 0;
+    z[side] += c(t, 2), ++n[side];
+  }
+  ASSERT_GT(n[0], 0);
+  ASSERT_GT(n[1], 0);
+  EXPECT_GT(z[1] / n[1] - z[0] / n[0], 0.02);  // plateau centres ~4 cm apart
+  EXPECT_NE(s.compartment_rule.find("2 connected components"), std::string::npos) << s.compartment_rule;
+  EXPECT_NE(msk::tibiofemoral_compartment_rule(m).find("tf_contact: per casting triangle"), std::string::npos);
+}
+
 TEST(ComakLenhart, FirstFramesConvergeNearOpenSimJam) {
   const msk::Model& m = knee_model();
   const msk::GaitTrial t = trial_for(m);
@@ -164,8 +188,16 @@ TEST(ComakLenhart, FirstFramesConvergeNearOpenSimJam) {
       (kRoot / "data/trials/lenhart2015_overground17/opensim_jam_comak/walking_values.sto").string());
   int k = 0;
   const auto summary = msk::run_comak(p, frames, [&](const msk::ComakFrameInput& in, const msk::ComakFrameResult& r,
-                                                     const msk::ModelData&) {
+                                                     const msk::ModelData& d) {
     EXPECT_EQ(r.status, msk::ComakFrameStatus::kConverged) << r.message;
+    // The one tibial contact surface's force split per compartment
+    // (split_lateral="+z"): the parts sum to the total to round-off, both
+    // plateaus loaded, the medial one more (medial share 0.55-0.63 measured
+    // here; 60-80 % of the load in stance in the literature, docs/comak.md).
+    const msk::ContactSummary tf = msk::tibiofemoral_contact(m, d);
+    EXPECT_LT((tf.medial_force + tf.lateral_force - tf.force).norm(), 1e-12 * tf.force.norm()) << in.time;
+    EXPECT_GT(tf.lateral_force.norm(), 0.2 * tf.force.norm()) << in.time;
+    EXPECT_GT(tf.medial_force.norm(), tf.lateral_force.norm()) << in.time;
     EXPECT_EQ(r.ipopt_status, 0) << r.message;
     EXPECT_NEAR(ref.data(k, 0), in.time, 1e-9);
     for (int c : p.secondary_coordinates()) {

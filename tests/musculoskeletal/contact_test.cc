@@ -1,13 +1,15 @@
 // Elastic-foundation contact: rigid sphere pressed into a thin layer on a
 // rigid plane (linear law vs closed form, nonlinear law vs quadrature), mesh
 // convergence rate, frame invariance, equal and opposite forces, the cached
-// search giving the same answer as cold queries, bad input.
+// search giving the same answer as cold queries, bad input; the force of one
+// casting surface split per compartment (two spheres on one plate).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <numbers>
 #include <random>
 
+#include "common/compartments.h"
 #include "common/error.h"
 #include "musculoskeletal/contact.h"
 
@@ -259,4 +261,95 @@ TEST(ElasticFoundation, BadInputIsRejected) {
   } catch (const arthrosim::common::NumericalError& e) {
     EXPECT_NE(std::string(e.what()).find("deep"), std::string::npos);
   }
+}
+
+namespace {
+
+// Translates a mesh by (dx, 0, 0).
+TriangleMesh shifted(TriangleMesh m, double dx) {
+  m.V.col(0).array() += dx;
+  return m;
+}
+
+// Two meshes as one (the second's indices offset).
+TriangleMesh merged(const TriangleMesh& a, const TriangleMesh& b) {
+  TriangleMesh m;
+  m.V.resize(a.V.rows() + b.V.rows(), 3);
+  m.V << a.V, b.V;
+  m.F.resize(a.F.rows() + b.F.rows(), 3);
+  m.F << a.F, (b.F.array() + static_cast<int>(a.V.rows())).matrix();
+  return m;
+}
+
+// One plate (the casting surface, labelled by the shared medial/lateral rule
+// with lateral = +x) under two rigid spheres: medial at x = -c pressed by
+// delta_m, lateral at x = +c by delta_l; `which` = 0 both, 1 medial only,
+// 2 lateral only.
+msk::ContactPair two_indenters(double delta_m, double delta_l, int which) {
+  const SphereCase med{0.02, delta_m, 0.003}, lat{0.02, delta_l, 0.003};
+  const double a = std::max(med.a(), lat.a()), c = 1.4 * a, s = 1.5e-4;
+  msk::ContactSurface plate;
+  plate.body = 0;
+  plate.mesh = plane_layer(2.8 * a, s);
+  plate.thickness = Eigen::VectorXd::Constant(plate.mesh.num_triangles(), med.h);
+  plate.lateral_M = Vec3::UnitX();
+  const auto split = arthrosim::common::split_medial_lateral(plate.mesh, plate.lateral_M);
+  plate.compartment = split.is_lateral;
+  plate.compartment_rule = "test";
+  const TriangleMesh m = shifted(sphere_cap(med.R, med.delta, 1.2 * med.a(), 2e-4), -c);
+  const TriangleMesh l = shifted(sphere_cap(lat.R, lat.delta, 1.2 * lat.a(), 2e-4), +c);
+  msk::ContactSurface spheres;
+  spheres.body = 1;
+  spheres.mesh = which == 0 ? merged(m, l) : which == 1 ? m : l;
+  spheres.thickness = Eigen::VectorXd::Zero(spheres.mesh.num_triangles());
+  return msk::ContactPair("two-spheres-on-plate", std::move(plate), std::move(spheres), {});
+}
+
+}  // namespace
+
+// The split of one casting surface's force per compartment: each compartment
+// carries what its own sphere alone produces (same rays, same pressures), the
+// closed form within the mesh error, medial + lateral = total to round-off,
+// the same in the casting frame for any common pose of the bodies.
+TEST(ContactCompartments, TwoSpheresOnOnePlateSplitByTheirSides) {
+  const double dm = 1e-3, dl = 0.6e-3;  // medial pressed deeper: F ~ delta^2 -> ratio ~2.8
+  const auto both = two_indenters(dm, dl, 0), med = two_indenters(dm, dl, 1), lat = two_indenters(dm, dl, 2);
+  const auto r = evaluate(both);
+  const msk::CompartmentForces c = msk::casting_force_by_compartment(both, r);
+  const Vec3 total = r.force_on_casting_W;  // identity poses: casting frame = world
+  // Round-off: sums of a few thousand terms of similar size.
+  EXPECT_LT((c.medial + c.lateral - total).norm(), 1e-12 * total.norm());
+  // Each compartment against its sphere alone (the other sphere's rays miss
+  // it): the same terms, so round-off again.
+  const Vec3 f_m = evaluate(med).force_on_casting_W, f_l = evaluate(lat).force_on_casting_W;
+  EXPECT_LT((c.medial - f_m).norm(), 1e-12 * f_m.norm());
+  EXPECT_LT((c.lateral - f_l).norm(), 1e-12 * f_l.norm());
+  // Closed form F = pi K delta^2 (3R - delta) / (3h) on the layer (pushed
+  // down, -z): the 0.15 mm grid's error is < 0.5 % (measured ~1e-3 here).
+  const double K = both.modulus();
+  auto F = [&](double d) { return kPi * K * d * d * (3 * 0.02 - d) / (3 * 0.003); };
+  EXPECT_NEAR(-c.medial.z(), F(dm), 5e-3 * F(dm));
+  EXPECT_NEAR(-c.lateral.z(), F(dl), 5e-3 * F(dl));
+  // Centres of pressure under the spheres (within a grid cell).
+  const double cx = 1.4 * SphereCase{0.02, dm, 0.003}.a();
+  EXPECT_LT((c.medial_cop - Vec3(-cx, 0, 0)).norm(), 1.5e-4);
+  EXPECT_LT((c.lateral_cop - Vec3(cx, 0, 0)).norm(), 1.5e-4);
+  EXPECT_GT(c.medial_area, c.lateral_area);
+  // Both bodies moved by one pose: the split in the casting frame is the same.
+  msk::Pose X = msk::Pose::Identity();
+  X.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  X.translation() = Vec3(0.1, -0.2, 0.3);
+  const auto rx = evaluate(both, X, X);
+  const msk::CompartmentForces cxf = msk::casting_force_by_compartment(both, rx);
+  EXPECT_LT((cxf.medial - c.medial).norm(), 1e-9 * c.medial.norm());
+  EXPECT_LT((cxf.lateral - c.lateral).norm(), 1e-9 * c.lateral.norm());
+}
+
+TEST(ContactCompartments, WithoutLabelsOrWithTheWrongCountIsAnError) {
+  auto pair = make_pair(SphereCase{}, 4e-4, msk::FoundationLaw::kLinear);
+  const auto r = evaluate(pair);
+  EXPECT_THROW(msk::casting_force_by_compartment(pair, r), arthrosim::common::InputError);
+  msk::ContactSurface a = pair.casting(), b = pair.target();
+  a.compartment.assign(3, 0);  // not one per triangle
+  EXPECT_THROW(msk::ContactPair("bad", a, b, {}), arthrosim::common::InputError);
 }

@@ -576,3 +576,34 @@ TEST(ModelForces, ForceLengthScaling) {
 )";
   EXPECT_NE(error_of(model_xml(half)).find("inline.urdf:"), std::string::npos) << error_of(model_xml(half));
 }
+
+// split_lateral on a surface holding both tibial plateaus: labels by
+// prepare's rule (here one connected plane: the 2-means cut), a bad
+// direction names the line.
+TEST(ModelIo, SplitLateralLabelsTheSurfaceAndBadDirectionsAreRefused) {
+  const std::string dir = contact_files();
+  std::string extra = kContact;
+  const std::string tib = "thickness_csv=\"tibia_plane_thickness.csv\"";
+  extra.replace(extra.find(tib), tib.size(), tib + " split_lateral=\"+x\"");
+  const auto m = msk::parse_model(model_xml(extra), "inline.urdf", dir);
+  const msk::ContactSurface& s = m.contacts[0].casting();
+  ASSERT_EQ(static_cast<int>(s.compartment.size()), s.mesh.num_triangles());
+  const int lateral = static_cast<int>(std::count(s.compartment.begin(), s.compartment.end(), 1));
+  EXPECT_GT(lateral, 0);
+  EXPECT_LT(lateral, s.mesh.num_triangles());
+  EXPECT_NE(s.compartment_rule.find("one connected piece"), std::string::npos) << s.compartment_rule;
+  for (const char* bad : {"+q", "0 0 0", "1 2"}) {
+    std::string e = kContact;
+    e.replace(e.find(tib), tib.size(), tib + " split_lateral=\"" + bad + "\"");
+    const std::string err = [&] {
+      try {
+        msk::parse_model(model_xml(e), "inline.urdf", dir);
+      } catch (const std::exception& x) {
+        return std::string(x.what());
+      }
+      return std::string();
+    }();
+    EXPECT_NE(err.find("split_lateral"), std::string::npos) << bad << ": " << err;
+    EXPECT_EQ(err.rfind("inline.urdf:", 0), 0u) << err;
+  }
+}

@@ -8,6 +8,7 @@
 // docs/surface_output.md "The real subject"), not a test.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -47,6 +48,27 @@ double axial_at(const Eigen::VectorXd& t1, const Eigen::MatrixXd& F1, double t) 
   return std::nan("");
 }
 
+// Largest value of the report summary's contact-force series `label`
+// (summary.json: {"label": L, "time_s": [...], "value_N": [...]}); NaN when
+// the series is absent.
+double series_max(const std::string& summary, const std::string& label) {
+  const auto at = summary.find("\"label\": \"" + label + "\"");
+  if (at == std::string::npos) return std::nan("");
+  const auto v = summary.find("\"value_N\": [", at);
+  if (v == std::string::npos) return std::nan("");
+  const char* p = summary.c_str() + v + 12;
+  double best = -HUGE_VAL;
+  while (*p && *p != ']') {
+    char* end = nullptr;
+    const double x = std::strtod(p, &end);
+    if (end == p) break;
+    best = std::max(best, x);
+    p = end;
+    while (*p == ',' || *p == ' ') ++p;
+  }
+  return best;
+}
+
 }  // namespace
 
 // The scene's every stage, 3 stage-1 frames (1.21-1.23 s, right heel strike)
@@ -75,6 +97,15 @@ TEST(RealSubjectPipeline, EveryStageRunsOnTheRealKneeInAShortWindow) {
   const Eigen::VectorXd t1 = kin.read_vector("/time");
   const Eigen::MatrixXd F1 = kin.read_matrix("/contact/tibiofemoral/force");
   ASSERT_EQ(t1.size(), 3);
+  // The one tibial contact surface's force split per compartment (prepare's
+  // parts): both loaded, summing to the total (docs/comak.md).
+  const Eigen::MatrixXd M1 = kin.read_matrix("/contact/tibiofemoral/medial_force");
+  const Eigen::MatrixXd L1 = kin.read_matrix("/contact/tibiofemoral/lateral_force");
+  for (Eigen::Index i = 0; i < t1.size(); ++i) {
+    EXPECT_GT(M1.row(i).norm(), 0.2 * F1.row(i).norm()) << t1(i);
+    EXPECT_GT(L1.row(i).norm(), 0.2 * F1.row(i).norm()) << t1(i);
+    EXPECT_LT((M1.row(i) + L1.row(i) - F1.row(i)).norm(), 1e-12 * F1.row(i).norm()) << t1(i);
+  }
 
   for (const char* sc : {"osmotic", "gait", "gait_osmotic"}) {
     const std::string path = out + "/surface_" + sc + ".h5";
@@ -114,4 +145,8 @@ TEST(RealSubjectPipeline, EveryStageRunsOnTheRealKneeInAShortWindow) {
   const std::string summary = slurp(out + "/summary.json");
   EXPECT_NE(summary.find("\"accuracy_rule\""), std::string::npos);
   EXPECT_NE(summary.find("gait_osmotic"), std::string::npos);
+  // The report's stage-1 compartment curves are drawn from those series (they
+  // were zero before stage 1 split one tibial surface).
+  EXPECT_GT(series_max(summary, "stage 1 medial_force |F|"), 200.0);
+  EXPECT_GT(series_max(summary, "stage 1 lateral_force |F|"), 200.0);
 }
