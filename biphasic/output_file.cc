@@ -266,6 +266,15 @@ std::vector<LayerSeries> read_layer_series(const std::string& path) {
                                 f.read_vector_int(g + "/series/max_tensile_vertex"));
     s.max_shear_where = where(g + "/series/max_shear_region", s.max_shear_region,
                               f.read_vector_int(g + "/series/max_shear_vertex"));
+    for (auto [dataset, dest] : {std::pair{g + "/surface/total_normal_stress", &s.max_contact_stress},
+                                 std::pair{g + "/surface/fluid_pressure", &s.max_contact_fluid_pressure}}) {
+      if (!f.exists(dataset)) continue;
+      const Eigen::MatrixXd m = f.read_matrix(dataset);
+      if (m.rows() != time.size())
+        throw common::InputError(path, 0, "dataset " + dataset + ": expected " + std::to_string(time.size()) +
+                                 " rows (one per step of /time), found " + std::to_string(m.rows()));
+      *dest = m.cols() ? Eigen::VectorXd(m.rowwise().maxCoeff()) : Eigen::VectorXd::Zero(m.rows());
+    }
     s.factorizations = static_cast<int>(f.attribute_int(g, "factorizations"));
     s.solves = static_cast<int>(f.attribute_int(g, "solves"));
     s.unknowns = static_cast<int>(f.attribute_int(g, "unknowns"));

@@ -72,6 +72,11 @@ struct LayerSeries {
   /// anterior, posterior, medial, lateral region of this layer's plate), per
   /// step; "none" where no contact vertex is in tension.
   std::vector<std::string> max_tensile_where, max_shear_where;
+  /// Largest applied total normal stress sigma_Tot_nn and contact fluid
+  /// pressure p over the articular vertices per step [Pa] (from
+  /// surface/total_normal_stress and surface/fluid_pressure; empty when the
+  /// file has no such datasets).
+  Eigen::VectorXd max_contact_stress, max_contact_fluid_pressure;
   int factorizations = 0, solves = 0, unknowns = 0;
   double factorization_s = 0.0, solve_s = 0.0;
 };

@@ -6,6 +6,8 @@
 #include <filesystem>
 
 #include "biphasic/output_file.h"
+#include "common/error.h"
+#include "common/hdf5.h"
 #include "pipelines/shockwave_output.h"
 
 namespace arthrosim::pipelines::post_report {
@@ -119,7 +121,9 @@ std::vector<SummaryRow> summary_rows(const KeyFigures& k) {
   return rows;
 }
 
-report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files) {
+report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files,
+                                      const std::string& kinematics,
+                                      const std::vector<std::pair<std::string, double>>& key_times) {
   report_html::Section sec;
   sec.id = "sec-biphasic";
   sec.title = "Biphasic layers";
@@ -187,6 +191,100 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
   }
   for (auto& p : plots) sec.blocks.push_back(std::move(p));
   sec.blocks.push_back(std::move(peaks));
+
+  // ---- contact pressure beside stage 1's elastic-foundation pressure ------
+  struct Source {
+    std::string label;
+    std::vector<double> t, p_MPa;
+  };
+  std::vector<Source> sources;
+  std::vector<std::string> missing;
+  for (const auto& [label, path] : files) {
+    for (const auto& l : biphasic::read_layer_series(path)) {
+      const std::string who = (files.size() > 1 ? label + " " : std::string()) + l.name;
+      if (l.max_contact_stress.size() == l.time.size() && l.time.size() > 0)
+        sources.push_back({"biphasic " + who + ": total normal stress", to_vector(l.time),
+                           to_vector(l.max_contact_stress, 1e-6)});
+      else
+        missing.push_back("biphasic " + who + ": no surface/total_normal_stress");
+      if (l.max_contact_fluid_pressure.size() == l.time.size() && l.time.size() > 0)
+        sources.push_back({"biphasic " + who + ": fluid pressure", to_vector(l.time),
+                           to_vector(l.max_contact_fluid_pressure, 1e-6)});
+      else
+        missing.push_back("biphasic " + who + ": no surface/fluid_pressure");
+    }
+  }
+  const std::string ef = "/contact/tibiofemoral/max_pressure";
+  if (kinematics.empty()) {
+    missing.push_back("stage 1 elastic-foundation pressure: no kinematics file");
+  } else {
+    const common::H5File k(kinematics, common::H5File::Mode::kRead);
+    if (k.exists(ef) && k.exists("/time")) {
+      const Eigen::VectorXd t = k.read_vector("/time"), p = k.read_vector(ef);
+      if (t.size() != p.size())
+        throw common::InputError(kinematics, 0, "dataset " + ef + ": expected " + std::to_string(t.size()) +
+                                 " values (one per frame of /time), found " + std::to_string(p.size()));
+      sources.push_back({"stage 1 elastic foundation (tibiofemoral)", to_vector(t), to_vector(p, 1e-6)});
+    } else {
+      missing.push_back("stage 1 elastic-foundation pressure: " + kinematics + " has no " + ef);
+    }
+  }
+  missing.push_back("shell stage contact pressure: not part of this comparison yet");
+  sec.blocks.push_back(report_html::Text{
+      "Peak contact pressure: per biphasic layer the largest applied total normal stress and contact fluid "
+      "pressure over its articular vertices per step (surface/total_normal_stress, surface/fluid_pressure), beside "
+      "stage 1's largest elastic-foundation pressure over the tibiofemoral contact (kinematics file " + ef +
+          "). The table gives them at the key frames (the step or frame nearest each key time). Not shown: " +
+          [&] {
+            std::string m;
+            for (const auto& x : missing) m += (m.empty() ? "" : "; ") + x;
+            return m;
+          }() + ".",
+      {}, false});
+  report_html::LinePlot pp;
+  pp.id = "fig-biphasic-pressure";
+  pp.title = "Peak contact pressure: biphasic layers and stage-1 elastic foundation";
+  pp.x_label = "time [s]";
+  pp.y_label = "pressure [MPa]";
+  int c = 0;
+  for (const auto& s : sources) {
+    report_html::Line line;
+    line.label = s.label;
+    line.x = s.t;
+    line.y = s.p_MPa;
+    line.colour = c++;
+    line.markers = s.t.size() < 30;
+    pp.lines.push_back(std::move(line));
+  }
+  sec.blocks.push_back(std::move(pp));
+  if (!key_times.empty()) {
+    report_html::Table kt;
+    kt.id = "tab-biphasic-pressure";
+    kt.title = "Peak contact pressure at the key frames [MPa]";
+    kt.header = {"source"};
+    for (const auto& [name, t] : key_times) {
+      kt.header.push_back(name + " (" + significant(t) + " s) [MPa]");
+      kt.header.push_back(name + ": time used [s]");
+    }
+    for (const auto& s : sources) {
+      std::vector<report_html::Cell> row{s.label};
+      for (const auto& kv : key_times) {
+        const double tk = kv.second;
+        std::size_t best = 0;
+        for (std::size_t i = 1; i < s.t.size(); ++i)
+          if (std::abs(s.t[i] - tk) < std::abs(s.t[best] - tk)) best = i;
+        if (s.t.empty()) {
+          row.push_back(kNaN);
+          row.push_back(kNaN);
+        } else {
+          row.push_back(s.p_MPa[best]);
+          row.push_back(s.t[best]);
+        }
+      }
+      kt.rows.push_back(std::move(row));
+    }
+    sec.blocks.push_back(std::move(kt));
+  }
   return sec;
 }
 

@@ -72,7 +72,14 @@ std::vector<report_html::SummaryRow> summary_rows(const KeyFigures& k);
 /// biphasic::read_layer_series: contact area, fluid load support, largest
 /// tensile and shear stress per layer over time, and a table of their peaks.
 /// `files`: (label, path).
-report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files);
+/// With `kinematics` (a stage-1 file, may be empty) and the key frames
+/// (name, time [s]): a plot of the peak contact pressure per layer (applied
+/// total normal stress and contact fluid pressure) beside stage 1's
+/// elastic-foundation max_pressure, and a table of these at the key frames
+/// (the step / frame nearest each key time).
+report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files,
+                                      const std::string& kinematics = {},
+                                      const std::vector<std::pair<std::string, double>>& key_times = {});
 
 /// One shockwave run's volume meeting every regeneration criterion.
 struct EfdVolume {
