@@ -14,6 +14,8 @@ add_test(NAME sample.arthrosim-post.shockwave_bar
           --out ${CMAKE_BINARY_DIR}/sample_runs/post_sw_bar)
 set_tests_properties(sample.arthrosim-post.shockwave_bar PROPERTIES LABELS sample TIMEOUT 60
   FIXTURES_SETUP post_shockwave_bar)
+# 6 figures: the biphasic series (4) + its peak contact pressure beside stage 1's
+# elastic-foundation pressure, and the shockwave figure.
 add_test(NAME sample.arthrosim-post.stages
   COMMAND arthrosim-post --kinematics ${CMAKE_BINARY_DIR}/sample_runs/biphasic_kinematics.h5
           --biphasic ${CMAKE_BINARY_DIR}/sample_runs/biphasic_five_frames.h5
@@ -21,7 +23,7 @@ add_test(NAME sample.arthrosim-post.stages
           --out ${CMAKE_BINARY_DIR}/sample_runs/post_stages)
 set_tests_properties(sample.arthrosim-post.stages PROPERTIES LABELS sample TIMEOUT 60
   FIXTURES_REQUIRED "biphasic_five_frames;post_shockwave_bar" FIXTURES_SETUP post_stages
-  PASS_REGULAR_EXPRESSION "wrote .*report.html \\(5 figures\\)")
+  PASS_REGULAR_EXPRESSION "wrote .*report.html \\(6 figures\\)")
 # The biphasic table names where the largest stresses are (a region of the
 # plate, through biphasic::read_layer_series), not a region code.
 add_test(NAME sample.arthrosim-post.stages_regions
