@@ -284,6 +284,52 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
       kt.rows.push_back(std::move(row));
     }
     sec.blocks.push_back(std::move(kt));
+    // Maps at the key frames: per layer, the applied total normal stress over
+    // its articular vertices (bone frame X anterior, Z lateral for a right
+    // knee) at the step nearest each key time, one colour range per layer.
+    for (const auto& [label, path] : files) {
+      const common::H5File f(path, common::H5File::Mode::kRead);
+      const Eigen::VectorXd t = f.read_vector("/time");
+      if (t.size() == 0) continue;
+      for (const std::string& name : f.read_strings("/layers/names")) {
+        const std::string g = "/layers/" + name;
+        if (!f.exists(g + "/surface/total_normal_stress") || !f.exists(g + "/articular_vertices")) continue;
+        const Eigen::MatrixXd sigma = f.read_matrix(g + "/surface/total_normal_stress");
+        const Eigen::MatrixXd v = f.read_matrix(g + "/articular_vertices", 3);
+        if (sigma.rows() != t.size() || sigma.cols() != v.rows())
+          throw common::InputError(path, 0, "dataset " + g + "/surface/total_normal_stress: expected " +
+                                   std::to_string(t.size()) + " x " + std::to_string(v.rows()) + ", found " +
+                                   std::to_string(sigma.rows()) + " x " + std::to_string(sigma.cols()));
+        std::vector<Eigen::Index> steps;
+        double hi = 0.0;
+        for (const auto& kv : key_times) {
+          Eigen::Index best = 0;
+          (t.array() - kv.second).abs().minCoeff(&best);
+          steps.push_back(best);
+          hi = std::max(hi, 1e-6 * sigma.row(best).maxCoeff());
+        }
+        for (std::size_t k = 0; k < key_times.size(); ++k) {
+          report_html::MapPlot m;
+          m.id = "fig-biphasic-map-" + std::to_string(sec.blocks.size());
+          m.title = (files.size() > 1 ? label + " " : std::string()) + name + ": total normal stress at the " +
+                    key_times[k].first + " (step " + significant(t[steps[k]]) + " s)";
+          m.x_label = "bone frame X (anterior) [mm]";
+          m.y_label = "bone frame Z [mm]";
+          report_html::Points pts;
+          pts.label = "sigma_Tot_nn";
+          pts.xy.resize(v.rows(), 2);
+          pts.xy.col(0) = 1e3 * v.col(0);
+          pts.xy.col(1) = 1e3 * v.col(2);
+          pts.values = 1e-6 * sigma.row(steps[k]).transpose();
+          pts.unit = "MPa";
+          pts.lo = 0.0;
+          pts.hi = hi > 0.0 ? hi : 1.0;
+          pts.marker_px = 4;
+          m.points.push_back(std::move(pts));
+          sec.blocks.push_back(std::move(m));
+        }
+      }
+    }
   }
   return sec;
 }

@@ -34,6 +34,9 @@ void write_biphasic(const std::string& path, const Eigen::MatrixXd& sigma, const
     f.write(g + "/series/" + s, std::vector<int>{0, 1, 2});
   f.write(g + "/surface/total_normal_stress", sigma);
   f.write(g + "/surface/fluid_pressure", p);
+  Eigen::MatrixXd v(sigma.cols(), 3);
+  for (Eigen::Index i = 0; i < v.rows(); ++i) v.row(i) << 0.001 * i, 0.5, -0.002 * i;  // [m]
+  f.write(g + "/articular_vertices", v);
   for (const char* a : {"factorizations", "solves", "unknowns"}) f.set_attribute(g, a, 1);
   for (const char* a : {"factorization_s", "solve_s"}) f.set_attribute(g, a, 0.5);
 }
@@ -93,6 +96,23 @@ TEST(PostBiphasicPressure, SeriesAndKeyFramesAreTheFilesValues) {
   // Stage-1 frames nearest: 0.20 / 0.30 s.
   EXPECT_DOUBLE_EQ(d(kt->rows[2][1]), 8.0);
   EXPECT_DOUBLE_EQ(d(kt->rows[2][3]), 10.0);
+
+  // One map per layer and key frame: the vertices (X, Z in mm) coloured by
+  // sigma_Tot_nn at the nearest step [MPa], one colour range over the key frames.
+  std::vector<const report_html::MapPlot*> maps;
+  for (const auto& b : sec.blocks)
+    if (const auto* m = std::get_if<report_html::MapPlot>(&b)) maps.push_back(m);
+  ASSERT_EQ(maps.size(), 2u);
+  ASSERT_EQ(maps[0]->points.size(), 1u);
+  const auto& pts = maps[0]->points[0];
+  ASSERT_EQ(pts.values.size(), 4);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_DOUBLE_EQ(pts.values[i], 1e-6 * sigma(1, i));
+    EXPECT_DOUBLE_EQ(pts.xy(i, 0), 1.0 * i);
+    EXPECT_DOUBLE_EQ(pts.xy(i, 1), -2.0 * i);
+  }
+  EXPECT_DOUBLE_EQ(maps[1]->points[0].values[2], 0.7);
+  EXPECT_DOUBLE_EQ(pts.hi, 5.0);
 }
 
 TEST(PostBiphasicPressure, MissingSourcesAreListed) {
