@@ -81,6 +81,9 @@ struct SurfaceParameters {
   /// poisson_ratio, density_kg_per_m3, foundation_stiffness_n_per_mm3,
   /// foundation_damping_n_s_per_mm3, osmotic_pressure_mpa, osmotic_ramp_s.
   void declare(common::OptionVisitor& v);
+  /// "" when thickness > 0, E > 0 and -1 < nu < 0.5 (the open ends the
+  /// declared closed ranges cannot express), else what is wrong.
+  std::string check_material() const;
 };
 
 /// Per-node foundation modulus of an elastic layer of thickness h_i with the

@@ -249,6 +249,10 @@ void SurfaceScenarioOptions::declare_shared(common::OptionVisitor& v) {
   v.flag("steady_state", steady_state,
          "solve directly for the steady state at end_time_s (static equilibrium: every listed term is built, "
          "velocities and accelerations are zero there) instead of time stepping");
+  v.flag("linear", integrator.linear,
+         "steady_state only: linear (small-displacement) analysis, one solve with the tangent of the reference "
+         "configuration and no geometric update (for linear benchmarks); strains are still evaluated as "
+         "Green-Lagrange strains of the solution");
   v.number("steady_state_change_mm", steady_state_change_m, Unit::kMillimetre, {0, 1e3},
            "time-stepping runs: end once the largest weighted coordinate change over one step (positions, and "
            "transverse gradients x h/2) is at most this, after the pressure ramp; 0: run to end_time_s. The output "
@@ -404,6 +408,12 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   c.steady = opt.steady_state;
   c.quasi_static = c.steady || !wants("inertia");
 
+  if (const std::string bad = opt.physics.check_material(); !bad.empty()) {
+    int line = sc->line;
+    for (const char* k : {"shell_thickness_mm", "youngs_modulus_mpa", "poisson_ratio"})
+      if (bad.rfind(k, 0) == 0 && o.has(k)) line = o.value(k).line;
+    throw common::InputError(file, line, "scenario '" + sc->name + "': " + bad);
+  }
   if (!opt.end_time_s && !c.moving)
     throw common::InputError(file, sc->line, "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
   if (opt.end_time_s && !(*opt.end_time_s > 0))
@@ -424,6 +434,13 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
                                    " s) exceeds end_time_s (" + std::to_string(*opt.end_time_s) +
                                    " s): the pressure would never reach osmotic_pressure_mpa");
   }
+  if (opt.integrator.linear && !c.steady)
+    throw common::InputError(file, o.value("linear").line,
+                             "scenario '" + sc->name + "': linear: true is a steady-state analysis (one solve at "
+                             "end_time_s); add steady_state: true");
+  if (opt.integrator.linear && c.contact)
+    throw common::InputError(file, o.value("linear").line,
+                             "scenario '" + sc->name + "': linear: true cannot be combined with mesh_contact");
   if (opt.steady_state_change_m > 0 && c.steady)
     throw common::InputError(file, o.value("steady_state_change_mm").line,
                              "scenario '" + sc->name + "': steady_state_change_mm stops a time-stepping run; "

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 
 #include <Eigen/SparseCore>
 #include <unsupported/Eigen/SparseExtra>
@@ -787,6 +788,139 @@ TEST(SurfaceStageGeneric, GenericEffectWithoutMeshIsAnError) {
   } catch (const common::InputError& e) {
     EXPECT_NE(std::string(e.what()).find("needs a generic `mesh`"), std::string::npos) << e.what();
   }
+}
+
+// ---------------------------------------------------------------------------
+// Issue 34: the generic scene as a general shell solver.
+// ---------------------------------------------------------------------------
+
+/// Scene of the 16-quad cantilever strip (100 x 10 x 1 mm, nu = 0) clamped at
+/// x = 0 with a total tip load P [N] along +z; `extra` adds scenario keys.
+std::string cantilever_scene(const std::string& name, double E_mpa, double P, const std::string& extra = "") {
+  write_plate_obj(name, 16, 100, 10);
+  std::ostringstream s;
+  s.precision(17);
+  s << "surface:\n  scenarios:\n    c:\n      mesh: " << name << ".obj\n      youngs_modulus_mpa: " << E_mpa
+    << "\n      poisson_ratio: 0\n      end_time_s: 1\n      steady_state: true\n"
+       "      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]\n"
+       "      load_box_mm: [99.999, -1, -1, 100.001, 11, 1]\n"
+       "      point_load_n: [0, 0, "
+    << P << "]\n" << extra << "      effects: [fixed_nodes, point_loads]\n";
+  return write_scene(name, s.str());
+}
+
+double cantilever_tip(const std::string& file, const std::string& name) {
+  const common::H5File f(file, common::H5File::Mode::kRead);
+  return f.read_matrix("/surfaces/" + name + "/deflection")(1, 16);  // node (16, 0): the tip
+}
+
+/// Euler-Bernoulli tip deflection P L^3 / (3 E I) of that strip [m].
+double beam_tip(double E_Pa, double P) {
+  const double L = 0.1, W = 0.01, t = 1e-3;
+  return P * L * L * L / (3 * E_Pa * W * t * t * t / 12);
+}
+
+// Material limits are those of physics: E > 0 without an upper cap (a steel
+// or the Scordelis-Lo roof's E = 4.32e8 in its own units is a valid scene),
+// -1 < nu < 0.5, thickness > 0; the open ends are refused naming the key.
+TEST(SurfaceStageGeneric, MaterialLimitsArePhysical) {
+  // Above the former 1e6 MPa cap: the same strip, load scaled with E, gives
+  // the same tip deflection relative to beam theory (tolerance as in
+  // CantileverPlateTipDeflectionMatchesBeamTheory).
+  const double E = 4.32e8, P = 1e-4 * E / 400;
+  const std::string scene = cantilever_scene("stiff_strip", E, P);
+  const SurfaceStageOptions o = stage_options(scene, "c", "stiff_strip.h5");
+  run_surface_stage(o);
+  EXPECT_NEAR(cantilever_tip(o.out, "stiff_strip") / beam_tip(E * 1e6, P), 1.0, 5e-3);
+  // An auxetic material (nu < 0) is accepted and runs.
+  const std::string auxetic = write_scene("auxetic", R"(surface:
+  scenarios:
+    c:
+      mesh: stiff_strip.obj
+      poisson_ratio: -0.5
+      end_time_s: 1
+      steady_state: true
+      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]
+      load_box_mm: [99.999, -1, -1, 100.001, 11, 1]
+      point_load_n: [0, 0, 1e-4]
+      effects: [fixed_nodes, point_loads]
+)");
+  const SurfaceStageOptions oa = stage_options(auxetic, "c", "auxetic.h5");
+  run_surface_stage(oa);
+  EXPECT_GT(cantilever_tip(oa.out, "stiff_strip"), 0.0);
+  for (const auto& [key, value] : std::vector<std::pair<std::string, std::string>>{
+           {"poisson_ratio", "0.5"}, {"poisson_ratio", "-1"}, {"youngs_modulus_mpa", "0"},
+           {"shell_thickness_mm", "0"}}) {
+    const std::string bad = cantilever_scene("bad_material", 400, 1e-4, "      " + key + ": " + value + "\n");
+    try {
+      run_surface_stage(stage_options(bad, "c", "bad_material.h5"));
+      ADD_FAILURE() << key << " = " << value << " accepted";
+    } catch (const common::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+    }
+  }
+}
+
+// linear: true -- one solve with the reference tangent. At P L^2 / (E I) =
+// 0.9 (linear w/L = 0.3) the linear tip matches Euler-Bernoulli to the
+// discretisation error of the 16-quad strip (0.09% at small load, see
+// CantileverPlateTipDeflectionMatchesBeamTheory; tolerance 5e-3), while the
+// geometrically nonlinear run is stiffer (elastica tables, e.g. Bisshopp &
+// Drucker 1945, give w/L = 0.3017 at P L^2 / (E I) = 1, 9.5% below linear;
+// at 0.9 the run gives 7.9%; the test asks for more than 2%).
+TEST(SurfaceStageGeneric, LinearAnalysisMatchesEulerBernoulliAtLargeLoad) {
+  const double E = 400, P = 3e-2;
+  const std::string lin = cantilever_scene("linear_strip", E, P, "      linear: true\n");
+  const SurfaceStageOptions ol = stage_options(lin, "c", "linear_strip.h5");
+  const SurfaceStageResult rl = run_surface_stage(ol);
+  EXPECT_EQ(rl.newton_iterations, 1);
+  const double w_lin = cantilever_tip(ol.out, "linear_strip"), w_beam = beam_tip(E * 1e6, P);
+  std::printf("linear cantilever: tip %.6g m, beam %.6g m (w/L %.2f), error %.3g%%\n", w_lin, w_beam, w_beam / 0.1,
+              100 * (w_lin / w_beam - 1));
+  EXPECT_NEAR(w_lin / w_beam, 1.0, 5e-3);
+  const std::string nl = cantilever_scene("nonlinear_strip", E, P);
+  const SurfaceStageOptions on = stage_options(nl, "c", "nonlinear_strip.h5");
+  run_surface_stage(on);
+  const double w_nl = cantilever_tip(on.out, "nonlinear_strip");
+  std::printf("nonlinear cantilever: tip %.6g m (%.3g%% below linear)\n", w_nl, 100 * (1 - w_nl / w_lin));
+  EXPECT_LT(w_nl / w_lin, 0.98);
+  // linear needs steady_state.
+  const std::string bad = write_scene("linear_dynamic", R"(surface:
+  scenarios:
+    c:
+      mesh: linear_strip.obj
+      end_time_s: 1
+      linear: true
+      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]
+      effects: [fixed_nodes]
+)");
+  try {
+    run_surface_stage(stage_options(bad, "c", "linear_dynamic.h5"));
+    FAIL() << "linear without steady_state accepted";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("steady_state"), std::string::npos) << e.what();
+  }
+}
+
+// newton_load_tolerance: on a stiff strip (E = 4.32e8 MPa) under a small load
+// (1e-2 N, tip 9.3e-9 m) the residual cannot fall below its round-off floor
+// (about eps E t h per node, ~1e-5 N here), which is above the absolute floor,
+// the relative test (1e-8 of the first residual 7e-3 N) and the round-off
+// stagnation rule (1e-3 of it): the default criteria fail after every
+// halving. With the load-relative pair at 5e-3 (residual against the applied
+// load, increment against the solution) the step converges and the tip has
+// the strip's discretisation error against beam theory (tolerance 5e-3).
+TEST(SurfaceStageGeneric, LoadRelativeCriterionConvergesWhereTheFloorsFail) {
+  const double E = 4.32e8, P = 1e-2;
+  const std::string plain = cantilever_scene("small_load", E, P);
+  EXPECT_THROW(run_surface_stage(stage_options(plain, "c", "small_load.h5")), common::NumericalError);
+  const std::string rel = cantilever_scene("small_load_rel", E, P, "      newton_load_tolerance: 5e-3\n");
+  const SurfaceStageOptions o = stage_options(rel, "c", "small_load_rel.h5");
+  const SurfaceStageResult r = run_surface_stage(o);
+  EXPECT_EQ(r.rejected_steps, 0);
+  const double w = cantilever_tip(o.out, "small_load_rel"), w_beam = beam_tip(E * 1e6, P);
+  std::printf("stiff strip, small load: tip %.6g m, beam %.6g m, error %.3g%%\n", w, w_beam, 100 * (w / w_beam - 1));
+  EXPECT_NEAR(w / w_beam, 1.0, 5e-3);
 }
 
 }  // namespace
