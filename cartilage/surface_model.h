@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "cartilage/shell_model.h"
+#include "cartilage/shell_scene.h"
 #include "common/mesh.h"
 #include "common/options.h"
 
@@ -40,6 +41,17 @@ struct GenericLoads {
   std::vector<int> displaced_nodes;  ///< positions prescribed (effect prescribed_displacement)
   Eigen::Vector3d displacement_m = Eigen::Vector3d::Zero();
   double ramp_time_s = 1;            ///< > 0
+  /// Masked constraints on named node sets (scene key constraints): those
+  /// without values are built by fixed_nodes, those with values by
+  /// prescribed_displacement (reached at ramp_time_s).
+  struct SetConstraint {
+    ConstraintDefinition definition;
+    std::vector<int> nodes;  ///< sorted, non-empty
+  };
+  std::vector<SetConstraint> constraints;
+  /// Nodal forces [N] of the scene key loads at full value (point_loads),
+  /// ramped like total_force_N.
+  std::vector<std::pair<int, Eigen::Vector3d>> set_loads_N;
 };
 
 /// One surface to simulate.

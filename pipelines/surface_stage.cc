@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -316,6 +317,21 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
                 "box of the nodes of `mesh` whose positions are prescribed (effect prescribed_displacement)");
   v.number_list("displacement_mm", displacement_m, Unit::kMillimetre, {3, 3},
                 "[ux, uy, uz] displacement of the nodes in displaced_box_mm, ramped like point_load_n");
+  v.text_list("node_sets", node_sets, "",
+              "named node sets of `mesh`, each 'NAME: box XMIN YMIN ZMIN XMAX YMAX ZMAX' (mm), 'NAME: plane NX NY NZ D "
+              "[TOL]' (nodes with |n.x - D| <= TOL, n normalised, D and TOL in mm, TOL 0.001 by default), 'NAME: nodes "
+              "I J ...' (0-based indices) or 'NAME: all'");
+  v.text_list("constraints", constraints, "",
+              "constraints on node sets, each 'SET: C C ... [= V V ...]' with C one of ux uy uz dx dy dz (global "
+              "position and director components; u = ux uy uz, d = dx dy dz, all = both): the components are held at "
+              "their reference value (effect fixed_nodes) or moved by V (mm for u, dimensionless for d), ramped like "
+              "point_load_n (effect prescribed_displacement); the reactions are written per constraint "
+              "(docs/surface_output.md)");
+  v.text_list("loads", loads, "",
+              "loads on node sets (effect point_loads, ramped like point_load_n), each 'SET: force FX FY FZ' (total "
+              "[N], equal shares), 'SET: force_per_node FX FY FZ' [N], 'SET: traction TX TY TZ' (fixed direction, "
+              "MPa, on the quads with all four nodes in SET, consistent nodal forces) or 'SET: gravity GX GY GZ' "
+              "(m/s^2: body force density_kg_per_m3 x g per unit volume on those quads)");
   v.effect_list("effects", effects, "surface", "surface effects to simulate in this scenario").required();
 }
 
@@ -458,12 +474,63 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
       throw common::InputError(file, sc->line,
                                "scenario '" + sc->name + "': effect '" + effect + "' needs `" + key + "`");
   };
-  require("fixed_box_mm", "fixed_nodes");
-  require("load_box_mm", "point_loads");
-  require("point_load_n", "point_loads");
+  // Named sets, constraints and loads (generic mesh only).
+  for (const auto& [key, items] : {std::pair<const char*, const std::vector<std::string>*>{"node_sets", &opt.node_sets},
+                                    {"constraints", &opt.constraints},
+                                    {"loads", &opt.loads}})
+    if (!items->empty() && !c.generic)
+      throw common::InputError(file, o.value(key).line, "scenario '" + sc->name + "': `" + key + "` needs a generic `mesh`");
+  auto parse_list = [&](const char* key, const std::vector<std::string>& items, auto parse, auto& out) {
+    for (const std::string& item : items) {
+      try {
+        out.push_back(parse(item));
+      } catch (const std::invalid_argument& e) {
+        throw common::InputError(file, o.value(key).line, "scenario '" + sc->name + "': " + key + ": " + e.what());
+      }
+    }
+  };
+  parse_list("node_sets", opt.node_sets, cartilage::parse_node_set, c.node_sets);
+  parse_list("constraints", opt.constraints, cartilage::parse_constraint, c.constraints);
+  parse_list("loads", opt.loads, cartilage::parse_load, c.loads);
+  for (std::size_t i = 0; i < c.node_sets.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (c.node_sets[i].name == c.node_sets[j].name)
+        throw common::InputError(file, o.value("node_sets").line,
+                                 "scenario '" + sc->name + "': node set '" + c.node_sets[i].name + "' defined twice");
+  auto known_set = [&](const std::string& name, const char* key) {
+    for (const auto& d : c.node_sets)
+      if (d.name == name) return;
+    std::string have;
+    for (const auto& d : c.node_sets) have += (have.empty() ? "" : ", ") + d.name;
+    throw common::InputError(file, o.value(key).line,
+                             "scenario '" + sc->name + "': " + key + ": unknown node set '" + name + "' (node_sets: " +
+                                 (have.empty() ? "none" : have) + ")");
+  };
+  bool fixed_sets = false, prescribed_sets = false;
+  for (const auto& d : c.constraints) {
+    known_set(d.set, "constraints");
+    (d.prescribed() ? prescribed_sets : fixed_sets) = true;
+  }
+  for (const auto& d : c.loads) known_set(d.set, "loads");
+  // Every constraint and load must be built by a listed effect.
+  if (fixed_sets && !wants("fixed_nodes"))
+    throw common::InputError(file, o.value("constraints").line,
+                             "scenario '" + sc->name + "': constraints without values need effect fixed_nodes");
+  if (prescribed_sets && !wants("prescribed_displacement"))
+    throw common::InputError(file, o.value("constraints").line,
+                             "scenario '" + sc->name + "': constraints with values need effect prescribed_displacement");
+  if (!c.loads.empty() && !wants("point_loads"))
+    throw common::InputError(file, o.value("loads").line, "scenario '" + sc->name + "': loads need effect point_loads");
+  if (!fixed_sets) require("fixed_box_mm", "fixed_nodes");
+  if (c.loads.empty()) {
+    require("load_box_mm", "point_loads");
+    require("point_load_n", "point_loads");
+  }
   require("pressure_mpa", "pressure");
-  require("displaced_box_mm", "prescribed_displacement");
-  require("displacement_mm", "prescribed_displacement");
+  if (!prescribed_sets) {
+    require("displaced_box_mm", "prescribed_displacement");
+    require("displacement_mm", "prescribed_displacement");
+  }
   if (c.generic) {
     std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
@@ -601,6 +668,39 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     if (!opt.displacement_m.empty()) {
       const auto& u = opt.displacement_m;
       g.displacement_m = Eigen::Vector3d(u[0], u[1], u[2]);
+    }
+    // Named sets, their constraints and loads.
+    std::map<std::string, std::vector<int>> sets;
+    for (const cartilage::NodeSetDefinition& d : c.node_sets) {
+      try {
+        sets[d.name] = cartilage::select_nodes(d, r.input.mesh);
+      } catch (const std::invalid_argument& e) {
+        throw common::InputError(file, c.line, "scenario '" + c.name + "': " + e.what());
+      }
+      if (sets[d.name].empty())
+        throw common::InputError(file, c.line,
+                                 "scenario '" + c.name + "': node set '" + d.name + "' holds no node of " + mesh_file);
+    }
+    for (const cartilage::ConstraintDefinition& d : c.constraints) g.constraints.push_back({d, sets.at(d.set)});
+    for (const cartilage::LoadDefinition& d : c.loads) {
+      const std::vector<int>& nodes = sets.at(d.set);
+      Eigen::MatrixXd f;
+      using K = cartilage::LoadDefinition::Kind;
+      if (d.kind == K::kForce || d.kind == K::kForcePerNode) {
+        const double share = d.kind == K::kForce ? 1.0 / static_cast<double>(nodes.size()) : 1.0;
+        for (int n : nodes) g.set_loads_N.emplace_back(n, share * d.vector);
+        continue;
+      }
+      const Eigen::Vector3d per_area = d.kind == K::kTraction
+                                           ? d.vector
+                                           : Eigen::Vector3d(par.material.density_kg_m3 * par.shell_thickness_m * d.vector);
+      f = cartilage::consistent_area_loads(r.input.mesh, nodes, per_area);
+      if (f.isZero(0.0))
+        throw common::InputError(file, c.line,
+                                 "scenario '" + c.name + "': load on node set '" + d.set +
+                                     "': no quad has all four nodes in the set");
+      for (int n = 0; n < f.rows(); ++n)
+        if (!f.row(n).isZero(0.0)) g.set_loads_N.emplace_back(n, f.row(n).transpose());
     }
     r.model = cartilage::build_surface_model(r.input, par, c.effects, cartilage::BoneMotion::fixed(), &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
@@ -778,6 +878,35 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   int frames_written = 0;
   // One frame: every surface's fields, the contact forces, then /time (so
   // /time counts complete frames).
+  // Reactions of the generic mesh's constraints, per frame: R = F (internal
+  // minus applied forces, zero velocity) summed over the set's constrained
+  // position coordinates not already counted by an earlier constraint
+  // (docs/surface_output.md).
+  std::vector<std::vector<std::vector<Eigen::Vector3d>>> reactions(runs.size());
+  auto record_reactions = [&](size_t k, const Eigen::VectorXd& q, double t) {
+    SurfaceRun& r = runs[k];
+    const auto& cons = r.input.generic.constraints;
+    if (cons.empty()) return;
+    reactions[k].resize(cons.size());
+    Eigen::VectorXd F;
+    numerics::EvalRequest req;
+    req.t = t;
+    req.q = &q;
+    r.model->evaluate(req, F, nullptr, nullptr);
+    // A coordinate held by several constraints counts for the first of them.
+    std::vector<char> claimed(static_cast<size_t>(F.size()), 0);
+    for (size_t i = 0; i < cons.size(); ++i) {
+      Eigen::Vector3d R = Eigen::Vector3d::Zero();
+      for (int n : cons[i].nodes)
+        for (int j = 0; j < 3; ++j) {
+          const size_t dof = static_cast<size_t>(6 * n + j);
+          if (!cons[i].definition.mask[static_cast<size_t>(j)] || claimed[dof]) continue;
+          claimed[dof] = 1;
+          R(j) += F(static_cast<Eigen::Index>(dof));
+        }
+      reactions[k][i].push_back(R);
+    }
+  };
   auto write_frame = [&](const Eigen::VectorXd& qs, double t, const std::vector<cartilage::ContactPairReport>& reps) {
     std::vector<Eigen::VectorXd> pressure(runs.size());
     for (size_t k = 0; k < runs.size(); ++k) pressure[k] = Eigen::VectorXd::Zero(runs[k].model->num_nodes());
@@ -803,6 +932,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       fr.displacement = cartilage::nodal_displacement(*r.model, q, T);
       fr.deflection = cartilage::nodal_deflection(*r.model, q, T);
       const cartilage::NodalStrains st = cartilage::nodal_strains(*r.model, r.basis, q);
+      record_reactions(k, q, t);
       common::check_finite(fr.displacement, "surface " + r.summary.name + ": displacement at t = " + std::to_string(t));
       common::check_finite(st.E, "surface " + r.summary.name + ": strain at t = " + std::to_string(t));
       fr.E = st.E;
@@ -1082,6 +1212,19 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.worst_penetration_ratio = worst_ratio;
   res.unfaded_penetration_warnings = unfaded_over;
   res.worst_unfaded_penetration_ratio = worst_unfaded_ratio;
+  for (size_t k = 0; k < runs.size(); ++k) {
+    const auto& cons = runs[k].input.generic.constraints;
+    for (size_t i = 0; i < reactions[k].size(); ++i) {
+      Eigen::MatrixXd R(static_cast<Eigen::Index>(reactions[k][i].size()), 3);
+      for (Eigen::Index f = 0; f < R.rows(); ++f) R.row(f) = reactions[k][i][static_cast<size_t>(f)].transpose();
+      std::string comps;
+      static const char* names[6] = {"ux", "uy", "uz", "dx", "dy", "dz"};
+      for (int j = 0; j < 6; ++j)
+        if (cons[i].definition.mask[static_cast<size_t>(j)]) comps += (comps.empty() ? "" : " ") + std::string(names[j]);
+      out.set_reactions(runs[k].summary.name, std::to_string(i) + "_" + cons[i].definition.set, cons[i].definition.set,
+                        comps, R);
+    }
+  }
   res.wall_s = now_s() - t_start;
   out.set_solver_attribute("wall_s", res.wall_s);
   out.complete();
