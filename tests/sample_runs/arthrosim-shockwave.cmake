@@ -43,7 +43,7 @@ set_tests_properties(sample.arthrosim-shockwave.too_coarse PROPERTIES LABELS sam
 # calls arthrosim-shockwave --scene and checks its effect ledger), and the
 # plan of the seed's three runs (prepare, then the stage).
 add_test(NAME sample.arthrosim-shockwave.scene_bar
-  COMMAND arthrosim run data/scenes/shockwave_bar.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/shockwave_bar_scene --jobs 1
+  COMMAND arthrosim run data/scenes/shockwave_bar.yaml --out ${CMAKE_BINARY_DIR}/sample_runs/shockwave_bar_scene --jobs 1 --force
   WORKING_DIRECTORY ${CMAKE_SOURCE_DIR})
 set_tests_properties(sample.arthrosim-shockwave.scene_bar PROPERTIES LABELS sample TIMEOUT 120
   PASS_REGULAR_EXPRESSION "finished: shockwave ran")
