@@ -891,8 +891,20 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     Eigen::VectorXd F;
     numerics::EvalRequest req;
     req.t = t;
-    req.q = &q;
-    r.model->evaluate(req, F, nullptr, nullptr);
+    if (iopt.linear) {
+      // linear: true solves the equations linearised at the reference state
+      // (constraints applied at t): the reactions are those of the same
+      // linear problem, F = F(q0) + K(q0) (q - q0).
+      Eigen::VectorXd q0 = r.model->reference_state();
+      r.model->apply_constraints(t, q0);
+      Eigen::SparseMatrix<double> K;
+      req.q = &q0;
+      r.model->evaluate(req, F, nullptr, &K);
+      F += K * (q - q0);
+    } else {
+      req.q = &q;
+      r.model->evaluate(req, F, nullptr, nullptr);
+    }
     // A coordinate held by several constraints counts for the first of them.
     std::vector<char> claimed(static_cast<size_t>(F.size()), 0);
     for (size_t i = 0; i < cons.size(); ++i) {
