@@ -6,10 +6,10 @@
       # runs data/scenes/verification/<problem>.yaml at every mesh (a copy of the
       # scene with `mesh` replaced) and prints value / reference per mesh
 
-Units (docs/shell_element.md, "Verification scenes"): the benchmarks are
-stated in ft / lb (Scordelis-Lo); the scenes read them as mm / N, so stresses
-(lb/ft^2) become N/mm^2 = MPa and displacements come out in mm of the scene
-= the benchmark's length unit. Node numbering of every mesh: node (i, j) =
+Units: the benchmarks are stated in consistent units of length L and force
+F (ft and lb, in and lb, or none); the scenes read L as mm and F as N, so
+stresses F/L^2 become MPa and displacements come out in mm of the scene = the
+benchmark's length unit (the series prints them so). Node numbering of every mesh: node (i, j) =
 j (nx + 1) + i, 0-based, i along the first grid direction.
 """
 import argparse
@@ -22,15 +22,40 @@ import tempfile
 
 
 def scordelis_lo(n):
-    """Quarter Scordelis-Lo roof: R 25, half length 25 (x from the diaphragm
-    at x = 0 to the midspan at x = 25), angle 0 (crown, y = 0) to 40 deg
-    (free edge); outward normals. Grid n x n (i along x, j along the angle)."""
-    R, half_L, phi = 25.0, 25.0, math.radians(40.0)
+    """Quarter Scordelis-Lo roof (data/scenes/verification/scordelis_lo_roof.yaml):
+    R 25, half length 25 (x from the midspan at x = 0 to the diaphragm at
+    x = 25), angle 0 (crown, y = 0) to 40 deg (free edge); outward normals.
+    Grid n x n, i along x, j along the angle."""
+    return cylinder_panel(n, n, 25.0, 25.0, math.radians(40.0))
+
+
+def pinched_cylinder(n):
+    """Octant of the pinched cylinder (pinched_cylinder.yaml): R 300, half
+    length 300 (x from the midspan at x = 0 to the diaphragm at x = 300),
+    angle 0 (loaded generator, y = 0) to 90 deg (z = 0); outward normals."""
+    return cylinder_panel(n, n, 300.0, 300.0, math.pi / 2)
+
+
+def cylinder_panel(nx, ny, R, length, phi):
+    nodes = []
+    for j in range(ny + 1):
+        th = phi * j / ny
+        for i in range(nx + 1):
+            nodes.append((length * i / nx, R * math.sin(th), R * math.cos(th)))
+    return nodes, grid_quads(nx, ny)
+
+
+def pinched_hemisphere(n):
+    """Quarter of the hemisphere with an 18 deg hole (pinched_hemisphere.yaml):
+    R 10, longitude 0 (x axis) to 90 deg (y axis) along i, latitude 0
+    (equator, z = 0) to 72 deg along j; outward normals."""
+    R, top = 10.0, math.radians(72.0)
     nodes = []
     for j in range(n + 1):
-        th = phi * j / n
+        lat = top * j / n
         for i in range(n + 1):
-            nodes.append((half_L * i / n, R * math.sin(th), R * math.cos(th)))
+            lon = (math.pi / 2) * i / n
+            nodes.append((R * math.cos(lat) * math.cos(lon), R * math.cos(lat) * math.sin(lon), R * math.sin(lat)))
     return nodes, grid_quads(n, n)
 
 
@@ -43,9 +68,15 @@ def grid_quads(nx, ny):
     return quads
 
 
+# name: (scene in data/scenes/verification, generator, probe node(n),
+#        component, sign, reference in the benchmark's units)
 PROBLEMS = {
-    # name: (generator, probe node(n), component, reference, sign)
-    "scordelis_lo": (scordelis_lo, lambda n: n * (n + 1) + n, 2, 0.3024, -1.0),
+    # vertical deflection of the free edge's midpoint, MacNeal & Harder 1985
+    "scordelis_lo": ("scordelis_lo_roof", scordelis_lo, lambda n: n * (n + 1), 2, -1.0, 0.3024),
+    # radial displacement under the load, MacNeal & Harder 1985
+    "pinched_cylinder": ("pinched_cylinder", pinched_cylinder, lambda n: 0, 2, -1.0, 1.8248e-5),
+    # radial displacement under the load, MacNeal & Harder 1985
+    "pinched_hemisphere": ("pinched_hemisphere", pinched_hemisphere, lambda n: 0, 0, 1.0, 0.094),
 }
 
 
@@ -63,8 +94,8 @@ def run_series(args):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     print("problem, mesh, elements, value, reference, value/reference")
     for name in args.problems:
-        gen, probe, comp, ref, sign = PROBLEMS[name]
-        scene_path = os.path.join(root, "data/scenes/verification", name + ".yaml")
+        scene_name, gen, probe, comp, sign, ref = PROBLEMS[name]
+        scene_path = os.path.join(root, "data/scenes/verification", scene_name + ".yaml")
         scene = open(scene_path).read()
         for n in args.meshes:
             with tempfile.TemporaryDirectory() as d:
@@ -96,7 +127,7 @@ def main():
     s.add_argument("--problems", nargs="+", default=sorted(PROBLEMS))
     args = ap.parse_args()
     if args.cmd == "mesh":
-        nodes, quads = PROBLEMS[args.problem][0](args.n)
+        nodes, quads = PROBLEMS[args.problem][1](args.n)
         write_obj(args.out, f"{args.problem} {args.n} x {args.n}", nodes, quads)
     else:
         run_series(args)
