@@ -59,6 +59,22 @@ def pinched_hemisphere(n):
     return nodes, grid_quads(n, n)
 
 
+def twisted_beam(n):
+    """Twisted beam (twisted_beam.yaml): length 12 along x, width 1.1, twisted
+    by 90 deg from the root (x = 0, width along y, normal +z) to the tip
+    (width along z). Grid 6n x n: i along x (6n quads), j across the width
+    (n quads); the tip's mid-width node is (6n, n/2), n even."""
+    L, W, nx, ny = 12.0, 1.1, 6 * n, n
+    nodes = []
+    for j in range(ny + 1):
+        w = -W / 2 + W * j / ny
+        for i in range(nx + 1):
+            x = L * i / nx
+            th = (math.pi / 2) * x / L
+            nodes.append((x, w * math.cos(th), w * math.sin(th)))
+    return nodes, grid_quads(nx, ny)
+
+
 def grid_quads(nx, ny):
     quads = []
     for j in range(ny):
@@ -68,8 +84,8 @@ def grid_quads(nx, ny):
     return quads
 
 
-# name: (scene in data/scenes/verification, generator, probe node(n),
-#        component, sign, reference in the benchmark's units)
+# name: (scene in data/scenes/verification[:scenario], generator, probe
+#        node(n), component, sign, reference in the benchmark's units)
 PROBLEMS = {
     # vertical deflection of the free edge's midpoint, MacNeal & Harder 1985
     "scordelis_lo": ("scordelis_lo_roof", scordelis_lo, lambda n: n * (n + 1), 2, -1.0, 0.3024),
@@ -77,6 +93,11 @@ PROBLEMS = {
     "pinched_cylinder": ("pinched_cylinder", pinched_cylinder, lambda n: 0, 2, -1.0, 1.8248e-5),
     # radial displacement under the load, MacNeal & Harder 1985
     "pinched_hemisphere": ("pinched_hemisphere", pinched_hemisphere, lambda n: 0, 0, 1.0, 0.094),
+    # tip displacement along the load, MacNeal & Harder 1985 (n = quads across the width)
+    "twisted_beam_in_plane": ("twisted_beam:in_plane", twisted_beam, lambda n: (n // 2) * (6 * n + 1) + 6 * n, 2, 1.0,
+                              5.424e-3),
+    "twisted_beam_out_of_plane": ("twisted_beam:out_of_plane", twisted_beam,
+                                  lambda n: (n // 2) * (6 * n + 1) + 6 * n, 1, 1.0, 1.754e-3),
 }
 
 
@@ -92,9 +113,10 @@ def write_obj(path, title, nodes, quads):
 def run_series(args):
     import h5py  # /usr/bin/python3
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    print("problem, mesh, elements, value, reference, value/reference")
+    print("problem, mesh parameter, elements, value, reference, value/reference")
     for name in args.problems:
         scene_name, gen, probe, comp, sign, ref = PROBLEMS[name]
+        scene_name, _, scenario = scene_name.partition(":")
         scene_path = os.path.join(root, "data/scenes/verification", scene_name + ".yaml")
         scene = open(scene_path).read()
         for n in args.meshes:
@@ -107,11 +129,12 @@ def run_series(args):
                 sp = os.path.join(d, "scene.yaml")
                 open(sp, "w").write(text)
                 out = os.path.join(d, "out.h5")
-                subprocess.run([args.bin, "--scene", sp, "--out", out, "--quiet"], check=True)
+                cmd = [args.bin, "--scene", sp, "--out", out, "--quiet"] + (["--scenario", scenario] if scenario else [])
+                subprocess.run(cmd, check=True)
                 with h5py.File(out, "r") as h:
                     u = h[f"/surfaces/{stem}/displacement"][-1]
                 value = sign * u[probe(n), comp] * 1e3  # m -> mm of the scene = benchmark unit
-                print(f"{name}, {n} x {n}, {len(quads)}, {value:.6g}, {ref}, {value / ref:.4f}", flush=True)
+                print(f"{name}, n = {n}, {len(quads)}, {value:.6g}, {ref}, {value / ref:.4f}", flush=True)
 
 
 def main():
