@@ -75,6 +75,14 @@ def twisted_beam(n):
     return nodes, grid_quads(nx, ny)
 
 
+def end_shear_cantilever(n):
+    """Cantilever strip of Sze et al. 2004 (large_rotation_cantilever.yaml):
+    length 10 along x, width 1 along y, in z = 0, n x 1 quads; the tip's
+    nodes are n and 2n + 1."""
+    nodes = [(10.0 * i / n, float(j), 0.0) for j in range(2) for i in range(n + 1)]
+    return nodes, grid_quads(n, 1)
+
+
 def grid_quads(nx, ny):
     quads = []
     for j in range(ny):
@@ -94,6 +102,8 @@ PROBLEMS = {
     # radial displacement under the load, MacNeal & Harder 1985
     "pinched_hemisphere": ("pinched_hemisphere", pinched_hemisphere, lambda n: 0, 0, 1.0, 0.094),
     # tip displacement along the load, MacNeal & Harder 1985 (n = quads across the width)
+    # tip deflection at P_max = 4 against the elastica (docs/shell_element.md)
+    "large_rotation_cantilever": ("large_rotation_cantilever", end_shear_cantilever, lambda n: n, 2, 1.0, 6.699642),
     "twisted_beam_in_plane": ("twisted_beam:in_plane", twisted_beam, lambda n: (n // 2) * (6 * n + 1) + 6 * n, 2, 1.0,
                               5.424e-3),
     "twisted_beam_out_of_plane": ("twisted_beam:out_of_plane", twisted_beam,
