@@ -53,14 +53,21 @@ cartilage::SurfaceInput read_prepared_surface(const common::PreparedModelReader&
 }
 
 /// Quad OBJ reader for the generic case: 'v x y z' (millimetres) and 4-node
-/// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); comments,
-/// vn/vt/vp/g/o/s/usemtl/mtllib/l lines are skipped. Anything else, or a face
-/// that is not a quad, is an InputError with file:line.
-common::QuadMesh read_quad_obj(const std::string& path) {
+/// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); 'vn'
+/// vertex normals referenced by the faces (i/j/k, i//k) become the nodes'
+/// directors when every face gives them (`normals`, unit rows; left empty
+/// when no face does); comments, vt/vp/g/o/s/usemtl/mtllib/l lines are
+/// skipped. Anything else, a face that is not a quad, normals on some faces
+/// only, two different normals of one vertex or a normal on the side opposite
+/// to the faces' orientation is an InputError with file:line.
+common::QuadMesh read_quad_obj(const std::string& path, common::Points3* normals) {
   std::ifstream in(path);
   if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
-  std::vector<Eigen::Vector3d> V;
+  std::vector<Eigen::Vector3d> V, VN;
   std::vector<Eigen::Vector4i> Q;
+  std::vector<int> node_normal;  // per vertex: index into VN, -1 none
+  std::vector<int> normal_line;  // per vertex: line that gave it
+  int faces_with_normals = 0;
   std::string line;
   int line_no = 0;
   while (std::getline(in, line)) {
@@ -75,8 +82,13 @@ common::QuadMesh read_quad_obj(const std::string& path) {
       if (!(ls >> p.x() >> p.y() >> p.z()) || !p.allFinite())
         throw common::InputError(path, line_no, "expected 'v x y z' with three finite numbers");
       V.push_back(p * 1e-3);
+    } else if (kw == "vn") {
+      Eigen::Vector3d n;
+      if (!(ls >> n.x() >> n.y() >> n.z()) || !n.allFinite() || !(n.norm() > 0))
+        throw common::InputError(path, line_no, "expected 'vn x y z' with three finite numbers, not all zero");
+      VN.push_back(n.normalized());
     } else if (kw == "f") {
-      std::vector<int> idx;
+      std::vector<int> idx, nidx;
       std::string tok;
       while (ls >> tok) {
         const std::string head = tok.substr(0, tok.find('/'));
@@ -95,12 +107,50 @@ common::QuadMesh read_quad_obj(const std::string& path) {
                                    "vertex index " + head + " out of range (" + std::to_string(V.size()) +
                                        " vertices so far)");
         idx.push_back(i);
+        // normal index: the third field of i/j/k or i//k
+        const std::size_t s1 = tok.find('/'), s2 = s1 == std::string::npos ? s1 : tok.find('/', s1 + 1);
+        if (s2 != std::string::npos) {
+          const std::string nh = tok.substr(s2 + 1);
+          int kn = 0;
+          std::size_t un = 0;
+          try {
+            kn = std::stoi(nh, &un);
+          } catch (const std::exception&) {
+            un = 0;
+          }
+          const int in = kn > 0 ? kn - 1 : static_cast<int>(VN.size()) + kn;
+          if (un != nh.size() || nh.empty() || kn == 0 || in < 0 || in >= static_cast<int>(VN.size()))
+            throw common::InputError(path, line_no,
+                                     "expected a normal index in 1.." + std::to_string(VN.size()) + ", found '" + tok +
+                                         "'");
+          nidx.push_back(in);
+        }
       }
       if (idx.size() != 4)
         throw common::InputError(path, line_no,
                                  "expected a quad (4 vertices), found a face with " + std::to_string(idx.size()));
+      if (!nidx.empty() && nidx.size() != 4)
+        throw common::InputError(path, line_no, "expected a normal index on all four vertices of the face or none");
+      if (!nidx.empty()) {
+        ++faces_with_normals;
+        node_normal.resize(V.size(), -1);
+        normal_line.resize(V.size(), 0);
+        for (int a = 0; a < 4; ++a) {
+          int& nn = node_normal[static_cast<size_t>(idx[static_cast<size_t>(a)])];
+          if (nn >= 0 && (VN[static_cast<size_t>(nn)] - VN[static_cast<size_t>(nidx[static_cast<size_t>(a)])]).norm() > 1e-12)
+            throw common::InputError(path, line_no,
+                                     "vertex " + std::to_string(idx[static_cast<size_t>(a)] + 1) +
+                                         " has two different normals (the first on line " +
+                                         std::to_string(normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])]) +
+                                         "): a shell node has one director");
+          if (nn < 0) {
+            nn = nidx[static_cast<size_t>(a)];
+            normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])] = line_no;
+          }
+        }
+      }
       Q.emplace_back(idx[0], idx[1], idx[2], idx[3]);
-    } else if (kw == "vn" || kw == "vt" || kw == "vp" || kw == "g" || kw == "o" || kw == "s" || kw == "usemtl" ||
+    } else if (kw == "vt" || kw == "vp" || kw == "g" || kw == "o" || kw == "s" || kw == "usemtl" ||
                kw == "mtllib" || kw == "l") {
       continue;
     } else {
@@ -113,6 +163,29 @@ common::QuadMesh read_quad_obj(const std::string& path) {
   for (size_t i = 0; i < V.size(); ++i) m.V.row(static_cast<Eigen::Index>(i)) = V[i].transpose();
   m.Q.resize(static_cast<Eigen::Index>(Q.size()), 4);
   for (size_t i = 0; i < Q.size(); ++i) m.Q.row(static_cast<Eigen::Index>(i)) = Q[i].transpose();
+  if (normals) normals->resize(0, 3);
+  if (faces_with_normals > 0) {
+    if (faces_with_normals != static_cast<int>(Q.size()))
+      throw common::InputError(path + ": error: " + std::to_string(faces_with_normals) + " of " +
+                               std::to_string(Q.size()) +
+                               " faces give vertex normals: give them on every face (they are the directors) or none");
+    const common::Points3 faces = cartilage::quad_mesh_vertex_normals(m);
+    common::Points3 N(m.num_nodes(), 3);
+    for (int i = 0; i < m.num_nodes(); ++i) {
+      const int nn = node_normal[static_cast<size_t>(i)];
+      if (nn < 0) {  // a vertex of no face: keep the (zero) face normal
+        N.row(i) = faces.row(i);
+        continue;
+      }
+      N.row(i) = VN[static_cast<size_t>(nn)].transpose();
+      if (!(N.row(i).dot(faces.row(i)) > 0))
+        throw common::InputError(path, normal_line[static_cast<size_t>(i)],
+                                 "the normal of vertex " + std::to_string(i + 1) +
+                                     " points away from the side the faces' orientation gives (counter-clockwise "
+                                     "faces seen from the normal's side)");
+    }
+    if (normals) *normals = N;
+  }
   return m;
 }
 
@@ -651,10 +724,12 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     const std::string mesh_file = opt.mesh.string();
     std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
-    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file);
+    common::Points3 given_normals;
+    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file, &given_normals);
     r.input.name = opt.mesh.stem().string();
     r.input.mesh.name = r.input.name;
-    r.input.normals = cartilage::quad_mesh_vertex_normals(r.input.mesh);
+    // Directors: the OBJ's vertex normals when given, else area-weighted quad normals.
+    r.input.normals = given_normals.rows() > 0 ? given_normals : cartilage::quad_mesh_vertex_normals(r.input.mesh);
     cartilage::GenericLoads& g = r.input.generic;
     g.ramp_time_s = end_time > 0 ? end_time : 1.0;
     if (!opt.fixed_box_m.empty()) g.fixed_nodes = nodes_in_box(r.input.mesh, opt.fixed_box_m);

@@ -7,11 +7,17 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <tuple>
+#include <vector>
 #include <limits>
 #include <numbers>
 
 #include <Eigen/Core>
 
+#include "common/error.h"
 #include "common/hdf5.h"
 #include "pipelines/surface_stage.h"
 
@@ -213,6 +219,93 @@ TEST(ShellBenchmarks, LargeRotationCantilever) {
   EXPECT_NEAR(tip(2) / ref(1), 1.0, 5e-3);
   EXPECT_NEAR(tip(0) / ref(0), 1.0, 5e-3);
   EXPECT_NEAR(ref(1), 6.6996, 1e-4);  // the integration itself (Python RK4 of the same equations: 6.69964)
+}
+
+/// A 4 x 1 quad plate 40 mm x 10 mm in z = 0 with OBJ vertex normals
+/// `normal(x)` (faces i//i) and a scene clamping x = 0 and pulling the tip
+/// up; returns the scene path. `faces_with_normals` < 4 leaves the rest
+/// without normal indices.
+std::string plate_with_normals(const std::string& name, const std::function<Eigen::Vector3d(int)>& normal,
+                               int faces_with_normals = 4) {
+  const fs::path d = fs::path(ARTHROSIM_BINARY_DIR) / "tests" / "shell_benchmarks";
+  fs::create_directories(d);
+  {
+    std::ofstream f(d / (name + ".obj"));
+    for (int j = 0; j <= 1; ++j)
+      for (int i = 0; i <= 4; ++i) f << "v " << 10 * i << " " << 10 * j << " 0\n";
+    for (int k = 0; k < 10; ++k) {
+      const Eigen::Vector3d n = normal(k);
+      f << "vn " << n.x() << " " << n.y() << " " << n.z() << "\n";
+    }
+    for (int i = 0; i < 4; ++i) {
+      const int a = i + 1, b = i + 2, c = i + 7, e = i + 6;
+      if (i < faces_with_normals)
+        f << "f " << a << "//" << a << " " << b << "//" << b << " " << c << "//" << c << " " << e << "//" << e << "\n";
+      else
+        f << "f " << a << " " << b << " " << c << " " << e << "\n";
+    }
+  }
+  const fs::path scene = d / (name + ".yaml");
+  std::ofstream(scene) << "model: " << ARTHROSIM_SOURCE_DIR << "/data/models/knee_parametric/coarse\n"
+                       << "outputs: [surface]\nsurface:\n  scenarios:\n    c:\n      mesh: " << name << ".obj\n"
+                       << "      end_time_s: 1\n      steady_state: true\n"
+                       << "      node_sets: [\"root: plane 1 0 0 0\", \"tip: plane 1 0 0 40\"]\n"
+                       << "      constraints: [\"root: all\"]\n      loads: [\"tip: force 0 0 1e-4\"]\n"
+                       << "      effects: [fixed_nodes, point_loads]\n";
+  return scene.string();
+}
+
+// Directors from the OBJ's vertex normals: tilted, node-dependent normals
+// (not the plate's quad normal (0, 0, 1)) come out as the reference
+// directors written to /surfaces/<name>/normals, normalised (1e-15: the
+// division by the norm; the OBJ is written with 6 significant digits, the
+// comparison uses the same digits). Without normal indices the directors are
+// the quad normals; bad normals are refused.
+TEST(ShellBenchmarks, DirectorsFromObjVertexNormals) {
+  auto tilted = [](int k) { return Eigen::Vector3d(0.05 * (k % 5), -0.02 * (k / 5), 1.0); };
+  auto rounded = [](const Eigen::Vector3d& v) {  // as written by the default ostream precision
+    Eigen::Vector3d r;
+    for (int c = 0; c < 3; ++c) r(c) = std::stod((std::ostringstream() << v(c)).str());
+    return r;
+  };
+  const std::string scene = plate_with_normals("vn_plate", tilted);
+  SurfaceStageOptions o;
+  o.scene = scene;
+  o.out = out_path("vn_plate");
+  o.progress = false;
+  ASSERT_EQ(run_surface_stage(o).status, SurfaceStageStatus::kCompleted);
+  const common::H5File f(o.out, common::H5File::Mode::kRead);
+  const Eigen::MatrixXd N = f.read_matrix("/surfaces/vn_plate/normals");
+  ASSERT_EQ(N.rows(), 10);
+  double worst = 0;
+  for (int k = 0; k < 10; ++k) worst = std::max(worst, (N.row(k).transpose() - rounded(tilted(k)).normalized()).norm());
+  std::printf("directors from vn: largest difference %.3g\n", worst);
+  EXPECT_LT(worst, 1e-15);
+
+  // No normal indices on the faces: the quad normals (0, 0, 1), vn unused.
+  SurfaceStageOptions o2 = o;
+  o2.scene = plate_with_normals("vn_unused", tilted, 0);
+  o2.out = out_path("vn_unused");
+  ASSERT_EQ(run_surface_stage(o2).status, SurfaceStageStatus::kCompleted);
+  const Eigen::MatrixXd N2 =
+      common::H5File(o2.out, common::H5File::Mode::kRead).read_matrix("/surfaces/vn_unused/normals");
+  EXPECT_EQ((N2.rowwise() - Eigen::RowVector3d(0, 0, 1)).norm(), 0.0);
+
+  // Refused: normals on some faces only; a normal on the wrong side.
+  for (const auto& [name, normal, faces, expect] :
+       std::vector<std::tuple<std::string, std::function<Eigen::Vector3d(int)>, int, std::string>>{
+           {"vn_partial", tilted, 2, "2 of 4 faces give vertex normals"},
+           {"vn_flipped", [](int) { return Eigen::Vector3d(0, 0, -1); }, 4, "points away from the side"}}) {
+    SurfaceStageOptions ob = o;
+    ob.scene = plate_with_normals(name, normal, faces);
+    ob.out = out_path(name);
+    try {
+      run_surface_stage(ob);
+      ADD_FAILURE() << name << " accepted";
+    } catch (const common::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace
