@@ -76,11 +76,15 @@ NodeSetDefinition parse_node_set(const std::string& text) {
       if (x < 0 || x != std::floor(x)) throw std::invalid_argument("'" + text + "': node index '" + w[k] + "'");
       s.nodes.push_back(static_cast<int>(x));
     }
+  } else if (w[0] == "group") {
+    if (w.size() != 2) throw std::invalid_argument("'" + text + "': expected 'group G' (an OBJ 'g' name)");
+    s.kind = NodeSetDefinition::Kind::kGroup;
+    s.group = w[1];
   } else if (w[0] == "all") {
     if (w.size() != 1) throw std::invalid_argument("'" + text + "': nothing may follow 'all'");
     s.kind = NodeSetDefinition::Kind::kAll;
   } else {
-    throw std::invalid_argument("'" + text + "': unknown set kind '" + w[0] + "' (box, plane, nodes, all)");
+    throw std::invalid_argument("'" + text + "': unknown set kind '" + w[0] + "' (box, plane, nodes, all, group)");
   }
   return s;
 }
@@ -137,7 +141,7 @@ LoadDefinition parse_load(const std::string& text) {
   return l;
 }
 
-std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh& m) {
+std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh& m, const FaceGroups& groups) {
   std::vector<int> out;
   const int n = m.num_nodes();
   switch (s.kind) {
@@ -155,6 +159,20 @@ std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh
       const Eigen::Vector3d nrm(s.numbers[0], s.numbers[1], s.numbers[2]);
       for (int i = 0; i < n; ++i)
         if (std::abs(m.V.row(i).dot(nrm) - s.numbers[3]) <= s.numbers[4]) out.push_back(i);
+      break;
+    }
+    case NodeSetDefinition::Kind::kGroup: {
+      const auto it = groups.find(s.group);
+      if (it == groups.end()) {
+        std::string have;
+        for (const auto& [name, quads] : groups) have += (have.empty() ? "" : ", ") + name;
+        throw std::invalid_argument("node set '" + s.name + "': the mesh has no face group '" + s.group +
+                                    "' (groups: " + (have.empty() ? "none" : have) + ")");
+      }
+      for (int q : it->second)
+        for (int a = 0; a < 4; ++a) out.push_back(m.Q(q, a));
+      std::sort(out.begin(), out.end());
+      out.erase(std::unique(out.begin(), out.end()), out.end());
       break;
     }
     case NodeSetDefinition::Kind::kNodes:

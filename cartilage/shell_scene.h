@@ -8,6 +8,7 @@
 //                "NAME: plane NX NY NZ D [TOL]"              (|n.x - D| <= TOL, n normalised; D, TOL mm; TOL 1e-3)
 //                "NAME: nodes I J K ..."                       (0-based node indices, as in the output)
 //                "NAME: all"
+//                "NAME: group G"                               (nodes of the faces after an OBJ 'g' line naming G)
 //   constraints: "SET: C C ... [= V V ...]" with C in ux uy uz dx dy dz (u = ux uy uz, d = dx dy dz, all = both):
 //                the masked coordinates of the set's nodes (positions and
 //                director components, global frame) are prescribed at their
@@ -25,6 +26,7 @@
 // integral of zeta over the thickness is zero).
 #include <Eigen/Core>
 #include <array>
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -35,10 +37,14 @@ namespace arthrosim::cartilage {
 
 struct NodeSetDefinition {
   std::string name;
-  enum class Kind { kBox, kPlane, kNodes, kAll } kind = Kind::kAll;
+  enum class Kind { kBox, kPlane, kNodes, kAll, kGroup } kind = Kind::kAll;
   std::vector<double> numbers;  ///< box: 6 (SI); plane: unit normal (3), offset D and tolerance [m]
   std::vector<int> nodes;       ///< kNodes
+  std::string group;            ///< kGroup
 };
+
+/// Face groups of a mesh file (OBJ 'g' lines): group name -> quad indices.
+using FaceGroups = std::map<std::string, std::vector<int>>;
 
 struct ConstraintDefinition {
   std::string set;
@@ -58,9 +64,10 @@ NodeSetDefinition parse_node_set(const std::string& text);
 ConstraintDefinition parse_constraint(const std::string& text);
 LoadDefinition parse_load(const std::string& text);
 
-/// The nodes of `mesh` in the set (sorted, unique); an index out of range
-/// throws std::invalid_argument.
-std::vector<int> select_nodes(const NodeSetDefinition& set, const common::QuadMesh& mesh);
+/// The nodes of `mesh` in the set (sorted, unique); an index out of range or
+/// an unknown group throws std::invalid_argument.
+std::vector<int> select_nodes(const NodeSetDefinition& set, const common::QuadMesh& mesh,
+                              const FaceGroups& groups = {});
 
 /// Consistent nodal forces of a fixed-direction force per unit area f [Pa]
 /// on the quads whose four nodes are all in `nodes` (sorted): node a gets

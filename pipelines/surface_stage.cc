@@ -56,15 +56,18 @@ cartilage::SurfaceInput read_prepared_surface(const common::PreparedModelReader&
 /// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); 'vn'
 /// vertex normals referenced by the faces (i/j/k, i//k) become the nodes'
 /// directors when every face gives them (`normals`, unit rows; left empty
-/// when no face does); comments, vt/vp/g/o/s/usemtl/mtllib/l lines are
+/// when no face does); 'g' lines name the groups of the faces after them
+/// (into `groups` when given); comments, vt/vp/o/s/usemtl/mtllib/l lines are
 /// skipped. Anything else, a face that is not a quad, normals on some faces
 /// only, two different normals of one vertex or a normal on the side opposite
 /// to the faces' orientation is an InputError with file:line.
-common::QuadMesh read_quad_obj(const std::string& path, common::Points3* normals) {
+common::QuadMesh read_quad_obj(const std::string& path, common::Points3* normals,
+                               cartilage::FaceGroups* groups = nullptr) {
   std::ifstream in(path);
   if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
   std::vector<Eigen::Vector3d> V, VN;
   std::vector<Eigen::Vector4i> Q;
+  std::vector<std::string> current_groups;  // names on the last 'g' line
   std::vector<int> node_normal;  // per vertex: index into VN, -1 none
   std::vector<int> normal_line;  // per vertex: line that gave it
   int faces_with_normals = 0;
@@ -149,8 +152,14 @@ common::QuadMesh read_quad_obj(const std::string& path, common::Points3* normals
           }
         }
       }
+      if (groups)
+        for (const std::string& g : current_groups) (*groups)[g].push_back(static_cast<int>(Q.size()));
       Q.emplace_back(idx[0], idx[1], idx[2], idx[3]);
-    } else if (kw == "vt" || kw == "vp" || kw == "g" || kw == "o" || kw == "s" || kw == "usemtl" ||
+    } else if (kw == "g") {
+      current_groups.clear();
+      std::string g;
+      while (ls >> g) current_groups.push_back(g);
+    } else if (kw == "vt" || kw == "vp" || kw == "o" || kw == "s" || kw == "usemtl" ||
                kw == "mtllib" || kw == "l") {
       continue;
     } else {
@@ -393,7 +402,8 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
   v.text_list("node_sets", node_sets, "",
               "named node sets of `mesh`, each 'NAME: box XMIN YMIN ZMIN XMAX YMAX ZMAX' (mm), 'NAME: plane NX NY NZ D "
               "[TOL]' (nodes with |n.x - D| <= TOL, n normalised, D and TOL in mm, TOL 0.001 by default), 'NAME: nodes "
-              "I J ...' (0-based indices) or 'NAME: all'");
+              "I J ...' (0-based indices), 'NAME: all' or 'NAME: group G' (the nodes of the faces after an OBJ 'g' line "
+              "naming G)");
   v.text_list("constraints", constraints, "",
               "constraints on node sets, each 'SET: C C ... [= V V ...]' with C one of ux uy uz dx dy dz (global "
               "position and director components; u = ux uy uz, d = dx dy dz, all = both): the components are held at "
@@ -725,7 +735,8 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
     common::Points3 given_normals;
-    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file, &given_normals);
+    cartilage::FaceGroups groups;  // OBJ 'g' groups (node sets "NAME: group G")
+    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file, &given_normals, &groups);
     r.input.name = opt.mesh.stem().string();
     r.input.mesh.name = r.input.name;
     // Directors: the OBJ's vertex normals when given, else area-weighted quad normals.
@@ -748,7 +759,7 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     std::map<std::string, std::vector<int>> sets;
     for (const cartilage::NodeSetDefinition& d : c.node_sets) {
       try {
-        sets[d.name] = cartilage::select_nodes(d, r.input.mesh);
+        sets[d.name] = cartilage::select_nodes(d, r.input.mesh, groups);
       } catch (const std::invalid_argument& e) {
         throw common::InputError(file, c.line, "scenario '" + c.name + "': " + e.what());
       }

@@ -1159,5 +1159,44 @@ TEST(SurfaceStageGeneric, ScordelisLoRoofMatchesTheReference) {
     EXPECT_LT(std::abs(series[i].second - series[3].second), std::abs(series[i - 1].second - series[3].second) + 1e-12);
 }
 
+// OBJ `g` groups as node sets: a traction on the faces of group `tip` (the
+// last quad of the strip) equals the same traction on a box holding exactly
+// that quad's nodes, bit for bit; an unknown group names the groups there are.
+TEST(SurfaceStageGeneric, ObjGroupsAreNodeSets) {
+  {
+    std::ofstream f(work_dir() + "/grouped_strip.obj");
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i <= 16; ++i) f << "v " << i * 6.25 << " " << j * 10 << " 0\n";
+    for (int i = 0; i < 16; ++i) {
+      if (i == 0) f << "g root\n";
+      if (i == 1) f << "g body\n";
+      if (i == 15) f << "g tip loaded\n";
+      f << "f " << i + 1 << " " << i + 2 << " " << 17 + i + 2 << " " << 17 + i + 1 << "\n";
+    }
+  }
+  auto scene = [](const std::string& name, const std::string& tip_set) {
+    return write_scene(name, "surface:\n  scenarios:\n    c:\n      mesh: grouped_strip.obj\n      poisson_ratio: 0\n"
+                             "      end_time_s: 1\n      steady_state: true\n"
+                             "      node_sets: [\"root: plane 1 0 0 0\", \"tip: " +
+                                 tip_set +
+                                 "\"]\n      constraints: [\"root: all\"]\n      loads: [\"tip: traction 0 0 1e-6\"]\n"
+                                 "      effects: [fixed_nodes, point_loads]\n");
+  };
+  const SurfaceStageOptions og = stage_options(scene("grouped", "group loaded"), "c", "grouped.h5");
+  run_surface_stage(og);
+  const SurfaceStageOptions ob = stage_options(scene("grouped_box", "box 93.749 -1 -1 100.001 11 1"), "c", "grouped_box.h5");
+  run_surface_stage(ob);
+  const double wg = cantilever_tip(og.out, "grouped_strip"), wb = cantilever_tip(ob.out, "grouped_strip");
+  EXPECT_GT(wg, 0.0);
+  EXPECT_EQ(wg, wb);
+  try {
+    run_surface_stage(stage_options(scene("grouped_bad", "group nowhere"), "c", "grouped_bad.h5"));
+    FAIL() << "unknown group accepted";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no face group 'nowhere' (groups: body, loaded, root, tip)"), std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace arthrosim::pipelines
