@@ -15,6 +15,9 @@ PACKAGES=(
   # The post report drawn in a real browser (tests/pipelines/report_html_test.cc,
   # docs/post.md "Report"): headless Chromium renders it and checks every figure.
   chromium
+  # Cohort studies (docs/cohorts.md): `arthrosim cohort` runs workflow/Snakefile
+  # with Debian's Snakemake (7.21: local runs, --slurm, profiles).
+  snakemake
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -6,11 +6,16 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <iterator>
 #include <thread>
+
+#include <unistd.h>
 
 #include "common/effects.h"
 #include "common/error.h"
@@ -18,6 +23,7 @@
 #include "common/scene_edit.h"
 #include "common/version.h"
 #include "pipelines/apps/import_osim_command.h"
+#include "pipelines/cohort.h"
 #include "pipelines/apps/name_value.h"
 #include "pipelines/runner.h"
 #include "pipelines/stages.h"
@@ -52,6 +58,8 @@ Sample runs (from the repository root, after scripts/build.sh):
       --set surface.scenarios.gait.end_time_s=0.63
       the scene with one option changed (dotted keys as in `arthrosim study`;
       the changed scene is written to OUT/scene_set.yaml and run from there)
+  build/bin/arthrosim cohort data/cohorts/tiny.yaml --out out/cohort_tiny --cores 2
+      a cohort (subjects x a settings grid) run by Snakemake (docs/cohorts.md)
   build/bin/arthrosim schema
       every scene key with its type, unit, default and range, and every effect
   build/bin/arthrosim import-osim data/models/lenhart2015/source/lenhart2015.osim \
@@ -112,6 +120,34 @@ Sample runs (from the repository root, after scripts/build.sh):
 Exit status: 0 every setting ran; 1 bad input (nothing runs) or a setting
 failed (the outputs are still written and name it).)";
 
+constexpr const char* kCohortDescription = R"(arthrosim cohort: many subjects x a grid of settings, run by Snakemake.
+
+Reads COHORT (YAML: subjects with model, trial, scene and overrides; a
+settings grid of dotted scene keys -> lists of values; docs/cohorts.md),
+writes one scene per subject x setting into OUT/scenes/, plans each through
+the stage table and writes the jobs to OUT/plan.json, then runs Snakemake
+(Debian's `snakemake`) with workflow/Snakefile in OUT: every stage run is a
+job whose outputs are OUT/runs/<subject>/<setting>/..., so a second call
+runs only what is missing or changed (inputs newer than outputs, other
+options, another stage program). Last job: the cohort report
+OUT/report/cohort.csv and OUT/report/report.html.
+
+Local by default (--cores N); --slurm submits every job to Slurm with the
+profile workflow/profiles/slurm (or --profile DIR for your own). Arguments
+after `--` go to snakemake unchanged (e.g. -- --summary, -- --forcerun comak).
+
+Sample runs (from the repository root, after scripts/build.sh):
+  build/bin/arthrosim cohort data/cohorts/tiny.yaml --out out/cohort_tiny --cores 2
+      2 subjects x 2 settings on the bundled knee, short windows (about a minute)
+  build/bin/arthrosim cohort data/cohorts/tiny.yaml --out out/cohort_tiny --dry-run
+      what would run, and why (snakemake -n)
+  build/bin/arthrosim cohort data/cohorts/tiny.yaml --out out/cohort_tiny --plan-only
+      write the scenes and plan.json, print the snakemake command, run nothing
+  build/bin/arthrosim cohort data/cohorts/tiny.yaml --out /shared/cohort_tiny --slurm
+      every stage run as a Slurm job (from a login node of the cluster)
+
+Exit status: snakemake's (0: every job done); 1 bad cohort file (nothing runs).)";
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -165,12 +201,116 @@ int main(int argc, char** argv) {
       ->allow_extra_args(false);
   accuracy->add_flag("--force", study_options.force, "rerun every stage of every setting");
 
+  CLI::App* cohort = app.add_subcommand("cohort", kCohortDescription);
+  std::string cohort_file, cohort_out, cohort_profile, snakemake_program = "snakemake", workflow_dir;
+  int cohort_cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  bool cohort_dry_run = false, cohort_slurm = false, cohort_plan_only = false;
+  cohort->add_option("COHORT", cohort_file, "cohort file (YAML)")->required()->check(CLI::ExistingFile);
+  cohort->add_option("--out", cohort_out, "output folder (created when missing)")->required();
+  cohort->add_option("--cores", cohort_cores, "cores Snakemake may use on this machine (snakemake -c)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  cohort->add_flag("--dry-run", cohort_dry_run, "show what would run (snakemake -n); run nothing");
+  cohort->add_flag("--plan-only", cohort_plan_only, "write the scenes and plan.json, print the snakemake command");
+  cohort->add_flag("--slurm", cohort_slurm, "run every job on Slurm (profile workflow/profiles/slurm)");
+  cohort->add_option("--profile", cohort_profile, "a Snakemake profile folder (cluster settings)");
+  cohort->add_option("--snakemake", snakemake_program, "the snakemake program")->capture_default_str();
+  cohort->add_option("--workflow", workflow_dir,
+                     "folder of the Snakefile (default: $ARTHROSIM_WORKFLOW_DIR, else workflow/ of the repository "
+                     "holding this program)");
+  std::vector<std::string> snakemake_args;
+  cohort->add_option("SNAKEMAKE_ARGS", snakemake_args, "after `--`: arguments passed to snakemake unchanged");
+
+  CLI::App* cohort_report = app.add_subcommand(
+      "cohort-report", "the cohort report from OUT/plan.json and the runs' output files (the workflow's last job)");
+  std::string report_plan, report_out;
+  cohort_report->add_option("PLAN", report_plan, "OUT/plan.json written by `arthrosim cohort`")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cohort_report->add_option("--out", report_out, "report folder (cohort.csv, report.html)")->required();
+
+  CLI::App* check_effects = app.add_subcommand(
+      "cohort-check-effects", "the runner's effect-ledger check of one stage output (run by workflow/Snakefile)");
+  std::string effects_file;
+  std::vector<std::string> effects_requested;
+  check_effects->add_option("FILE", effects_file, "a stage's HDF5 output")->required()->check(CLI::ExistingFile);
+  check_effects->add_option("--effects", effects_requested, "the effects the scene asks for")->delimiter(',');
+
   pl::ImportOsimCommand import_osim;
   pl::add_import_osim_command(app, import_osim);
 
   CLI11_PARSE(app, argc, argv);
 
   if (import_osim.app->parsed()) return pl::run_import_osim_command(import_osim);
+  if (check_effects->parsed()) {
+    std::string built;
+    const std::string problem = pl::cohort::check_effects(effects_file, effects_requested, built);
+    std::cout << effects_file << ": effects built: " << (built.empty() ? "none" : built) << "\n";
+    if (problem.empty()) return 0;
+    std::cerr << "arthrosim cohort-check-effects: " << effects_file << ": error: " << problem << "\n";
+    return 1;
+  }
+  if (cohort_report->parsed()) {
+    try {
+      const int rows = pl::cohort::write_cohort_report(report_plan, report_out);
+      std::cout << "cohort-report: " << rows << " runs; wrote " << (fs::path(report_out) / "cohort.csv").string()
+                << ", " << (fs::path(report_out) / "report.html").string() << "\n";
+      return 0;
+    } catch (const cm::InputError& e) {
+      std::cerr << "arthrosim cohort-report: " << e.what() << "\n";
+      return 1;
+    }
+  }
+  if (cohort->parsed()) {
+    std::vector<std::string> command;
+    try {
+      const fs::path stage_dir = pl::default_stage_dir();
+      const pl::cohort::Cohort c = pl::cohort::load_cohort(cohort_file);
+      const fs::path out = fs::absolute(cohort_out).lexically_normal();
+      fs::path workflow = workflow_dir;
+      if (workflow.empty() && std::getenv("ARTHROSIM_WORKFLOW_DIR")) workflow = std::getenv("ARTHROSIM_WORKFLOW_DIR");
+      if (workflow.empty()) workflow = cm::repository_of(stage_dir) / "workflow";
+      workflow = fs::absolute(workflow).lexically_normal();
+      if (!fs::is_regular_file(workflow / "Snakefile"))
+        throw cm::InputError((workflow / "Snakefile").string(), 0,
+                             "expected the workflow's Snakefile (give its folder with --workflow), found none");
+      const pl::cohort::Plan plan = pl::cohort::plan_cohort(c, out, stage_dir);
+      const fs::path plan_file = out / "plan.json";
+      pl::cohort::write_if_changed(plan_file, pl::cohort::plan_json(c, plan, stage_dir));
+      std::cout << "arthrosim cohort: " << c.subjects.size() << " subject(s) x " << plan.settings.size()
+                << " setting(s): " << plan.jobs.size() << " stage runs planned in " << plan_file.string() << "\n";
+      command = {snakemake_program, "--snakefile", (workflow / "Snakefile").string(), "--configfile",
+                 (workflow / "config.yaml").string(), "--directory", out.string(), "--rerun-incomplete"};
+      if (cohort_slurm && cohort_profile.empty()) cohort_profile = (workflow / "profiles" / "slurm").string();
+      if (!cohort_profile.empty()) {
+        command.insert(command.end(), {"--profile", fs::absolute(cohort_profile).lexically_normal().string()});
+        if (cohort->count("--cores") > 0) command.insert(command.end(), {"--cores", std::to_string(cohort_cores)});
+      } else {
+        command.insert(command.end(), {"--cores", std::to_string(cohort_cores)});
+      }
+      if (cohort_dry_run) command.push_back("--dry-run");
+      for (const std::string& extra : snakemake_args) command.push_back(extra);
+      // Last: --config takes every following word up to the next option.
+      command.insert(command.end(), {"--config", "plan=" + plan_file.string()});
+    } catch (const cm::InputError& e) {
+      std::cerr << "arthrosim cohort: " << e.what() << "\n";
+      return 1;
+    } catch (const fs::filesystem_error& e) {
+      std::cerr << "arthrosim cohort: error: " << e.what() << "\n";
+      return 1;
+    }
+    std::string shown;
+    for (const std::string& w : command) shown += (shown.empty() ? "" : " ") + w;
+    std::cout << "arthrosim cohort: " << (cohort_plan_only ? "to run it: " : "$ ") << shown << std::endl;
+    if (cohort_plan_only) return 0;
+    std::vector<char*> argv_exec;
+    for (std::string& w : command) argv_exec.push_back(w.data());
+    argv_exec.push_back(nullptr);
+    execvp(argv_exec[0], argv_exec.data());
+    std::cerr << "arthrosim cohort: error: cannot run " << snakemake_program << " (" << std::strerror(errno)
+              << "): install it (scripts/install-deps.sh installs Debian's snakemake) or name it with --snakemake\n";
+    return 1;
+  }
   if (accuracy->parsed()) {
     try {
       study_options.scene_file = study_scene;
