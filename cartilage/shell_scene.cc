@@ -134,10 +134,12 @@ LoadDefinition parse_load(const std::string& text) {
   else if (w[0] == "force_per_node") l.kind = LoadDefinition::Kind::kForcePerNode;
   else if (w[0] == "traction") l.kind = LoadDefinition::Kind::kTraction;
   else if (w[0] == "gravity") l.kind = LoadDefinition::Kind::kGravity;
+  else if (w[0] == "body_force") l.kind = LoadDefinition::Kind::kBodyForce;
   else
-    throw std::invalid_argument("'" + text + "': unknown load '" + w[0] + "' (force, force_per_node, traction, gravity)");
+    throw std::invalid_argument("'" + text + "': unknown load '" + w[0] + "' (force, force_per_node, traction, gravity, body_force)");
   l.vector = vector_of(w, 1, text);
-  if (l.kind == LoadDefinition::Kind::kTraction) l.vector *= 1e6;  // MPa -> Pa
+  if (l.kind == LoadDefinition::Kind::kTraction) l.vector *= 1e6;    // MPa -> Pa
+  if (l.kind == LoadDefinition::Kind::kBodyForce) l.vector *= 1e9;   // N/mm^3 -> N/m^3
   return l;
 }
 

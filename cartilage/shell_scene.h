@@ -19,6 +19,7 @@
 //                "SET: traction TX TY TZ"         fixed-direction force per unit reference area [MPa]
 //                                                 on the quads whose four nodes are in SET
 //                "SET: gravity GX GY GZ"          body force rho g per unit volume [m/s^2], same quads
+//                "SET: body_force FX FY FZ"       body force per unit volume [N/mm^3], same quads
 //
 // Distributed loads are lumped consistently: node a of a quad gets
 // f integral(N_a dA) over the bilinear reference mid-surface (2 x 2 Gauss),
@@ -55,8 +56,8 @@ struct ConstraintDefinition {
 
 struct LoadDefinition {
   std::string set;
-  enum class Kind { kForce, kForcePerNode, kTraction, kGravity } kind = Kind::kForce;
-  Eigen::Vector3d vector = Eigen::Vector3d::Zero();  ///< SI: N, N, Pa, m/s^2
+  enum class Kind { kForce, kForcePerNode, kTraction, kGravity, kBodyForce } kind = Kind::kForce;
+  Eigen::Vector3d vector = Eigen::Vector3d::Zero();  ///< SI: N, N, Pa, m/s^2, N/m^3
 };
 
 /// Parsers of one item; std::invalid_argument with what is wrong otherwise.

@@ -414,7 +414,8 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
               "loads on node sets (effect point_loads, ramped like point_load_n), each 'SET: force FX FY FZ' (total "
               "[N], equal shares), 'SET: force_per_node FX FY FZ' [N], 'SET: traction TX TY TZ' (fixed direction, "
               "MPa, on the quads with all four nodes in SET, consistent nodal forces) or 'SET: gravity GX GY GZ' "
-              "(m/s^2: body force density_kg_per_m3 x g per unit volume on those quads)");
+              "(m/s^2: body force density_kg_per_m3 x g per unit volume on those quads) or 'SET: body_force FX FY FZ' "
+              "(N/mm^3, per unit volume, on those quads)");
   v.effect_list("effects", effects, "surface", "surface effects to simulate in this scenario").required();
 }
 
@@ -777,9 +778,10 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
         for (int n : nodes) g.set_loads_N.emplace_back(n, share * d.vector);
         continue;
       }
-      const Eigen::Vector3d per_area = d.kind == K::kTraction
-                                           ? d.vector
-                                           : Eigen::Vector3d(par.material.density_kg_m3 * par.shell_thickness_m * d.vector);
+      const Eigen::Vector3d per_area =
+          d.kind == K::kTraction     ? d.vector
+          : d.kind == K::kBodyForce ? Eigen::Vector3d(par.shell_thickness_m * d.vector)
+                                    : Eigen::Vector3d(par.material.density_kg_m3 * par.shell_thickness_m * d.vector);
       f = cartilage::consistent_area_loads(r.input.mesh, nodes, per_area);
       if (f.isZero(0.0))
         throw common::InputError(file, c.line,
