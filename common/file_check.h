@@ -1,6 +1,6 @@
 #pragma once
 // What a stage checks of a file another stage wrote before it uses it
-// (docs/testing.md, "Inputs from other stages"):
+// (docs/testing.md, "Crash safety"):
 // 1. the kind and version: a file of another kind, or of a format version
 //    this build does not read, is an InputError naming the file, what it
 //    holds and what was expected;

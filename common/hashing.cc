@@ -143,19 +143,36 @@ std::string sha256_file(const std::filesystem::path& file) {
   return h.hex_digest();
 }
 
-std::string sha256_path(const std::filesystem::path& path) {
+std::string sha256_path(const std::filesystem::path& path, const HashLimits& limits) {
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path.string(), 0, "no such file or directory");
   if (!fs::is_directory(path, ec)) return sha256_file(path);
   std::vector<std::string> relative;
-  for (auto it = fs::recursive_directory_iterator(path); it != fs::recursive_directory_iterator();
-       ++it) {
+  std::uintmax_t bytes = 0;
+  const auto size = [](std::uintmax_t n) {
+    return n >= (std::uintmax_t(1) << 20) ? std::to_string(n >> 20) + " MiB" : std::to_string(n) + " bytes";
+  };
+  const auto too_large = [&](const std::string& what) {
+    return InputError(path.string(), 0,
+                      "refusing to hash this folder as a stage input: " + what +
+                          " (limit " + std::to_string(limits.max_files) + " files, " + size(limits.max_bytes) + "); is it the right folder? Point the scene at the folder holding only the "
+                          "model or trial files");
+  };
+  for (auto it = fs::recursive_directory_iterator(path, fs::directory_options::skip_permission_denied);
+       it != fs::recursive_directory_iterator(); ++it) {
     if (it->path().filename().string().rfind('.', 0) == 0) {
-      if (it->is_directory()) it.disable_recursion_pending();
+      if (it->is_directory(ec)) it.disable_recursion_pending();
       continue;
     }
-    if (it->is_regular_file()) relative.push_back(fs::relative(it->path(), path).generic_string());
+    if (!it->is_regular_file(ec)) continue;
+    relative.push_back(fs::relative(it->path(), path).generic_string());
+    bytes += it->file_size(ec);
+    if (relative.size() > limits.max_files)
+      throw too_large("it holds more than " + std::to_string(limits.max_files) + " files");
+    if (bytes > limits.max_bytes)
+      throw too_large("its files hold more than " + size(limits.max_bytes) + " (" +
+                      std::to_string(relative.size()) + " files read so far)");
   }
   std::sort(relative.begin(), relative.end());
   Sha256 h;

@@ -50,6 +50,21 @@ std::string sha256_file(const std::filesystem::path& file);
 /// removing a file changes the result as much as editing one does. Hidden
 /// entries (names starting with '.') are skipped. Throws InputError when the
 /// path does not exist.
-std::string sha256_path(const std::filesystem::path& path);
+///
+/// Bounded: a directory holding more than `limits.max_files` files or more
+/// than `limits.max_bytes` bytes in them is refused (InputError naming the
+/// folder, what it holds so far and the limit) before any byte is hashed, and
+/// the walk stops at the first file past a limit, so `model: /usr` fails in
+/// well under a second instead of hashing gigabytes. A cheaper stamp (sizes
+/// and modification times) is deliberately not used beyond the limit: it
+/// misses edits that keep the size and time (copies with -p, checkouts,
+/// restored backups), which is the stale reuse the stamp exists to prevent;
+/// a folder that large is almost always the wrong folder (the bundled model
+/// and trial folders hold < 50 files and < 10 MB).
+struct HashLimits {
+  std::size_t max_files = 10000;
+  std::uintmax_t max_bytes = std::uintmax_t(2) << 30;  // 2 GiB
+};
+std::string sha256_path(const std::filesystem::path& path, const HashLimits& limits = {});
 
 }  // namespace arthrosim::common

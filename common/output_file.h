@@ -1,5 +1,5 @@
 #pragma once
-// Safe output files of the stage programs (docs/testing.md, "Outputs").
+// Safe output files of the stage programs (docs/testing.md, "Crash safety").
 //
 // 1. An output never overwrites an input: refuse_output_over_inputs() compares
 //    the output path with every input the program was given (same file after

@@ -13,6 +13,7 @@
 #include "biphasic/output_file.h"
 #include "common/effects.h"
 #include "common/error.h"
+#include "common/file_check.h"
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/metadata.h"
@@ -76,6 +77,7 @@ struct KinematicsInput {
 KinematicsInput read_kinematics(const std::string& path, const std::set<std::string>& bones,
                                 const std::set<std::string>& compartments, double end_time_s) {
   const common::H5File f(path, common::H5File::Mode::kRead);
+  common::require_file_format(f, path, common::StageFile::kKinematics);  // kind and version (common/file_check.h)
   const Eigen::VectorXd time = f.read_vector("/time");
   const Eigen::Index n = time.size();
   std::map<std::string, common::Tensor3d> poses;
@@ -579,6 +581,7 @@ std::pair<std::string, std::string> write_two_layer_case(const std::string& dir)
   {
     common::H5File f(kinematics, common::H5File::Mode::kTruncate);
     f.set_attribute("/", "format", "arthrosim kinematics file");
+    f.set_attribute("/", "format_version", 1);
     f.set_attribute("/", "world_frame", "femur frame of the canonical case: Y superior");
     const int n = 101;
     Eigen::VectorXd t(n);

@@ -16,6 +16,8 @@
 #include "common/scene.h"
 #include "common/storage.h"
 #include "musculoskeletal/ankle_muscles.h"
+#include "musculoskeletal/external_loads.h"
+#include "musculoskeletal/gait_trial.h"
 #include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
@@ -283,6 +285,22 @@ StageDescriptor comak_stage_descriptor() {
     }
     const fs::path prepared = out / "prepared.h5", kinematics = out / "kinematics.h5";
     if (!in.trial.empty()) s.inputs.emplace_back("trial", in.trial);
+    // The files a trial.yaml names (they may live outside the trial folder),
+    // and the data file its ExternalLoads XML names. A description that
+    // cannot be read adds nothing here: the stage itself then fails naming it.
+    if (!in.trial.empty() && scene.has_block("comak")) {
+      try {
+        const msk::TrialDescription td = msk::read_trial_description(in.trial.string());
+        std::vector<std::pair<std::string, fs::path>> files = {{"trial kinematics", td.kinematics_file},
+                                                               {"trial ground reactions", td.grf_file},
+                                                               {"trial knee loads", td.knee_loads_file},
+                                                               {"trial external loads", td.external_loads_file}};
+        if (!td.external_loads_file.empty())
+          files.emplace_back("trial external loads data", msk::read_external_loads(td.external_loads_file).datafile);
+        add_referenced_inputs(s, files);
+      } catch (const common::InputError&) {
+      }
+    }
     s.inputs.emplace_back("prepared.h5", prepared);
     const common::OptionBlock& block = scene.block("comak");
     s.options = block.canonical();

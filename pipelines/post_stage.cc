@@ -100,6 +100,7 @@ std::vector<PostScenarioSummary> read_post_summary(const std::filesystem::path& 
 StageDescriptor post_stage_descriptor() {
   StageDescriptor d;
   d.name = "post";
+  d.takes_allow_partial = true;
   d.executable = "arthrosim-post";
   d.summary = "averaged principal strain directions against split-line maps (CPD); report.html, summary.json";
   d.block = block_schema<PostOptions>("post", "options of the post stage");

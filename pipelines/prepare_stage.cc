@@ -1,5 +1,6 @@
 // The prepare stage's scene block and descriptor (the stage's algorithms are
 // in prepare.cc).
+#include "common/error.h"
 #include "common/mesh_io.h"
 #include "pipelines/prepare.h"
 #include "pipelines/stages.h"
@@ -46,6 +47,16 @@ StageDescriptor prepare_stage_descriptor() {
     s.origin = "the prepare stage";
     const SceneInputs in = scene_inputs(scene);
     s.inputs.emplace_back("model", in.model);
+    // A manifest's meshes may live outside the model folder (or the model is
+    // the manifest file itself). Unreadable: the stage fails naming why.
+    try {
+      const ModelFiles files = find_model_files(in.model.string());
+      std::vector<std::pair<std::string, std::filesystem::path>> refs;
+      for (const auto& [name, file] : files.bones) refs.emplace_back("model mesh " + name + "_bone", file);
+      for (const auto& [name, file] : files.cartilage) refs.emplace_back("model mesh " + name + "_cartilage", file);
+      add_referenced_inputs(s, refs);
+    } catch (const common::InputError&) {
+    }
     const common::OptionBlock& block = scene.block("prepare");
     s.options = block.canonical();
     add_path_inputs(block, s);

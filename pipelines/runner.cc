@@ -295,10 +295,18 @@ fs::path default_stage_dir() {
   return ec ? fs::path() : self.parent_path();
 }
 
+std::vector<StageStep> runner_plan(const Scene& scene, const RunnerOptions& options) {
+  std::vector<StageStep> plan = plan_stages(scene, fs::absolute(options.out_dir).lexically_normal());
+  for (StageStep& s : plan)
+    if (const StageDescriptor* d = stage_of_run(s.name); options.allow_partial && d && d->takes_allow_partial)
+      s.arguments.push_back("--allow-partial");
+  return plan;
+}
+
 RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostream& log) {
   RunReport report;
   const fs::path out_dir = fs::absolute(options.out_dir).lexically_normal();
-  const std::vector<StageStep> plan = plan_stages(scene, out_dir);
+  const std::vector<StageStep> plan = runner_plan(scene, options);
 
   log << "arthrosim: scene " << scene.file.string() << "\n";
   if (const std::string description = scene_inputs(scene).description; !description.empty())

@@ -52,6 +52,11 @@ struct RunnerOptions {
   /// and share the cores through OMP_NUM_THREADS (unless the caller set it).
   /// Results are bit-identical for any value. 1: one stage after the other.
   int jobs = 1;
+  /// Pass --allow-partial to the runs of stages that take it
+  /// (StageDescriptor::takes_allow_partial: surface, post): they go on with an
+  /// incomplete input and say so at the top of their output. The flag is part
+  /// of those runs' command lines, hence of their stage keys.
+  bool allow_partial = false;
 };
 
 enum class StageStatus {
@@ -95,6 +100,10 @@ struct RunReport {
 /// for a failing stage (see RunReport); throws common::InputError for files
 /// that cannot be read or an output folder that cannot be created.
 RunReport run_scene(const common::Scene& scene, const RunnerOptions& options, std::ostream& log);
+
+/// The runs run_scene executes: plan_stages in the absolute output folder,
+/// with the runner's own arguments added (--allow-partial).
+std::vector<StageStep> runner_plan(const common::Scene& scene, const RunnerOptions& options);
 
 /// The stamp of a run in an output folder: DIR/.stamps/<run>.txt (its format
 /// is the runner's own; read it through these functions).

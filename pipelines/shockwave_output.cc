@@ -26,7 +26,7 @@ struct ShockwaveWriter::Impl {
 ShockwaveWriter::ShockwaveWriter(const fs::path& h5_path, const shockwave::Model& m, const std::string& label,
                                  bool frames, bool fluid, const std::string& metadata_options,
                                  const std::vector<std::string>& argv)
-    : impl_(std::make_unique<Impl>(h5_path, m)), path_(h5_path) {
+    : path_(h5_path), atomic_(h5_path), impl_(std::make_unique<Impl>(atomic_.temp(), m)) {
   Impl& d = *impl_;
   d.frames = frames;
   d.fluid = fluid;
@@ -183,7 +183,10 @@ std::vector<double> ShockwaveWriter::finish(const shockwave::Simulation& sim,
   fs::path xdmf = path_;
   xdmf.replace_extension(".xdmf");
   common::write_xdmf(xdmf.string(), d.h5, series);
-  return d.best_at_once;
+  std::vector<double> best = d.best_at_once;
+  impl_.reset();  // closes the appenders, then the file
+  atomic_.commit();
+  return best;
 }
 
 ShockwaveFile read_shockwave_file(const fs::path& p) {

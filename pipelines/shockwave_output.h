@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "common/output_file.h"
 #include "shockwave/criteria.h"
 #include "shockwave/simulation.h"
 
@@ -39,8 +40,10 @@ struct ShockwaveEffect {
 
 class ShockwaveWriter {
  public:
-  /// Creates `h5_path` (replacing it) and writes the model. `metadata_options`
-  /// is the resolved options text; `argv` the command line.
+  /// Writes the model into "<h5_path>.partial" (common/output_file.h); finish()
+  /// renames it over `h5_path`, so an earlier complete file stays until then
+  /// and a killed run leaves only the .partial. `metadata_options` is the
+  /// resolved options text; `argv` the command line.
   ShockwaveWriter(const std::filesystem::path& h5_path, const shockwave::Model& model, const std::string& label,
                   bool frames, bool fluid, const std::string& metadata_options, const std::vector<std::string>& argv);
   ~ShockwaveWriter();
@@ -51,7 +54,8 @@ class ShockwaveWriter {
                     const shockwave::RegenerationCriteria& criteria, double compression_force = 0.0,
                     double compression_displacement = 0.0);
   /// Peaks, peak-based volumes, attributes, the effect ledger; then the XDMF
-  /// sidecar. Returns the largest at-once volume per tissue.
+  /// sidecar; closes the file and renames it to its complete name (the
+  /// writer takes no more frames). Returns the largest at-once volume per tissue.
   std::vector<double> finish(const shockwave::Simulation& sim, const shockwave::RegenerationCriteria& criteria,
                              const std::vector<ShockwaveEffect>& effects,
                              const std::vector<std::pair<std::string, double>>& attributes);
@@ -59,8 +63,9 @@ class ShockwaveWriter {
 
  private:
   struct Impl;
-  std::unique_ptr<Impl> impl_;
   std::filesystem::path path_;
+  common::AtomicOutput atomic_;
+  std::unique_ptr<Impl> impl_;
 };
 
 /// What a consumer (a test, the summary) reads back from a run file.

@@ -9,6 +9,7 @@
 
 #include "common/effects.h"
 #include "common/error.h"
+#include "common/output_file.h"
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/mesh_io.h"
@@ -536,7 +537,8 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
   // Summary: JSON and the volumes-vs-EFD plot.
   result.summary_json = fs::path(o.out.string() + "_summary.json");
   {
-    std::ofstream js(result.summary_json);
+    common::AtomicOutput atomic(result.summary_json);  // <name>.partial, renamed when written
+    std::ofstream js(atomic.temp());
     js << "{\n  \"automata\": " << result.automata << ",\n  \"bonds\": " << result.bonds
        << ",\n  \"diameter_mm\": " << number(m.lattice.diameter * 1e3) << ",\n  \"lattice\": \""
        << shockwave::to_string(m.lattice.kind) << "\",\n  \"time_step_s\": " << number(result.time_step_s)
@@ -562,7 +564,9 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       js << "}}" << (r + 1 < result.runs.size() ? "," : "") << "\n";
     }
     js << "  ]\n}\n";
+    js.close();
     if (!js) throw common::InputError(result.summary_json.string(), 0, "write failed");
+    atomic.commit();
   }
   if (!compression) {
     // Volumes (all three criteria, and each criterion) of cartilage and

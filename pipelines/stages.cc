@@ -93,6 +93,22 @@ void add_path_inputs(const common::OptionBlock& block, StageStep& step) {
   }
 }
 
+void add_referenced_inputs(StageStep& step,
+                           const std::vector<std::pair<std::string, std::filesystem::path>>& files) {
+  namespace fs = std::filesystem;
+  for (const auto& [label, file] : files) {
+    if (file.empty()) continue;
+    const fs::path f = fs::weakly_canonical(file);
+    bool covered = false;
+    for (const auto& [l, p] : step.inputs) {
+      const fs::path c = fs::weakly_canonical(p);
+      const auto [end, rest] = std::mismatch(c.begin(), c.end(), f.begin(), f.end());
+      covered = covered || end == c.end();  // c is f or a folder above it
+    }
+    if (!covered) step.inputs.emplace_back(label, file);
+  }
+}
+
 std::vector<StageStep> plan_stages(const common::Scene& scene, const std::filesystem::path& out_dir) {
   namespace fs = std::filesystem;
   std::vector<StageStep> runs;

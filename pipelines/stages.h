@@ -95,6 +95,10 @@ struct StageDescriptor {
   /// What the scene lacks when runs() gives no run, for messages (e.g. "a
   /// 'surface' block with at least one scenario").
   std::string no_runs;
+  /// Its program takes --allow-partial (goes on with an incomplete input
+  /// from another stage, saying so at the top of its output); `arthrosim run
+  /// --allow-partial` passes the flag to the runs of such stages.
+  bool takes_allow_partial = false;
   /// The key outputs of run `run` (a name from runs()) for accuracy studies:
   /// its outputs in `dir` against the reference run's in `ref_dir`. Empty for
   /// a stage without a key output of its own (prepare: its resolution shows
@@ -121,6 +125,13 @@ std::vector<StageStep> plan_stages(const common::Scene& scene, const std::filesy
 /// Every kPath option of a block is an input of the run that reads it
 /// (label "<block>.<key>").
 void add_path_inputs(const common::OptionBlock& block, StageStep& step);
+
+/// Files a run reads because an input names them (the .mot files of a
+/// trial.yaml, a meshes.yaml manifest's meshes): each (label, file) that no
+/// input of `step` already covers (the same file, or a folder holding it) is
+/// added as an input, so editing it reruns the step. Empty paths are ignored.
+void add_referenced_inputs(StageStep& step,
+                           const std::vector<std::pair<std::string, std::filesystem::path>>& files);
 
 /// The scene's top-level keys.
 struct SceneInputs {

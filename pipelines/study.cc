@@ -12,6 +12,7 @@
 
 #include "biphasic/output_file.h"
 #include "common/error.h"
+#include "common/file_check.h"
 #include "common/hashing.h"
 #include "common/hdf5.h"
 #include "common/scene.h"
@@ -142,6 +143,8 @@ bool has_key_outputs(const std::string& run) {
 std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file) {
   const musculoskeletal::KinematicsFileReader a(file.string());
   const musculoskeletal::KinematicsFileReader b(ref_file.string());
+  common::require_file_format(a.file(), file.string(), common::StageFile::kKinematics);  // common/file_check.h
+  common::require_file_format(b.file(), ref_file.string(), common::StageFile::kKinematics);
   std::vector<Metric> out;
   const std::string force = musculoskeletal::KinematicsFileReader::kTibiofemoralForce;
   const std::string force_description =

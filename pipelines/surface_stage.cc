@@ -422,6 +422,7 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
 StageDescriptor surface_stage_descriptor() {
   StageDescriptor d;
   d.name = "surface";
+  d.takes_allow_partial = true;
   d.executable = "arthrosim-surface";
   d.summary = "ANCF shells on foundations, osmotic pressure, mesh contact, HHT; one run per scenario";
   d.block = block_schema_with_instances<SurfaceScenarioOptions>(

@@ -166,6 +166,9 @@ int main(int argc, char** argv) {
   run->add_option("--out", out_dir, "output folder (created when missing)")->capture_default_str();
   run->add_flag("--force", options.force, "run every planned stage even when up to date");
   run->add_flag("--dry-run", options.dry_run, "print the plan and what would run; run nothing");
+  run->add_flag("--allow-partial", options.allow_partial,
+                "let the surface and post stages go on with an incomplete input (a killed or stopped COMAK or "
+                "surface run); their outputs say so at the top");
   options.jobs = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   run->add_option("--jobs", options.jobs,
                   "how many stages may run at once (stages whose inputs are ready); "

@@ -76,6 +76,8 @@ struct KinematicsSpec {
 std::string write_kinematics(const std::string& file, const KinematicsSpec& k) {
   const std::string path = (scratch() / file).string();
   common::H5File f(path, common::H5File::Mode::kTruncate);
+  f.set_attribute("/", "format", "arthrosim kinematics file");  // what the stage checks (common/file_check.h)
+  f.set_attribute("/", "format_version", 1);
   const int n = static_cast<int>(k.overlap_m.size());
   Eigen::VectorXd t(n);
   std::vector<double> femur, tibia;

@@ -14,16 +14,20 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <thread>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <sstream>
 #include <string>
 
+#include "common/effects.h"
 #include "common/error.h"
+#include "common/hashing.h"
 #include "common/file_check.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
@@ -31,10 +35,12 @@
 #include "common/scene_edit.h"
 #include "musculoskeletal/model.h"
 #include "musculoskeletal/model_io.h"
+#include "pipelines/biphasic_stage.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/prepare.h"
 #include "pipelines/runner.h"
 #include "pipelines/stages.h"
+#include "pipelines/study.h"
 #include "pipelines/surface_stage.h"
 
 namespace arthrosim::pipelines {
@@ -429,6 +435,38 @@ TEST(SafetyAtomic, KilledRerunKeepsTheCompleteSurfaceOutput) {
   EXPECT_EQ(slurp(dir / "surface_moving.xdmf").find(".partial"), std::string::npos);
 }
 
+// Before: a shockwave rerun truncated <stem>_efd<EFD>.h5 at its start, so a
+// kill destroyed the complete result of the earlier run.
+TEST(SafetyAtomic, KilledShockwaveRerunKeepsTheCompleteRunFile) {
+  const fs::path dir = scratch("atomic_shockwave");
+  const std::string shockwave =
+      (kBin / "arthrosim-shockwave").string() + " --quiet --geometry bar --out " + (dir / "sw").string();
+  const auto [status, printed] = run(shockwave + " --end-time-us 5");
+  ASSERT_EQ(status, 0) << printed;
+  const fs::path out = dir / "sw_efd0.33.h5";
+  ASSERT_TRUE(fs::exists(out)) << printed;
+  ASSERT_FALSE(fs::exists(common::partial_name(out)));
+  const std::string complete = slurp(out), summary = slurp(dir / "sw_summary.json");
+
+  const pid_t child = ::fork();
+  if (child == 0) {
+    // 100 ms of simulated time: minutes; killed well before.
+    ::execl("/bin/sh", "sh", "-c", ("exec " + shockwave + " --end-time-us 100000").c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const bool started = wait_until([&] { return fs::exists(common::partial_name(out)); }, 30);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ::kill(child, SIGKILL);
+  int st = 0;
+  ::waitpid(child, &st, 0);
+  ASSERT_TRUE(WIFSIGNALED(st)) << "the rerun finished before it was killed";
+  EXPECT_TRUE(started) << "the rerun wrote no " << common::partial_name(out);
+  EXPECT_TRUE(slurp(out) == complete) << out << " changed";  // untouched (binary: not printed)
+  EXPECT_EQ(slurp(dir / "sw_summary.json"), summary);        // untouched
+  const common::H5File partial(common::partial_name(out).string(), common::H5File::Mode::kRead);
+  EXPECT_FALSE(partial.exists("/effects"));  // the killed run never finished its file
+}
+
 class SafetyRunner : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -512,6 +550,206 @@ TEST_F(SafetyRunner, SigtermIsForwardedToTheStageAndTheLockNamesItsHolder) {
   ASSERT_TRUE(WIFEXITED(status));   // the runner ended on its own, after its stage
   EXPECT_EQ(WEXITSTATUS(status), 3);  // with the stage reported as failed
   if (alive(stage)) ::kill(stage, SIGKILL);
+}
+
+
+// Before: `arthrosim run` had no --allow-partial, so a user could not go on
+// with a killed COMAK run's kinematics through the runner.
+TEST(SafetyPartial, RunPassesAllowPartialToTheStagesThatTakeIt) {
+  const fs::path dir = scratch("allow_partial");
+  const fs::path scene_file = dir / "s.yaml";
+  std::ofstream(scene_file) << "model: " << kCoarse.string() << "\ntrial: " << ARTHROSIM_SOURCE_DIR
+                            << "/data/trials/synthetic_gait\noutputs: [report]\n"
+                               "comak: {effects: [ligaments, muscles]}\nsurface:\n  scenarios:\n"
+                               "    gait: {effects: [foundation_springs, imposed_kinematics, mesh_contact]}\n";
+  const common::Scene scene = load_scene(scene_file);
+  RunnerOptions options;
+  options.out_dir = dir / "out";
+  const auto flagged = [&] {
+    std::vector<std::string> runs;
+    for (const StageStep& s : runner_plan(scene, options))
+      if (std::find(s.arguments.begin(), s.arguments.end(), "--allow-partial") != s.arguments.end())
+        runs.push_back(s.name);
+    return runs;
+  };
+  EXPECT_EQ(flagged(), std::vector<std::string>{});
+  options.allow_partial = true;
+  EXPECT_EQ(flagged(), (std::vector<std::string>{"surface.gait", "post"}));
+  // Every stage that says it takes the flag does (its program's --help).
+  for (const StageDescriptor& d : stages()) {
+    if (!d.takes_allow_partial) continue;
+    const auto [status, help] = run((kBin / d.executable).string() + " --help");
+    EXPECT_EQ(status, 0) << help;
+    EXPECT_NE(help.find("--allow-partial"), std::string::npos) << d.executable;
+  }
+}
+
+// Before: the biphasic stage and the accuracy study read a kinematics file of
+// format_version 99 (or of another kind) as if it were current.
+TEST(SafetyVersions, BiphasicStageAndStudyCheckTheKinematicsVersion) {
+  const fs::path dir = scratch("versions_biphasic");
+  const auto [prepared, kinematics] = write_two_layer_case((dir / "case").string());
+  const fs::path v99 = dir / "kinematics_v99.h5", foreign = dir / "kinematics_foreign.h5";
+  fs::copy_file(kinematics, v99);
+  fs::copy_file(kinematics, foreign);
+  {
+    common::H5File f(v99.string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "format_version", 99);
+  }
+  {
+    common::H5File f(foreign.string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "format", "some other file");
+  }
+  for (const fs::path& k : {v99, foreign}) {
+    SCOPED_TRACE(k.string());
+    const auto [status, printed] = run((kBin / "arthrosim-biphasic").string() + " --quiet --layers femur tibia_medial --prepared " + prepared +
+                                       " --kinematics " + k.string() + " --out " + (dir / "out.h5").string());
+    EXPECT_NE(status, 0) << printed;
+    EXPECT_NE(printed.find(k.string()), std::string::npos) << printed;
+    EXPECT_FALSE(fs::exists(dir / "out.h5"));
+    const std::string study = error_of([&] { study::comak_metrics(k, kinematics); });
+    EXPECT_NE(study.find(k.string()), std::string::npos) << study;
+  }
+  // File, version found, version read.
+  const auto [status, printed] = run((kBin / "arthrosim-biphasic").string() + " --quiet --layers femur tibia_medial --prepared " + prepared +
+                                     " --kinematics " + v99.string() + " --out " + (dir / "out.h5").string());
+  EXPECT_NE(printed.find("format_version 99; this build reads version 1"), std::string::npos) << printed;
+  EXPECT_NE(error_of([&] { study::comak_metrics(kinematics, v99); }).find("format_version 99"), std::string::npos);
+  EXPECT_NE(error_of([&] { study::comak_metrics(foreign, kinematics); }).find("found format 'some other file'"),
+            std::string::npos);
+  // The canonical case itself passes.
+  EXPECT_EQ(error_of([&] { study::comak_metrics(kinematics, kinematics); }), "");
+}
+
+// ---- 1. complete input identity -------------------------------------------
+
+// A fake stage program for the runner: writes its --out file (a fixed text,
+// so an unchanged rerun writes the same bytes); arthrosim-comak's output
+// starts with an HDF5 file holding an empty effect ledger (the runner checks
+// it), arthrosim-prepare also writes prepared.xdmf.
+constexpr const char* kFakeStage = R"SH(#!/bin/sh
+stage="$(basename "$0")"; out=""; prev=""
+for a in "$@"; do case "$prev" in --out) out="$a" ;; esac; prev="$a"; done
+if [ "$stage" = arthrosim-comak ]; then cp "$SAFETY_FAKE_LEDGER" "$out"; echo comak >> "$out";
+else echo "$stage" > "$out"; echo xdmf > "${out%.h5}.xdmf"; fi
+)SH";
+
+// Before: the runner hashed the trial and model paths only, so the .mot and
+// ExternalLoads files a trial.yaml names outside its folder (and the data
+// file the XML names), and a manifest's meshes outside the model folder,
+// could change without rerunning anything. Fake stages: only the runner's
+// plan and stamps are under test, so this takes well under a second.
+TEST(SafetyInputs, EditingEachReferencedFileRerunsItsStep) {
+  const fs::path root = scratch("inputs");
+  const fs::path trial = fs::path(ARTHROSIM_SOURCE_DIR) / "data/trials/lenhart2015_overground17";
+  for (const char* d : {"bin", "scenes", "models/knee", "meshes", "trials/walk", "shared/xml", "shared/grf", "ledger"})
+    fs::create_directories(root / d);
+  for (const char* s : {"arthrosim-prepare", "arthrosim-comak"}) {
+    std::ofstream(root / "bin" / s) << kFakeStage;
+    fs::permissions(root / "bin" / s, fs::perms::owner_all);
+  }
+  {
+    common::H5File f((root / "ledger/comak.h5").string(), common::H5File::Mode::kTruncate);
+    common::write_effect_ledger(f, common::EffectLedger("comak"));
+  }
+  setenv("SAFETY_FAKE_LEDGER", (root / "ledger/comak.h5").c_str(), 1);
+  // The trial: its description in trials/walk, its files elsewhere.
+  std::string yaml = slurp(trial / "trial.yaml");
+  const auto replace = [](std::string& s, const std::string& from, const std::string& to) {
+    const std::size_t at = s.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    s.replace(at, from.size(), to);
+  };
+  replace(yaml, "kinematics_file: overground_17_ik.mot", "kinematics_file: ../../shared/ik.mot");
+  replace(yaml, "external_loads_file: overground_17_ext_loads.xml", "external_loads_file: ../../shared/xml/ext.xml");
+  std::ofstream(root / "trials/walk/trial.yaml") << yaml;
+  std::string xml = slurp(trial / "overground_17_ext_loads.xml");
+  replace(xml, "<datafile>overground_17_grf.mot</datafile>", "<datafile>../grf/grf.mot</datafile>");
+  std::ofstream(root / "shared/xml/ext.xml") << xml;
+  fs::copy_file(trial / "overground_17_ik.mot", root / "shared/ik.mot");
+  fs::copy_file(trial / "overground_17_grf.mot", root / "shared/grf/grf.mot");
+  // The model: a manifest whose cartilage meshes live outside its folder.
+  std::ofstream(root / "models/knee/meshes.yaml")
+      << "unit: mm\nbones:\n  femur: {file: femur_bone.stl}\n  tibia: {file: tibia_bone.stl}\n"
+         "cartilage:\n  femur: {file: ../../meshes/femur_cartilage.stl, bone: femur}\n"
+         "  tibia: {file: ../../meshes/tibia_cartilage.stl, bone: tibia}\n";
+  for (const char* m : {"models/knee/femur_bone.stl", "models/knee/tibia_bone.stl", "meshes/femur_cartilage.stl",
+                        "meshes/tibia_cartilage.stl"})
+    fs::copy_file(kCoarse / (fs::path(m).filename() == "tibia_cartilage.stl" ? fs::path("tibia_medial_cartilage.stl")
+                                                                              : fs::path(m).filename()),
+                  root / m);
+  const fs::path scene_file = root / "scenes/s.yaml";
+  std::ofstream(scene_file) << "model: ../models/knee\ntrial: ../trials/walk\noutputs: [kinematics]\n"
+                               "comak: {effects: [ligaments, muscles]}\n";
+  const common::Scene scene = load_scene(scene_file);
+
+  RunnerOptions options;
+  options.out_dir = root / "out";
+  options.stage_dir = root / "bin";
+  const auto outcome = [&](bool dry) {
+    options.dry_run = dry;
+    std::ostringstream log;
+    const RunReport r = run_scene(scene, options, log);
+    EXPECT_EQ(r.status, RunStatus::kOk) << log.str();
+    std::map<std::string, std::pair<StageStatus, std::string>> m;
+    for (const StageOutcome& o : r.stages) m[o.name] = {o.status, o.reason};
+    return m;
+  };
+  auto first = outcome(false);
+  ASSERT_EQ(first["prepare"].first, StageStatus::kRan);
+  ASSERT_EQ(first["comak"].first, StageStatus::kRan);
+  auto same = outcome(true);
+  EXPECT_EQ(same["prepare"].first, StageStatus::kWouldSkip) << same["prepare"].second;
+  EXPECT_EQ(same["comak"].first, StageStatus::kWouldSkip) << same["comak"].second;
+
+  struct Edit {
+    const char* file;
+    const char* stage;  // the step that must rerun
+    const char* label;  // the input its reason names
+  };
+  for (const Edit& e : {Edit{"shared/ik.mot", "comak", "trial kinematics"},
+                        Edit{"shared/xml/ext.xml", "comak", "trial external loads"},
+                        Edit{"shared/grf/grf.mot", "comak", "trial external loads data"},
+                        Edit{"meshes/tibia_cartilage.stl", "prepare", "model mesh tibia_cartilage"}}) {
+    SCOPED_TRACE(e.file);
+    std::ofstream(root / e.file, std::ios::app) << "\n";  // one byte more
+    auto dry = outcome(true);
+    EXPECT_EQ(dry[e.stage].first, StageStatus::kWouldRun);
+    EXPECT_NE(dry[e.stage].second.find("input changed: " + std::string(e.label)), std::string::npos)
+        << dry[e.stage].second;
+    if (std::string(e.stage) == "comak")
+      EXPECT_EQ(dry["prepare"].first, StageStatus::kWouldSkip) << dry["prepare"].second;
+    auto rerun = outcome(false);  // restamp
+    EXPECT_EQ(rerun[e.stage].first, StageStatus::kRan);
+    auto after = outcome(true);
+    EXPECT_EQ(after["prepare"].first, StageStatus::kWouldSkip) << after["prepare"].second;
+    EXPECT_EQ(after["comak"].first, StageStatus::kWouldSkip) << after["comak"].second;
+  }
+}
+
+// Before: `model: /usr` hashed every file below it (11 GB) with no output.
+TEST(SafetyInputs, HashingAHugeFolderIsRefusedAtItsLimit) {
+  const fs::path dir = scratch("huge");
+  for (int i = 0; i < 12; ++i) std::ofstream(dir / ("f" + std::to_string(i))) << std::string(1000, 'x');
+  common::HashLimits few;
+  few.max_files = 10;
+  const std::string files = error_of([&] { common::sha256_path(dir, few); });
+  EXPECT_NE(files.find(dir.string()), std::string::npos) << files;
+  EXPECT_NE(files.find("more than 10 files"), std::string::npos) << files;
+  common::HashLimits small;
+  small.max_bytes = 5000;
+  const std::string bytes = error_of([&] { common::sha256_path(dir, small); });
+  EXPECT_NE(bytes.find("more than 5000 bytes"), std::string::npos) << bytes;
+  EXPECT_EQ(error_of([&] { common::sha256_path(dir); }), "");  // within the default limits
+  // A system folder fails at the default file limit after a walk, not a hash
+  // of gigabytes (a generous 20 s for a loaded machine; ~0.1 s idle).
+  if (fs::is_directory("/usr/lib")) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::string usr = error_of([&] { common::sha256_path("/usr"); });
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_NE(usr.find("more than 10000 files"), std::string::npos) << usr;
+    EXPECT_LT(s, 20.0);
+  }
 }
 
 }  // namespace
