@@ -101,6 +101,13 @@ Writes OUT/study.json (everything), OUT/study.csv (one row per setting and
 stage), OUT/report.html (error-versus-time plot with Pareto fronts, tables,
 recommended settings), OUT/scenes/ (each setting's scene).
 
+With --workflow the grid runs through Snakemake instead (grids too large for
+one machine): OUT/cohort.yaml, a cohort of one subject with the --vary values
+as its settings, run like `arthrosim cohort` into OUT/cohort/ (--cores N
+locally, --slurm or --profile P on a cluster; docs/cohorts.md), then evaluated
+by the same code into the same outputs. Time, CPU and memory per stage are
+not measured then.
+
 Sample runs (from the repository root, after scripts/build.sh):
   build/bin/arthrosim study accuracy data/studies/post_outline_points.yaml \
       --vary post.outline_points=50,100,200,400,800 --out out/study_post
@@ -116,6 +123,9 @@ Sample runs (from the repository root, after scripts/build.sh):
       --vary surface.scenarios.cantilever.shell_thickness_mm=1,2 --reference \
       surface.scenarios.cantilever.youngs_modulus_mpa=400 --out out/study_grid
       a 2 x 2 grid
+  build/bin/arthrosim study accuracy data/scenes/osmotic.yaml \
+      --vary prepare.edge_length_mm=3,2.5 --out out/study_wf --workflow --cores 2
+      a grid run by Snakemake (--slurm: on a cluster)
 
 Exit status: 0 every setting ran; 1 bad input (nothing runs) or a setting
 failed (the outputs are still written and name it).)";

@@ -272,6 +272,8 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
 // scenes, and stage outputs are deterministic) and the same recommendation.
 // Two shell resolutions of the osmotic-only scene: seconds.
 TEST(StudyWorkflow, SameErrorsAndRecommendationAsTheLocalStudy) {
+  if (which("snakemake").empty())
+    GTEST_SKIP() << "snakemake not found on PATH (scripts/install-deps.sh installs Debian's snakemake)";
   const fs::path dir = fresh_scratch_dir("study_workflow");
   ::arthrosim::pipelines::study::StudyOptions o;
   o.scene_file = kSource / "data/scenes/osmotic.yaml";
