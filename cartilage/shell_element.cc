@@ -201,8 +201,8 @@ ShellElement::ShellElement(const std::array<Eigen::Vector3d, 4>& X,
                            const ShellMaterial& material, const std::string& label)
     : h_(h) {
   const double E = material.youngs_modulus_Pa, nu = material.poisson_ratio;
-  if (!(E > 0) || !(nu >= 0 && nu < 0.5) || !(material.density_kg_m3 >= 0))
-    throw common::InputError(label + ": material must have E > 0, 0 <= nu < 0.5, rho >= 0; found E=" +
+  if (!(E > 0) || !(nu > -1 && nu < 0.5) || !(material.density_kg_m3 >= 0))
+    throw common::InputError(label + ": material must have E > 0, -1 < nu < 0.5, rho >= 0; found E=" +
                              std::to_string(E) + " nu=" + std::to_string(nu) +
                              " rho=" + std::to_string(material.density_kg_m3));
   for (int k = 0; k < 4; ++k) {

@@ -39,7 +39,7 @@ using Matrix24 = Eigen::Matrix<double, 24, 24>;
 /// Isotropic St. Venant-Kirchhoff material and section integration.
 struct ShellMaterial {
   double youngs_modulus_Pa = 400e6;  ///< E [Pa], > 0; seed 002: 400 MPa
-  double poisson_ratio = 0.3;        ///< nu, in [0, 0.5); seed 002: 0.3
+  double poisson_ratio = 0.3;        ///< nu, in (-1, 0.5); seed 002: 0.3
   double density_kg_m3 = 1000.0;     ///< rho [kg/m^3], >= 0; seed 002: 1000
   /// Gauss points through the thickness, 2 or 3. 2 integrates the linear
   /// (small-strain) bending energy exactly (integrand quadratic in zeta);

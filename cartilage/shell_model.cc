@@ -589,12 +589,17 @@ void ShellModel::add_constraint(NodeConstraint c) {
   if (!c.value) throw common::InputError("constraint '" + c.name + "': value function is empty");
   for (const auto& existing : constraints_)
     if (existing.name == c.name) throw common::InputError("constraint '" + c.name + "' added twice");
-  for (int node : c.nodes) {
+  if (!c.node_masks.empty() && c.node_masks.size() != c.nodes.size())
+    throw common::InputError("constraint '" + c.name + "': " + std::to_string(c.node_masks.size()) + " masks for " +
+                             std::to_string(c.nodes.size()) + " nodes");
+  for (size_t i = 0; i < c.nodes.size(); ++i) {
+    const int node = c.nodes[i];
     if (node < 0 || node >= num_nodes_)
       throw common::InputError("constraint '" + c.name + "': node " + std::to_string(node) + " out of range [0, " +
                                std::to_string(num_nodes_) + ")");
+    const std::array<bool, 6>& mask = c.node_masks.empty() ? c.mask : c.node_masks[i];
     for (int j = 0; j < 6; ++j)
-      if (c.mask[j]) constrained_[6 * node + j] = 1;
+      if (mask[j]) constrained_[6 * node + j] = 1;
   }
   record(c.name, static_cast<long>(c.nodes.size()));
   constraints_.push_back(std::move(c));
@@ -602,11 +607,13 @@ void ShellModel::add_constraint(NodeConstraint c) {
 
 void ShellModel::apply_constraints(double t, Eigen::VectorXd& q) const {
   for (const auto& c : constraints_)
-    for (int node : c.nodes) {
+    for (size_t i = 0; i < c.nodes.size(); ++i) {
+      const int node = c.nodes[i];
       Eigen::Matrix<double, 6, 1> q6 = q.segment<6>(6 * node);
       c.value(t, node, q6);
+      const std::array<bool, 6>& mask = c.node_masks.empty() ? c.mask : c.node_masks[i];
       for (int j = 0; j < 6; ++j)
-        if (c.mask[j]) q(6 * node + j) = q6(j);
+        if (mask[j]) q(6 * node + j) = q6(j);
     }
 }
 

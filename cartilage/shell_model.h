@@ -99,6 +99,8 @@ struct NodeConstraint {
   std::string name;
   std::vector<int> nodes;
   std::array<bool, 6> mask{};  ///< which of r_x, r_y, r_z, d_x, d_y, d_z
+  /// Per node (same order as `nodes`) instead of `mask`, when not empty.
+  std::vector<std::array<bool, 6>> node_masks;
   std::function<void(double, int, Eigen::Matrix<double, 6, 1>&)> value;
 };
 

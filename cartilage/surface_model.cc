@@ -15,11 +15,15 @@ namespace arthrosim::cartilage {
 
 void SurfaceParameters::declare(common::OptionVisitor& v) {
   using common::Unit;
-  v.number("shell_thickness_mm", shell_thickness_m, Unit::kMillimetre, {0.01, 20},
-           "thickness of the superficial-layer shells");
-  v.number("youngs_modulus_mpa", material.youngs_modulus_Pa, Unit::kMegapascal, {1e-3, 1e6},
-           "Young's modulus of the shells");
-  v.number("poisson_ratio", material.poisson_ratio, Unit::kNone, {0, 0.499}, "Poisson's ratio of the shells");
+  // Limits of physics, not of cartilage (a generic scene may be a metal
+  // shell): thickness and E positive, nu in (-1, 0.5); the open ends are
+  // checked by check_material().
+  v.number("shell_thickness_mm", shell_thickness_m, Unit::kMillimetre, {0, 1e6},
+           "thickness of the shells (> 0)");
+  v.number("youngs_modulus_mpa", material.youngs_modulus_Pa, Unit::kMegapascal, {0, 1e12},
+           "Young's modulus of the shells (> 0)");
+  v.number("poisson_ratio", material.poisson_ratio, Unit::kNone, {-1, 0.5},
+           "Poisson's ratio of the shells, in the open interval (-1, 0.5)");
   v.number("density_kg_per_m3", material.density_kg_m3, Unit::kKilogramPerCubicMetre, {1, 1e5},
            "density of the shells (used by inertia)");
   v.number("foundation_stiffness_n_per_mm3", foundation_stiffness_N_m3, Unit::kNewtonPerCubicMillimetre, {0, 1e6},
@@ -32,6 +36,16 @@ void SurfaceParameters::declare(common::OptionVisitor& v) {
            "without imposed_kinematics: the osmotic pressure rises from 0 over this time by the smoothstep "
            "3 s^2 - 2 s^3 of the seating ramp (0: full pressure from t = 0; with imposed_kinematics the pressure rises "
            "over seating_time_s instead); at most end_time_s");
+}
+
+std::string SurfaceParameters::check_material() const {
+  if (!(shell_thickness_m > 0)) return "shell_thickness_mm must be > 0";
+  if (!(material.youngs_modulus_Pa > 0)) return "youngs_modulus_mpa must be > 0";
+  const double nu = material.poisson_ratio;
+  if (!(nu > -1 && nu < 0.5))
+    return "poisson_ratio must lie in the open interval (-1, 0.5) (positive definite isotropic elasticity), found " +
+           std::to_string(nu);
+  return {};
 }
 
 std::unique_ptr<ShellModel> build_surface_model(const SurfaceInput& surface, const SurfaceParameters& parameters,

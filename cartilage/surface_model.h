@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "cartilage/shell_model.h"
+#include "cartilage/shell_scene.h"
 #include "common/mesh.h"
 #include "common/options.h"
 
@@ -40,6 +41,17 @@ struct GenericLoads {
   std::vector<int> displaced_nodes;  ///< positions prescribed (effect prescribed_displacement)
   Eigen::Vector3d displacement_m = Eigen::Vector3d::Zero();
   double ramp_time_s = 1;            ///< > 0
+  /// Masked constraints on named node sets (scene key constraints): those
+  /// without values are built by fixed_nodes, those with values by
+  /// prescribed_displacement (reached at ramp_time_s).
+  struct SetConstraint {
+    ConstraintDefinition definition;
+    std::vector<int> nodes;  ///< sorted, non-empty
+  };
+  std::vector<SetConstraint> constraints;
+  /// Nodal forces [N] of the scene key loads at full value (point_loads),
+  /// ramped like total_force_N.
+  std::vector<std::pair<int, Eigen::Vector3d>> set_loads_N;
 };
 
 /// One surface to simulate.
@@ -81,6 +93,9 @@ struct SurfaceParameters {
   /// poisson_ratio, density_kg_per_m3, foundation_stiffness_n_per_mm3,
   /// foundation_damping_n_s_per_mm3, osmotic_pressure_mpa, osmotic_ramp_s.
   void declare(common::OptionVisitor& v);
+  /// "" when thickness > 0, E > 0 and -1 < nu < 0.5 (the open ends the
+  /// declared closed ranges cannot express), else what is wrong.
+  std::string check_material() const;
 };
 
 /// Per-node foundation modulus of an elastic layer of thickness h_i with the

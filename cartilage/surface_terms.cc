@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <map>
 #include <stdexcept>
 
 #include "cartilage/surface_model.h"
@@ -11,15 +12,6 @@
 namespace arthrosim::cartilage {
 
 namespace {
-
-// A generic mesh's node set of an effect must hold a node.
-std::function<void(const SurfaceInput&)> needs_nodes(const char* effect, std::vector<int> GenericLoads::*set) {
-  return [effect, set](const SurfaceInput& s) {
-    if ((s.generic.*set).empty())
-      throw common::InputError("surface " + s.name + ": effect '" + effect +
-                               "' is requested but its node set (box) holds no node of the mesh");
-  };
-}
 
 // The bundled terms, one registration each (the description of a bundled
 // term is its entry in common/effects.cc).
@@ -55,18 +47,45 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                    c.model.add_periphery_fixed(c.bone);
                }});
   t.push_back({"inertia", "", {}, [](const SurfaceTermContext& c) { c.model.add_inertia(); }});
-  t.push_back({"fixed_nodes", "", needs_nodes("fixed_nodes", &GenericLoads::fixed_nodes),
+  t.push_back({"fixed_nodes", "",
+               [](const SurfaceInput& s) {
+                 bool any = !s.generic.fixed_nodes.empty();
+                 for (const auto& c : s.generic.constraints) any = any || !c.definition.prescribed();
+                 if (!any)
+                   throw common::InputError("surface " + s.name + ": effect 'fixed_nodes' is requested but neither "
+                                            "its box nor a constraint without values holds a node of the mesh");
+               },
                [](const SurfaceTermContext& c) {
-                 std::array<bool, 6> all;
-                 all.fill(true);
-                 c.model.fix_nodes("fixed_nodes", c.surface.generic.fixed_nodes, all);
+                 // One constraint: the box (all six coordinates) and every
+                 // constraint without values, masks united per node.
+                 std::map<int, std::array<bool, 6>> masks;
+                 for (int n : c.surface.generic.fixed_nodes) masks[n].fill(true);
+                 for (const auto& sc : c.surface.generic.constraints)
+                   if (!sc.definition.prescribed())
+                     for (int n : sc.nodes)
+                       for (int j = 0; j < 6; ++j) masks[n][j] = masks[n][j] || sc.definition.mask[j];
+                 NodeConstraint n;
+                 n.name = "fixed_nodes";
+                 for (const auto& [node, mask] : masks) {
+                   n.nodes.push_back(node);
+                   n.node_masks.push_back(mask);
+                 }
+                 const Eigen::VectorXd q0 = c.model.reference_state();
+                 n.value = [q0](double, int node, Eigen::Matrix<double, 6, 1>& q6) { q6 = q0.segment<6>(6 * node); };
+                 c.model.add_constraint(std::move(n));
                }});
-  t.push_back({"point_loads", "", needs_nodes("point_loads", &GenericLoads::load_nodes),
+  t.push_back({"point_loads", "",
+               [](const SurfaceInput& s) {
+                 if (s.generic.load_nodes.empty() && s.generic.set_loads_N.empty())
+                   throw common::InputError("surface " + s.name + ": effect 'point_loads' is requested but neither "
+                                            "its box nor `loads` puts a load on a node of the mesh");
+               },
                [](const SurfaceTermContext& c) {
                  const GenericLoads& g = c.surface.generic;
                  std::vector<std::pair<int, Eigen::Vector3d>> loads;
                  for (int n : g.load_nodes)
                    loads.emplace_back(n, g.total_force_N / static_cast<double>(g.load_nodes.size()));
+                 for (const auto& l : g.set_loads_N) loads.push_back(l);
                  c.model.add_point_loads("point_loads", std::move(loads), c.ramp);
                }});
   t.push_back({"pressure", "", {}, [](const SurfaceTermContext& c) {
@@ -75,17 +94,55 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                  c.model.add_pressure("pressure", 0.0, [p, ramp](double t) { return p * ramp(t); });
                }});
   t.push_back({"prescribed_displacement", "",
-               needs_nodes("prescribed_displacement", &GenericLoads::displaced_nodes),
+               [](const SurfaceInput& s) {
+                 bool any = !s.generic.displaced_nodes.empty();
+                 for (const auto& c : s.generic.constraints) any = any || c.definition.prescribed();
+                 if (!any)
+                   throw common::InputError("surface " + s.name + ": effect 'prescribed_displacement' is requested "
+                                            "but neither its box nor a constraint with values holds a node of the "
+                                            "mesh");
+               },
                [](const SurfaceTermContext& c) {
+                 // One constraint: the box (positions moved by
+                 // displacement_m) and every constraint with values, per node
+                 // its united mask and its values (a component prescribed
+                 // twice must have one value).
+                 const GenericLoads& g = c.surface.generic;
+                 std::map<int, std::pair<std::array<bool, 6>, Eigen::Matrix<double, 6, 1>>> per_node;
+                 auto add = [&](int node, const std::array<bool, 6>& mask, const Eigen::Matrix<double, 6, 1>& v) {
+                   auto [it, fresh] = per_node.try_emplace(node);
+                   if (fresh) {
+                     it->second.first.fill(false);
+                     it->second.second.setZero();
+                   }
+                   for (int j = 0; j < 6; ++j) {
+                     if (!mask[j]) continue;
+                     if (it->second.first[j] && it->second.second(j) != v(j))
+                       throw common::InputError("surface " + c.surface.name + ": node " + std::to_string(node) +
+                                                " has two different prescribed values of one component");
+                     it->second.first[j] = true;
+                     it->second.second(j) = v(j);
+                   }
+                 };
+                 Eigen::Matrix<double, 6, 1> u = Eigen::Matrix<double, 6, 1>::Zero();
+                 u.head<3>() = g.displacement_m;
+                 for (int n : g.displaced_nodes) add(n, {true, true, true, false, false, false}, u);
+                 for (const auto& sc : g.constraints)
+                   if (sc.definition.prescribed())
+                     for (int n : sc.nodes) add(n, sc.definition.mask, sc.definition.value);
                  NodeConstraint n;
                  n.name = "prescribed_displacement";
-                 n.nodes = c.surface.generic.displaced_nodes;
-                 n.mask = {true, true, true, false, false, false};
+                 std::vector<Eigen::Matrix<double, 6, 1>> values(static_cast<size_t>(c.model.num_nodes()),
+                                                                 Eigen::Matrix<double, 6, 1>::Zero());
+                 for (const auto& [node, mv] : per_node) {
+                   n.nodes.push_back(node);
+                   n.node_masks.push_back(mv.first);
+                   values[static_cast<size_t>(node)] = mv.second;
+                 }
                  const Eigen::VectorXd q0 = c.model.reference_state();
-                 const Eigen::Vector3d u = c.surface.generic.displacement_m;
                  const std::function<double(double)> ramp = c.ramp;
-                 n.value = [q0, u, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
-                   q6.head<3>() = q0.segment<3>(6 * node) + ramp(t) * u;
+                 n.value = [q0, values, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+                   q6 = q0.segment<6>(6 * node) + ramp(t) * values[static_cast<size_t>(node)];
                  };
                  c.model.add_constraint(std::move(n));
                }});

@@ -34,6 +34,10 @@ void IntegratorOptions::declare(common::OptionVisitor& v) {
            "(contact: force jumps at facet kinks leave residuals of order 0.01 N)");
   v.number("newton_increment_floor_mm", increment_atol_m, Unit::kMillimetre, {0, 1},
            "absolute Newton increment below which a step's increment test passes");
+  v.number("newton_load_tolerance", load_rtol, Unit::kNone, {0, 1e-2},
+           "> 0: a step also converges when its residual is at most this times the norm of the applied load (loads "
+           "and forces of prescribed motion on the free coordinates at the step's time) and its increment at most this "
+           "times the solution's largest distance from the initial state (docs/shell_element.md); 0: off");
   v.choice("linear_solver", solver,
            {{"auto", LinearSolverChoice::kAuto},
             {"cholmod", LinearSolverChoice::kCholmod},
@@ -125,6 +129,7 @@ HhtIntegrator::HhtIntegrator(TimeIntegrable& system, const IntegratorOptions& op
   no.reuse_factorization = opts_.reuse_factorization;
   no.refactor_ratio = opts_.refactor_ratio;
   no.line_search_halvings = opts_.line_search_halvings;
+  no.linear = opts_.linear;
   no.solver = opts_.solver;
   step_ = std::make_unique<StepSystem>(sys_, *this);
   newton_ = std::make_unique<NewtonSolver>(*step_, no);
@@ -154,6 +159,7 @@ void HhtIntegrator::initialize(double t0, const Eigen::VectorXd& q0, const Eigen
   t_ = t0;
   q_ = q0;
   sys_.apply_constraints(t_, q_);
+  q_initial_ = q_;
   v_ = v0.size() == n ? v0 : Eigen::VectorXd::Zero(n);
   a_ = Eigen::VectorXd::Zero(n);
   h_prev_ = 0;
@@ -191,6 +197,19 @@ bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual
   else if (opts_.quasi_static && opts_.extrapolate_predictor && h_prev_ > 0)
     q += (h / h_prev_) * dq_prev_;
   sys_.apply_constraints(t1, q);
+  if (opts_.load_rtol > 0) {
+    // The applied load at t1: F at the initial state with t1's constraints.
+    Eigen::VectorXd q_load = q_initial_, F_load;
+    sys_.apply_constraints(t1, q_load);
+    EvalRequest req;
+    req.t = t1;
+    req.q = &q_load;
+    sys_.evaluate(req, F_load, nullptr, nullptr);
+    const std::vector<char>& c = sys_.constrained();
+    for (int i = 0; i < n; ++i)
+      if (c[i]) F_load(i) = 0;
+    newton_->set_load_criterion(opts_.load_rtol, F_load.norm(), q_initial_);
+  }
   step_->begin(t1, h);
   NewtonResult r = newton_->solve(q, q_, h);
   copy_newton_statistics();

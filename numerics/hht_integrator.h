@@ -81,6 +81,17 @@ struct IntegratorOptions {
   /// to this many halvings of the Newton step; 0 = full steps (pure Newton).
   /// Not combined with reuse_factorization.
   int line_search_halvings = 0;
+  /// > 0: a step also converges when ||G|| <= load_rtol ||F_load(t)|| and the
+  /// weighted increment is <= load_rtol x the largest weighted distance of
+  /// the iterate from the initial state (NewtonSolver::set_load_criterion);
+  /// ||F_load(t)||: norm of F at the initial state with the constraints of t
+  /// (the applied loads, and the forces of prescribed motion), unconstrained
+  /// coordinates. 0: off.
+  double load_rtol = 0;
+  /// Linear analysis: each step is one Newton solve from its start, accepted
+  /// as it is (a steady state from the reference configuration: the
+  /// small-displacement solution).
+  bool linear = false;
   int max_halvings = 10;           ///< consecutive halvings before giving up
   /// A failed step no longer than this fraction of dt_s stops the run, in (0, 1).
   double min_step_fraction = 1.0 / (1 << 20);
@@ -172,6 +183,7 @@ class HhtIntegrator {
   double t_ = 0, dt_ = 0;
   int successes_since_halving_ = 0;
   Eigen::VectorXd q_, v_, a_, F_;  // F_: F at the current accepted state
+  Eigen::VectorXd q_initial_;        // initialize()'s state (load_rtol)
   Eigen::VectorXd dq_prev_;          // last accepted step's change (predictor)
   double h_prev_ = 0;
   double initial_assembly_s_ = 0;    // initialize()'s evaluation

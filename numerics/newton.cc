@@ -182,7 +182,22 @@ NewtonResult NewtonSolver::solve(Eigen::VectorXd& x, const Eigen::VectorXd& x_re
     const bool inc_ok = (k == 0) ? r <= opts_.residual_atol : increment_passes(last_inc, x);
     const bool roundoff = k > 0 && !res_ok && last_inc <= opts_.roundoff_increment_rel * x_scale_ &&
                           r <= opts_.roundoff_residual_drop * r_ref;
-    if ((res_ok && inc_ok) || roundoff) {
+    // Load-relative pair (set_load_criterion): residual against the applied
+    // load, increment against the solution's distance from its reference.
+    bool load_ok = false;
+    if (load_tol_ > 0 && r <= load_tol_ * load_norm_) {
+      if (k == 0) {
+        load_ok = true;  // the start point already balances the load
+      } else {
+        const double sol = x_solution_ref_.size() == n ? weighted_max(x - x_solution_ref_, w) : 0.0;
+        load_ok = last_inc <= load_tol_ * sol;
+      }
+    }
+    if (opts_.linear && k >= 1) {  // one solve, accepted as it is
+      res.converged = true;
+      return res;
+    }
+    if ((res_ok && inc_ok) || load_ok || roundoff) {
       if (roundoff) ++stats_.roundoff_acceptances;
       res.converged = true;
       return res;

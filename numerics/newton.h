@@ -106,6 +106,9 @@ struct NewtonOptions {
   double refactor_ratio = 0.25;
   /// Backtracking halvings of the Newton step (0 = full steps).
   int line_search_halvings = 0;
+  /// Linear analysis: the iterate after the first Newton step is accepted
+  /// whatever its residual (one solve with the tangent at the start point).
+  bool linear = false;
   LinearSolverChoice solver = LinearSolverChoice::kAuto;
   /// Units named in failure messages.
   std::string residual_unit = "N";
@@ -148,6 +151,17 @@ class NewtonSolver {
   /// Scale of x for the round-off stagnation test (e.g. the largest weighted
   /// coordinate); 1 by default.
   void set_roundoff_scale(double scale) { x_scale_ = scale; }
+  /// Load-relative convergence (off while load_tol <= 0): an iterate also
+  /// converges when ||G|| <= load_tol * load_norm (load_norm: norm of the
+  /// applied load, unit of G) and its weighted increment is at most
+  /// load_tol * max_i w_i |x_i - x_solution_ref_i| (relative to the solution
+  /// measured from x_solution_ref, e.g. the reference configuration). Set
+  /// before each solve; it stays until changed.
+  void set_load_criterion(double load_tol, double load_norm, const Eigen::VectorXd& x_solution_ref) {
+    load_tol_ = load_tol;
+    load_norm_ = load_norm;
+    x_solution_ref_ = x_solution_ref;
+  }
   /// Forgets a kept factorisation (the next iteration refactorises).
   void invalidate_factorization() { factor_valid_ = false; }
 
@@ -163,6 +177,8 @@ class NewtonSolver {
   NewtonSystem& sys_;
   NewtonOptions opts_;
   double x_scale_ = 1.0;
+  double load_tol_ = 0, load_norm_ = 0;
+  Eigen::VectorXd x_solution_ref_;
   bool factor_valid_ = false, refactor_next_ = false;
   double factor_key_ = 0;
   Eigen::SparseMatrix<double> K_;

@@ -221,6 +221,17 @@ void Writer::set_surface_summary(const std::string& surface, const SurfaceSummar
   out.set_attribute(g, "residual_tolerance_N", a.residual_tolerance_N);
 }
 
+void Writer::set_reactions(const std::string& surface, const std::string& name, const std::string& set,
+                           const std::string& components, const Eigen::MatrixXd& frames_x3) {
+  H5File& out = impl_->out;
+  const std::string g = surface_group(surface) + "/reactions";
+  if (!out.exists(g)) out.create_group(g);
+  out.write(g + "/" + name, frames_x3);
+  out.set_attribute(g + "/" + name, "set", set);
+  out.set_attribute(g + "/" + name, "components", components);
+  out.set_attribute(g + "/" + name, "unit", "N");
+}
+
 void Writer::set_solver_attribute(const std::string& name, double value) {
   impl_->out.set_attribute("/solver", name, value);
 }

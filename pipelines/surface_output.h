@@ -123,6 +123,11 @@ class Writer {
   void append_step(const StepRecord& step);
   /// Attributes of the end of a run.
   void set_surface_summary(const std::string& surface, const SurfaceSummaryAttributes& summary);
+  /// Reactions of a generic mesh's constraints (docs/surface_output.md):
+  /// /surfaces/<surface>/reactions/<name> (frames x 3) [N] with attributes
+  /// set, components; written at the end of a completed run.
+  void set_reactions(const std::string& surface, const std::string& name, const std::string& set,
+                     const std::string& components, const Eigen::MatrixXd& frames_x3);
   void set_solver_attribute(const std::string& name, double value);
   void set_solver_attribute(const std::string& name, std::int64_t value);
   void set_solver_attribute(const std::string& name, const std::string& value);

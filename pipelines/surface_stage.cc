@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -52,14 +53,24 @@ cartilage::SurfaceInput read_prepared_surface(const common::PreparedModelReader&
 }
 
 /// Quad OBJ reader for the generic case: 'v x y z' (millimetres) and 4-node
-/// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); comments,
-/// vn/vt/vp/g/o/s/usemtl/mtllib/l lines are skipped. Anything else, or a face
-/// that is not a quad, is an InputError with file:line.
-common::QuadMesh read_quad_obj(const std::string& path) {
+/// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); 'vn'
+/// vertex normals referenced by the faces (i/j/k, i//k) become the nodes'
+/// directors when every face gives them (`normals`, unit rows; left empty
+/// when no face does); 'g' lines name the groups of the faces after them
+/// (into `groups` when given); comments, vt/vp/o/s/usemtl/mtllib/l lines are
+/// skipped. Anything else, a face that is not a quad, normals on some faces
+/// only, two different normals of one vertex or a normal on the side opposite
+/// to the faces' orientation is an InputError with file:line.
+common::QuadMesh read_quad_obj(const std::string& path, common::Points3* normals,
+                               cartilage::FaceGroups* groups = nullptr) {
   std::ifstream in(path);
   if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
-  std::vector<Eigen::Vector3d> V;
+  std::vector<Eigen::Vector3d> V, VN;
   std::vector<Eigen::Vector4i> Q;
+  std::vector<std::string> current_groups;  // names on the last 'g' line
+  std::vector<int> node_normal;  // per vertex: index into VN, -1 none
+  std::vector<int> normal_line;  // per vertex: line that gave it
+  int faces_with_normals = 0;
   std::string line;
   int line_no = 0;
   while (std::getline(in, line)) {
@@ -74,8 +85,13 @@ common::QuadMesh read_quad_obj(const std::string& path) {
       if (!(ls >> p.x() >> p.y() >> p.z()) || !p.allFinite())
         throw common::InputError(path, line_no, "expected 'v x y z' with three finite numbers");
       V.push_back(p * 1e-3);
+    } else if (kw == "vn") {
+      Eigen::Vector3d n;
+      if (!(ls >> n.x() >> n.y() >> n.z()) || !n.allFinite() || !(n.norm() > 0))
+        throw common::InputError(path, line_no, "expected 'vn x y z' with three finite numbers, not all zero");
+      VN.push_back(n.normalized());
     } else if (kw == "f") {
-      std::vector<int> idx;
+      std::vector<int> idx, nidx;
       std::string tok;
       while (ls >> tok) {
         const std::string head = tok.substr(0, tok.find('/'));
@@ -94,12 +110,56 @@ common::QuadMesh read_quad_obj(const std::string& path) {
                                    "vertex index " + head + " out of range (" + std::to_string(V.size()) +
                                        " vertices so far)");
         idx.push_back(i);
+        // normal index: the third field of i/j/k or i//k
+        const std::size_t s1 = tok.find('/'), s2 = s1 == std::string::npos ? s1 : tok.find('/', s1 + 1);
+        if (s2 != std::string::npos) {
+          const std::string nh = tok.substr(s2 + 1);
+          int kn = 0;
+          std::size_t un = 0;
+          try {
+            kn = std::stoi(nh, &un);
+          } catch (const std::exception&) {
+            un = 0;
+          }
+          const int in = kn > 0 ? kn - 1 : static_cast<int>(VN.size()) + kn;
+          if (un != nh.size() || nh.empty() || kn == 0 || in < 0 || in >= static_cast<int>(VN.size()))
+            throw common::InputError(path, line_no,
+                                     "expected a normal index in 1.." + std::to_string(VN.size()) + ", found '" + tok +
+                                         "'");
+          nidx.push_back(in);
+        }
       }
       if (idx.size() != 4)
         throw common::InputError(path, line_no,
                                  "expected a quad (4 vertices), found a face with " + std::to_string(idx.size()));
+      if (!nidx.empty() && nidx.size() != 4)
+        throw common::InputError(path, line_no, "expected a normal index on all four vertices of the face or none");
+      if (!nidx.empty()) {
+        ++faces_with_normals;
+        node_normal.resize(V.size(), -1);
+        normal_line.resize(V.size(), 0);
+        for (int a = 0; a < 4; ++a) {
+          int& nn = node_normal[static_cast<size_t>(idx[static_cast<size_t>(a)])];
+          if (nn >= 0 && (VN[static_cast<size_t>(nn)] - VN[static_cast<size_t>(nidx[static_cast<size_t>(a)])]).norm() > 1e-12)
+            throw common::InputError(path, line_no,
+                                     "vertex " + std::to_string(idx[static_cast<size_t>(a)] + 1) +
+                                         " has two different normals (the first on line " +
+                                         std::to_string(normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])]) +
+                                         "): a shell node has one director");
+          if (nn < 0) {
+            nn = nidx[static_cast<size_t>(a)];
+            normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])] = line_no;
+          }
+        }
+      }
+      if (groups)
+        for (const std::string& g : current_groups) (*groups)[g].push_back(static_cast<int>(Q.size()));
       Q.emplace_back(idx[0], idx[1], idx[2], idx[3]);
-    } else if (kw == "vn" || kw == "vt" || kw == "vp" || kw == "g" || kw == "o" || kw == "s" || kw == "usemtl" ||
+    } else if (kw == "g") {
+      current_groups.clear();
+      std::string g;
+      while (ls >> g) current_groups.push_back(g);
+    } else if (kw == "vt" || kw == "vp" || kw == "o" || kw == "s" || kw == "usemtl" ||
                kw == "mtllib" || kw == "l") {
       continue;
     } else {
@@ -112,6 +172,29 @@ common::QuadMesh read_quad_obj(const std::string& path) {
   for (size_t i = 0; i < V.size(); ++i) m.V.row(static_cast<Eigen::Index>(i)) = V[i].transpose();
   m.Q.resize(static_cast<Eigen::Index>(Q.size()), 4);
   for (size_t i = 0; i < Q.size(); ++i) m.Q.row(static_cast<Eigen::Index>(i)) = Q[i].transpose();
+  if (normals) normals->resize(0, 3);
+  if (faces_with_normals > 0) {
+    if (faces_with_normals != static_cast<int>(Q.size()))
+      throw common::InputError(path + ": error: " + std::to_string(faces_with_normals) + " of " +
+                               std::to_string(Q.size()) +
+                               " faces give vertex normals: give them on every face (they are the directors) or none");
+    const common::Points3 faces = cartilage::quad_mesh_vertex_normals(m);
+    common::Points3 N(m.num_nodes(), 3);
+    for (int i = 0; i < m.num_nodes(); ++i) {
+      const int nn = node_normal[static_cast<size_t>(i)];
+      if (nn < 0) {  // a vertex of no face: keep the (zero) face normal
+        N.row(i) = faces.row(i);
+        continue;
+      }
+      N.row(i) = VN[static_cast<size_t>(nn)].transpose();
+      if (!(N.row(i).dot(faces.row(i)) > 0))
+        throw common::InputError(path, normal_line[static_cast<size_t>(i)],
+                                 "the normal of vertex " + std::to_string(i + 1) +
+                                     " points away from the side the faces' orientation gives (counter-clockwise "
+                                     "faces seen from the normal's side)");
+    }
+    if (normals) *normals = N;
+  }
   return m;
 }
 
@@ -249,6 +332,10 @@ void SurfaceScenarioOptions::declare_shared(common::OptionVisitor& v) {
   v.flag("steady_state", steady_state,
          "solve directly for the steady state at end_time_s (static equilibrium: every listed term is built, "
          "velocities and accelerations are zero there) instead of time stepping");
+  v.flag("linear", integrator.linear,
+         "steady_state only: linear (small-displacement) analysis, one solve with the tangent of the reference "
+         "configuration and no geometric update (for linear benchmarks); strains are still evaluated as "
+         "Green-Lagrange strains of the solution");
   v.number("steady_state_change_mm", steady_state_change_m, Unit::kMillimetre, {0, 1e3},
            "time-stepping runs: end once the largest weighted coordinate change over one step (positions, and "
            "transverse gradients x h/2) is at most this, after the pressure ramp; 0: run to end_time_s. The output "
@@ -312,6 +399,23 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
                 "box of the nodes of `mesh` whose positions are prescribed (effect prescribed_displacement)");
   v.number_list("displacement_mm", displacement_m, Unit::kMillimetre, {3, 3},
                 "[ux, uy, uz] displacement of the nodes in displaced_box_mm, ramped like point_load_n");
+  v.text_list("node_sets", node_sets, "",
+              "named node sets of `mesh`, each 'NAME: box XMIN YMIN ZMIN XMAX YMAX ZMAX' (mm), 'NAME: plane NX NY NZ D "
+              "[TOL]' (nodes with |n.x - D| <= TOL, n normalised, D and TOL in mm, TOL 0.001 by default), 'NAME: nodes "
+              "I J ...' (0-based indices), 'NAME: all' or 'NAME: group G' (the nodes of the faces after an OBJ 'g' line "
+              "naming G)");
+  v.text_list("constraints", constraints, "",
+              "constraints on node sets, each 'SET: C C ... [= V V ...]' with C one of ux uy uz dx dy dz (global "
+              "position and director components; u = ux uy uz, d = dx dy dz, all = both): the components are held at "
+              "their reference value (effect fixed_nodes) or moved by V (mm for u, dimensionless for d), ramped like "
+              "point_load_n (effect prescribed_displacement); the reactions are written per constraint "
+              "(docs/surface_output.md)");
+  v.text_list("loads", loads, "",
+              "loads on node sets (effect point_loads, ramped like point_load_n), each 'SET: force FX FY FZ' (total "
+              "[N], equal shares), 'SET: force_per_node FX FY FZ' [N], 'SET: traction TX TY TZ' (fixed direction, "
+              "MPa, on the quads with all four nodes in SET, consistent nodal forces) or 'SET: gravity GX GY GZ' "
+              "(m/s^2: body force density_kg_per_m3 x g per unit volume on those quads) or 'SET: body_force FX FY FZ' "
+              "(N/mm^3, per unit volume, on those quads)");
   v.effect_list("effects", effects, "surface", "surface effects to simulate in this scenario").required();
 }
 
@@ -405,6 +509,12 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   c.steady = opt.steady_state;
   c.quasi_static = c.steady || !wants("inertia");
 
+  if (const std::string bad = opt.physics.check_material(); !bad.empty()) {
+    int line = sc->line;
+    for (const char* k : {"shell_thickness_mm", "youngs_modulus_mpa", "poisson_ratio"})
+      if (bad.rfind(k, 0) == 0 && o.has(k)) line = o.value(k).line;
+    throw common::InputError(file, line, "scenario '" + sc->name + "': " + bad);
+  }
   if (!opt.end_time_s && !c.moving)
     throw common::InputError(file, sc->line, "scenario '" + sc->name + "' needs end_time_s (it has no imposed_kinematics)");
   if (opt.end_time_s && !(*opt.end_time_s > 0))
@@ -425,6 +535,13 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
                                    " s) exceeds end_time_s (" + std::to_string(*opt.end_time_s) +
                                    " s): the pressure would never reach osmotic_pressure_mpa");
   }
+  if (opt.integrator.linear && !c.steady)
+    throw common::InputError(file, o.value("linear").line,
+                             "scenario '" + sc->name + "': linear: true is a steady-state analysis (one solve at "
+                             "end_time_s); add steady_state: true");
+  if (opt.integrator.linear && c.contact)
+    throw common::InputError(file, o.value("linear").line,
+                             "scenario '" + sc->name + "': linear: true cannot be combined with mesh_contact");
   if (opt.steady_state_change_m > 0 && c.steady)
     throw common::InputError(file, o.value("steady_state_change_mm").line,
                              "scenario '" + sc->name + "': steady_state_change_mm stops a time-stepping run; "
@@ -442,12 +559,63 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
       throw common::InputError(file, sc->line,
                                "scenario '" + sc->name + "': effect '" + effect + "' needs `" + key + "`");
   };
-  require("fixed_box_mm", "fixed_nodes");
-  require("load_box_mm", "point_loads");
-  require("point_load_n", "point_loads");
+  // Named sets, constraints and loads (generic mesh only).
+  for (const auto& [key, items] : {std::pair<const char*, const std::vector<std::string>*>{"node_sets", &opt.node_sets},
+                                    {"constraints", &opt.constraints},
+                                    {"loads", &opt.loads}})
+    if (!items->empty() && !c.generic)
+      throw common::InputError(file, o.value(key).line, "scenario '" + sc->name + "': `" + key + "` needs a generic `mesh`");
+  auto parse_list = [&](const char* key, const std::vector<std::string>& items, auto parse, auto& out) {
+    for (const std::string& item : items) {
+      try {
+        out.push_back(parse(item));
+      } catch (const std::invalid_argument& e) {
+        throw common::InputError(file, o.value(key).line, "scenario '" + sc->name + "': " + key + ": " + e.what());
+      }
+    }
+  };
+  parse_list("node_sets", opt.node_sets, cartilage::parse_node_set, c.node_sets);
+  parse_list("constraints", opt.constraints, cartilage::parse_constraint, c.constraints);
+  parse_list("loads", opt.loads, cartilage::parse_load, c.loads);
+  for (std::size_t i = 0; i < c.node_sets.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (c.node_sets[i].name == c.node_sets[j].name)
+        throw common::InputError(file, o.value("node_sets").line,
+                                 "scenario '" + sc->name + "': node set '" + c.node_sets[i].name + "' defined twice");
+  auto known_set = [&](const std::string& name, const char* key) {
+    for (const auto& d : c.node_sets)
+      if (d.name == name) return;
+    std::string have;
+    for (const auto& d : c.node_sets) have += (have.empty() ? "" : ", ") + d.name;
+    throw common::InputError(file, o.value(key).line,
+                             "scenario '" + sc->name + "': " + key + ": unknown node set '" + name + "' (node_sets: " +
+                                 (have.empty() ? "none" : have) + ")");
+  };
+  bool fixed_sets = false, prescribed_sets = false;
+  for (const auto& d : c.constraints) {
+    known_set(d.set, "constraints");
+    (d.prescribed() ? prescribed_sets : fixed_sets) = true;
+  }
+  for (const auto& d : c.loads) known_set(d.set, "loads");
+  // Every constraint and load must be built by a listed effect.
+  if (fixed_sets && !wants("fixed_nodes"))
+    throw common::InputError(file, o.value("constraints").line,
+                             "scenario '" + sc->name + "': constraints without values need effect fixed_nodes");
+  if (prescribed_sets && !wants("prescribed_displacement"))
+    throw common::InputError(file, o.value("constraints").line,
+                             "scenario '" + sc->name + "': constraints with values need effect prescribed_displacement");
+  if (!c.loads.empty() && !wants("point_loads"))
+    throw common::InputError(file, o.value("loads").line, "scenario '" + sc->name + "': loads need effect point_loads");
+  if (!fixed_sets) require("fixed_box_mm", "fixed_nodes");
+  if (c.loads.empty()) {
+    require("load_box_mm", "point_loads");
+    require("point_load_n", "point_loads");
+  }
   require("pressure_mpa", "pressure");
-  require("displaced_box_mm", "prescribed_displacement");
-  require("displacement_mm", "prescribed_displacement");
+  if (!prescribed_sets) {
+    require("displaced_box_mm", "prescribed_displacement");
+    require("displacement_mm", "prescribed_displacement");
+  }
   if (c.generic) {
     std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
@@ -568,10 +736,13 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     const std::string mesh_file = opt.mesh.string();
     std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
-    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file);
+    common::Points3 given_normals;
+    cartilage::FaceGroups groups;  // OBJ 'g' groups (node sets "NAME: group G")
+    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file, &given_normals, &groups);
     r.input.name = opt.mesh.stem().string();
     r.input.mesh.name = r.input.name;
-    r.input.normals = cartilage::quad_mesh_vertex_normals(r.input.mesh);
+    // Directors: the OBJ's vertex normals when given, else area-weighted quad normals.
+    r.input.normals = given_normals.rows() > 0 ? given_normals : cartilage::quad_mesh_vertex_normals(r.input.mesh);
     cartilage::GenericLoads& g = r.input.generic;
     g.ramp_time_s = end_time > 0 ? end_time : 1.0;
     if (!opt.fixed_box_m.empty()) g.fixed_nodes = nodes_in_box(r.input.mesh, opt.fixed_box_m);
@@ -585,6 +756,40 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     if (!opt.displacement_m.empty()) {
       const auto& u = opt.displacement_m;
       g.displacement_m = Eigen::Vector3d(u[0], u[1], u[2]);
+    }
+    // Named sets, their constraints and loads.
+    std::map<std::string, std::vector<int>> sets;
+    for (const cartilage::NodeSetDefinition& d : c.node_sets) {
+      try {
+        sets[d.name] = cartilage::select_nodes(d, r.input.mesh, groups);
+      } catch (const std::invalid_argument& e) {
+        throw common::InputError(file, c.line, "scenario '" + c.name + "': " + e.what());
+      }
+      if (sets[d.name].empty())
+        throw common::InputError(file, c.line,
+                                 "scenario '" + c.name + "': node set '" + d.name + "' holds no node of " + mesh_file);
+    }
+    for (const cartilage::ConstraintDefinition& d : c.constraints) g.constraints.push_back({d, sets.at(d.set)});
+    for (const cartilage::LoadDefinition& d : c.loads) {
+      const std::vector<int>& nodes = sets.at(d.set);
+      Eigen::MatrixXd f;
+      using K = cartilage::LoadDefinition::Kind;
+      if (d.kind == K::kForce || d.kind == K::kForcePerNode) {
+        const double share = d.kind == K::kForce ? 1.0 / static_cast<double>(nodes.size()) : 1.0;
+        for (int n : nodes) g.set_loads_N.emplace_back(n, share * d.vector);
+        continue;
+      }
+      const Eigen::Vector3d per_area =
+          d.kind == K::kTraction     ? d.vector
+          : d.kind == K::kBodyForce ? Eigen::Vector3d(par.shell_thickness_m * d.vector)
+                                    : Eigen::Vector3d(par.material.density_kg_m3 * par.shell_thickness_m * d.vector);
+      f = cartilage::consistent_area_loads(r.input.mesh, nodes, per_area);
+      if (f.isZero(0.0))
+        throw common::InputError(file, c.line,
+                                 "scenario '" + c.name + "': load on node set '" + d.set +
+                                     "': no quad has all four nodes in the set");
+      for (int n = 0; n < f.rows(); ++n)
+        if (!f.row(n).isZero(0.0)) g.set_loads_N.emplace_back(n, f.row(n).transpose());
     }
     r.model = cartilage::build_surface_model(r.input, par, c.effects, cartilage::BoneMotion::fixed(), &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
@@ -762,6 +967,47 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   int frames_written = 0;
   // One frame: every surface's fields, the contact forces, then /time (so
   // /time counts complete frames).
+  // Reactions of the generic mesh's constraints, per frame: R = F (internal
+  // minus applied forces, zero velocity) summed over the set's constrained
+  // position coordinates not already counted by an earlier constraint
+  // (docs/surface_output.md).
+  std::vector<std::vector<std::vector<Eigen::Vector3d>>> reactions(runs.size());
+  auto record_reactions = [&](size_t k, const Eigen::VectorXd& q, double t) {
+    SurfaceRun& r = runs[k];
+    const auto& cons = r.input.generic.constraints;
+    if (cons.empty()) return;
+    reactions[k].resize(cons.size());
+    Eigen::VectorXd F;
+    numerics::EvalRequest req;
+    req.t = t;
+    if (iopt.linear) {
+      // linear: true solves the equations linearised at the reference state
+      // (constraints applied at t): the reactions are those of the same
+      // linear problem, F = F(q0) + K(q0) (q - q0).
+      Eigen::VectorXd q0 = r.model->reference_state();
+      r.model->apply_constraints(t, q0);
+      Eigen::SparseMatrix<double> K;
+      req.q = &q0;
+      r.model->evaluate(req, F, nullptr, &K);
+      F += K * (q - q0);
+    } else {
+      req.q = &q;
+      r.model->evaluate(req, F, nullptr, nullptr);
+    }
+    // A coordinate held by several constraints counts for the first of them.
+    std::vector<char> claimed(static_cast<size_t>(F.size()), 0);
+    for (size_t i = 0; i < cons.size(); ++i) {
+      Eigen::Vector3d R = Eigen::Vector3d::Zero();
+      for (int n : cons[i].nodes)
+        for (int j = 0; j < 3; ++j) {
+          const size_t dof = static_cast<size_t>(6 * n + j);
+          if (!cons[i].definition.mask[static_cast<size_t>(j)] || claimed[dof]) continue;
+          claimed[dof] = 1;
+          R(j) += F(static_cast<Eigen::Index>(dof));
+        }
+      reactions[k][i].push_back(R);
+    }
+  };
   auto write_frame = [&](const Eigen::VectorXd& qs, double t, const std::vector<cartilage::ContactPairReport>& reps) {
     std::vector<Eigen::VectorXd> pressure(runs.size());
     for (size_t k = 0; k < runs.size(); ++k) pressure[k] = Eigen::VectorXd::Zero(runs[k].model->num_nodes());
@@ -787,6 +1033,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       fr.displacement = cartilage::nodal_displacement(*r.model, q, T);
       fr.deflection = cartilage::nodal_deflection(*r.model, q, T);
       const cartilage::NodalStrains st = cartilage::nodal_strains(*r.model, r.basis, q);
+      record_reactions(k, q, t);
       common::check_finite(fr.displacement, "surface " + r.summary.name + ": displacement at t = " + std::to_string(t));
       common::check_finite(st.E, "surface " + r.summary.name + ": strain at t = " + std::to_string(t));
       fr.E = st.E;
@@ -1066,6 +1313,19 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.worst_penetration_ratio = worst_ratio;
   res.unfaded_penetration_warnings = unfaded_over;
   res.worst_unfaded_penetration_ratio = worst_unfaded_ratio;
+  for (size_t k = 0; k < runs.size(); ++k) {
+    const auto& cons = runs[k].input.generic.constraints;
+    for (size_t i = 0; i < reactions[k].size(); ++i) {
+      Eigen::MatrixXd R(static_cast<Eigen::Index>(reactions[k][i].size()), 3);
+      for (Eigen::Index f = 0; f < R.rows(); ++f) R.row(f) = reactions[k][i][static_cast<size_t>(f)].transpose();
+      std::string comps;
+      static const char* names[6] = {"ux", "uy", "uz", "dx", "dy", "dz"};
+      for (int j = 0; j < 6; ++j)
+        if (cons[i].definition.mask[static_cast<size_t>(j)]) comps += (comps.empty() ? "" : " ") + std::string(names[j]);
+      out.set_reactions(runs[k].summary.name, std::to_string(i) + "_" + cons[i].definition.set, cons[i].definition.set,
+                        comps, R);
+    }
+  }
   res.wall_s = now_s() - t_start;
   out.set_solver_attribute("wall_s", res.wall_s);
   out.complete();

@@ -80,6 +80,9 @@ struct SurfaceScenarioOptions {
   std::optional<double> pressure_Pa;    ///< on the mid-surface of `mesh`
   std::vector<double> displaced_box_m;  ///< same box form; empty = none
   std::vector<double> displacement_m;   ///< [ux, uy, uz]; empty = none
+  /// Named node sets, masked constraints and loads of `mesh`, one text item
+  /// each (grammar: cartilage/shell_scene.h); empty = none.
+  std::vector<std::string> node_sets, constraints, loads;
   std::vector<std::string> effects;     ///< the scenario's effects
 
   void declare_shared(common::OptionVisitor& v);
@@ -109,6 +112,10 @@ struct SurfaceScenarioConfig {
   /// mesh_contact: pairs as indices into `surfaces`, and as written ("a:b").
   std::vector<std::pair<int, int>> contact_pairs;
   std::vector<std::string> contact_pair_names;
+  /// Generic mesh: node_sets, constraints and loads parsed (sets referenced exist).
+  std::vector<cartilage::NodeSetDefinition> node_sets;
+  std::vector<cartilage::ConstraintDefinition> constraints;
+  std::vector<cartilage::LoadDefinition> loads;
 };
 
 /// The scenario `scenario` of `scene` ("" = the scene's only one) with every

@@ -8,6 +8,9 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <numbers>
+#include <sstream>
+#include <tuple>
 
 #include <Eigen/SparseCore>
 #include <unsupported/Eigen/SparseExtra>
@@ -786,6 +789,422 @@ TEST(SurfaceStageGeneric, GenericEffectWithoutMeshIsAnError) {
     FAIL();
   } catch (const common::InputError& e) {
     EXPECT_NE(std::string(e.what()).find("needs a generic `mesh`"), std::string::npos) << e.what();
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Issue 34: the generic scene as a general shell solver.
+// ---------------------------------------------------------------------------
+
+/// Scene of the 16-quad cantilever strip (100 x 10 x 1 mm, nu = 0) clamped at
+/// x = 0 with a total tip load P [N] along +z; `extra` adds scenario keys.
+std::string cantilever_scene(const std::string& name, double E_mpa, double P, const std::string& extra = "") {
+  write_plate_obj(name, 16, 100, 10);
+  std::ostringstream s;
+  s.precision(17);
+  s << "surface:\n  scenarios:\n    c:\n      mesh: " << name << ".obj\n      youngs_modulus_mpa: " << E_mpa
+    << "\n      poisson_ratio: 0\n      end_time_s: 1\n      steady_state: true\n"
+       "      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]\n"
+       "      load_box_mm: [99.999, -1, -1, 100.001, 11, 1]\n"
+       "      point_load_n: [0, 0, "
+    << P << "]\n" << extra << "      effects: [fixed_nodes, point_loads]\n";
+  return write_scene(name, s.str());
+}
+
+double cantilever_tip(const std::string& file, const std::string& name) {
+  const common::H5File f(file, common::H5File::Mode::kRead);
+  return f.read_matrix("/surfaces/" + name + "/deflection")(1, 16);  // node (16, 0): the tip
+}
+
+/// Euler-Bernoulli tip deflection P L^3 / (3 E I) of that strip [m].
+double beam_tip(double E_Pa, double P) {
+  const double L = 0.1, W = 0.01, t = 1e-3;
+  return P * L * L * L / (3 * E_Pa * W * t * t * t / 12);
+}
+
+// Material limits are those of physics: E > 0 without an upper cap (a steel
+// or the Scordelis-Lo roof's E = 4.32e8 in its own units is a valid scene),
+// -1 < nu < 0.5, thickness > 0; the open ends are refused naming the key.
+TEST(SurfaceStageGeneric, MaterialLimitsArePhysical) {
+  // Above the former 1e6 MPa cap: the same strip, load scaled with E, gives
+  // the same tip deflection relative to beam theory (tolerance as in
+  // CantileverPlateTipDeflectionMatchesBeamTheory).
+  const double E = 4.32e8, P = 1e-4 * E / 400;
+  const std::string scene = cantilever_scene("stiff_strip", E, P);
+  const SurfaceStageOptions o = stage_options(scene, "c", "stiff_strip.h5");
+  run_surface_stage(o);
+  EXPECT_NEAR(cantilever_tip(o.out, "stiff_strip") / beam_tip(E * 1e6, P), 1.0, 5e-3);
+  // An auxetic material (nu < 0) is accepted and runs.
+  const std::string auxetic = write_scene("auxetic", R"(surface:
+  scenarios:
+    c:
+      mesh: stiff_strip.obj
+      poisson_ratio: -0.5
+      end_time_s: 1
+      steady_state: true
+      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]
+      load_box_mm: [99.999, -1, -1, 100.001, 11, 1]
+      point_load_n: [0, 0, 1e-4]
+      effects: [fixed_nodes, point_loads]
+)");
+  const SurfaceStageOptions oa = stage_options(auxetic, "c", "auxetic.h5");
+  run_surface_stage(oa);
+  EXPECT_GT(cantilever_tip(oa.out, "stiff_strip"), 0.0);
+  for (const auto& [key, value] : std::vector<std::pair<std::string, std::string>>{
+           {"poisson_ratio", "0.5"}, {"poisson_ratio", "-1"}, {"youngs_modulus_mpa", "0"},
+           {"shell_thickness_mm", "0"}}) {
+    const std::string bad = cantilever_scene("bad_material", 400, 1e-4, "      " + key + ": " + value + "\n");
+    try {
+      run_surface_stage(stage_options(bad, "c", "bad_material.h5"));
+      ADD_FAILURE() << key << " = " << value << " accepted";
+    } catch (const common::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+    }
+  }
+}
+
+// linear: true -- one solve with the reference tangent. At P L^2 / (E I) =
+// 0.9 (linear w/L = 0.3) the linear tip matches Euler-Bernoulli to the
+// discretisation error of the 16-quad strip (0.09% at small load, see
+// CantileverPlateTipDeflectionMatchesBeamTheory; tolerance 5e-3), while the
+// geometrically nonlinear run is stiffer (elastica tables, e.g. Bisshopp &
+// Drucker 1945, give w/L = 0.3017 at P L^2 / (E I) = 1, 9.5% below linear;
+// at 0.9 the run gives 7.9%; the test asks for more than 2%).
+TEST(SurfaceStageGeneric, LinearAnalysisMatchesEulerBernoulliAtLargeLoad) {
+  const double E = 400, P = 3e-2;
+  const std::string lin = cantilever_scene("linear_strip", E, P, "      linear: true\n");
+  const SurfaceStageOptions ol = stage_options(lin, "c", "linear_strip.h5");
+  const SurfaceStageResult rl = run_surface_stage(ol);
+  EXPECT_EQ(rl.newton_iterations, 1);
+  const double w_lin = cantilever_tip(ol.out, "linear_strip"), w_beam = beam_tip(E * 1e6, P);
+  std::printf("linear cantilever: tip %.6g m, beam %.6g m (w/L %.2f), error %.3g%%\n", w_lin, w_beam, w_beam / 0.1,
+              100 * (w_lin / w_beam - 1));
+  EXPECT_NEAR(w_lin / w_beam, 1.0, 5e-3);
+  const std::string nl = cantilever_scene("nonlinear_strip", E, P);
+  const SurfaceStageOptions on = stage_options(nl, "c", "nonlinear_strip.h5");
+  run_surface_stage(on);
+  const double w_nl = cantilever_tip(on.out, "nonlinear_strip");
+  std::printf("nonlinear cantilever: tip %.6g m (%.3g%% below linear)\n", w_nl, 100 * (1 - w_nl / w_lin));
+  EXPECT_LT(w_nl / w_lin, 0.98);
+  // linear needs steady_state.
+  const std::string bad = write_scene("linear_dynamic", R"(surface:
+  scenarios:
+    c:
+      mesh: linear_strip.obj
+      end_time_s: 1
+      linear: true
+      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]
+      effects: [fixed_nodes]
+)");
+  try {
+    run_surface_stage(stage_options(bad, "c", "linear_dynamic.h5"));
+    FAIL() << "linear without steady_state accepted";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("steady_state"), std::string::npos) << e.what();
+  }
+}
+
+// newton_load_tolerance: on a stiff strip (E = 4.32e8 MPa) under a small load
+// (1e-2 N, tip 9.3e-9 m) the residual cannot fall below its round-off floor
+// (about eps E t h per node, ~1e-5 N here), which is above the absolute floor,
+// the relative test (1e-8 of the first residual 7e-3 N) and the round-off
+// stagnation rule (1e-3 of it): the default criteria fail after every
+// halving. With the load-relative pair at 5e-3 (residual against the applied
+// load, increment against the solution) the step converges and the tip has
+// the strip's discretisation error against beam theory (tolerance 5e-3).
+TEST(SurfaceStageGeneric, LoadRelativeCriterionConvergesWhereTheFloorsFail) {
+  const double E = 4.32e8, P = 1e-2;
+  const std::string plain = cantilever_scene("small_load", E, P);
+  EXPECT_THROW(run_surface_stage(stage_options(plain, "c", "small_load.h5")), common::NumericalError);
+  const std::string rel = cantilever_scene("small_load_rel", E, P, "      newton_load_tolerance: 5e-3\n");
+  const SurfaceStageOptions o = stage_options(rel, "c", "small_load_rel.h5");
+  const SurfaceStageResult r = run_surface_stage(o);
+  EXPECT_EQ(r.rejected_steps, 0);
+  const double w = cantilever_tip(o.out, "small_load_rel"), w_beam = beam_tip(E * 1e6, P);
+  std::printf("stiff strip, small load: tip %.6g m, beam %.6g m, error %.3g%%\n", w, w_beam, 100 * (w / w_beam - 1));
+  EXPECT_NEAR(w / w_beam, 1.0, 5e-3);
+}
+
+/// OBJ of an L x W plate (mm) of nx x ny quads in z = 0, node (i, j) = j (nx+1) + i.
+std::string write_grid_obj(const std::string& name, int nx, int ny, double L_mm, double W_mm) {
+  const std::string p = work_dir() + "/" + name + ".obj";
+  std::ofstream f(p);
+  for (int j = 0; j <= ny; ++j)
+    for (int i = 0; i <= nx; ++i) f << "v " << i * L_mm / nx << " " << j * W_mm / ny << " 0\n";
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      const int a = j * (nx + 1) + i + 1;
+      f << "f " << a << " " << a + 1 << " " << a + nx + 2 << " " << a + nx + 1 << "\n";
+    }
+  return p;
+}
+
+// Named sets: the bundled cantilever written with a plane set, a clamp on
+// `all` components and a total force gives the bundled box-scene result
+// (same nodes, same shares: bit for bit).
+TEST(SurfaceStageGeneric, NamedSetsReproduceTheBoxScene) {
+  const std::string box = cantilever_scene("sets_box", 400, 1e-4);
+  const SurfaceStageOptions ob = stage_options(box, "c", "sets_box.h5");
+  run_surface_stage(ob);
+  write_plate_obj("sets_named", 16, 100, 10);
+  const std::string named = write_scene("sets_named", R"(surface:
+  scenarios:
+    c:
+      mesh: sets_named.obj
+      poisson_ratio: 0
+      end_time_s: 1
+      steady_state: true
+      node_sets: ["root: plane 1 0 0 0", "tip: box 99.999 -1 -1 100.001 11 1"]
+      constraints: ["root: all"]
+      loads: ["tip: force 0 0 1e-4"]
+      effects: [fixed_nodes, point_loads]
+)");
+  const SurfaceStageOptions on = stage_options(named, "c", "sets_named.h5");
+  run_surface_stage(on);
+  EXPECT_EQ(cantilever_tip(on.out, "sets_named"), cantilever_tip(ob.out, "sets_box"));
+}
+
+// Masked constraints: a symmetry plane (normal displacement and the
+// director's normal component held: "uy dy") on the half of a 2-quad-wide
+// strip (nu = 0.3, so the plate bends anticlastically and the symmetry
+// condition matters) gives the full strip's deflection field with half the
+// load. The discrete problems are identical up to round-off: tolerance 1e-9
+// relative.
+TEST(SurfaceStageGeneric, SymmetryPlaneHalfModelMatchesTheFullModel) {
+  write_grid_obj("sym_full", 8, 2, 100, 20);
+  write_grid_obj("sym_half", 8, 1, 100, 10);
+  // Loaded: the tip corners off the symmetry plane (full: nodes 8 and 26;
+  // half: node 8), 1e-4 N each, so the half model carries half the load.
+  auto scene = [](const std::string& name, const std::string& tip_nodes, const std::string& extra_sets,
+                  const std::string& extra_cons, double P) {
+    std::ostringstream s;
+    s << "surface:\n  scenarios:\n    c:\n      mesh: " << name << ".obj\n      end_time_s: 1\n"
+      << "      steady_state: true\n      node_sets: [\"root: plane 1 0 0 0\", \"tip: nodes " << tip_nodes << "\""
+      << extra_sets << "]\n      constraints: [\"root: all\"" << extra_cons << "]\n"
+      << "      loads: [\"tip: force_per_node 0 0 " << P << "\"]\n      effects: [fixed_nodes, point_loads]\n";
+    return write_scene(name, s.str());
+  };
+  const SurfaceStageOptions of = stage_options(scene("sym_full", "8 26", "", "", 1e-4), "c", "sym_full.h5");
+  run_surface_stage(of);
+  const SurfaceStageOptions oh =
+      stage_options(scene("sym_half", "8", ", \"sym: plane 0 1 0 10\"", ", \"sym: uy dy\"", 1e-4), "c", "sym_half.h5");
+  run_surface_stage(oh);
+  const common::H5File ff(of.out, common::H5File::Mode::kRead), fh(oh.out, common::H5File::Mode::kRead);
+  const common::Tensor3d uf = ff.read_tensor3("/surfaces/sym_full/displacement");
+  const common::Tensor3d uh = fh.read_tensor3("/surfaces/sym_half/displacement");
+  // Half-model node (i, j) = full-model node (i, j) for j = 0, 1.
+  double scale = 0, worst = 0;
+  for (int j = 0; j <= 1; ++j)
+    for (int i = 0; i <= 8; ++i) {
+      const int nf = j * 9 + i, nh = j * 9 + i;
+      for (int c = 0; c < 3; ++c) {
+        scale = std::max(scale, std::abs(uf(1, nf, c)));
+        worst = std::max(worst, std::abs(uf(1, nf, c) - uh(1, nh, c)));
+      }
+    }
+  std::printf("symmetry half model: largest difference %.3g of the largest displacement %.3g m\n", worst / scale,
+              scale);
+  EXPECT_GT(scale, 0.0);
+  EXPECT_LT(worst, 1e-9 * scale);
+}
+
+// Reactions balance the applied loads: a clamped plate (nu = 0.3) under a
+// point force, a fixed-direction traction and its own weight, with a
+// symmetry-type masked support on one side; the reactions written per
+// constraint plus the applied loads sum to zero up to the converged Newton
+// residual (below 1e-11 of the load here), with the consistent traction and
+// self-weight totalling traction x area and rho t g x area.
+TEST(SurfaceStageGeneric, ReactionsBalanceTheAppliedLoads) {
+  write_grid_obj("reactions_plate", 6, 3, 60, 30);
+  const std::string scene = write_scene("reactions_plate", R"(surface:
+  scenarios:
+    c:
+      mesh: reactions_plate.obj
+      density_kg_per_m3: 7800
+      end_time_s: 1
+      steady_state: true
+      node_sets: ["root: plane 1 0 0 0", "side: plane 0 1 0 0", "corner: nodes 27", "all: all"]
+      constraints: ["root: all", "side: uy dy"]
+      loads: ["corner: force 0.01 0.02 -0.05", "all: traction 0 1e-6 -2e-6", "all: gravity 0 0 -9.81"]
+      effects: [fixed_nodes, point_loads]
+)");
+  const SurfaceStageOptions o = stage_options(scene, "c", "reactions_plate.h5");
+  const SurfaceStageResult r = run_surface_stage(o);
+  const common::H5File f(o.out, common::H5File::Mode::kRead);
+  const Eigen::MatrixXd R0 = f.read_matrix("/surfaces/reactions_plate/reactions/0_root");
+  const Eigen::MatrixXd R1 = f.read_matrix("/surfaces/reactions_plate/reactions/1_side");
+  ASSERT_EQ(R0.rows(), 2);
+  const double area = 0.06 * 0.03, t = 1e-3;
+  const Eigen::Vector3d applied = Eigen::Vector3d(0.01, 0.02, -0.05) + area * Eigen::Vector3d(0, 1, -2) +
+                                  7800 * t * area * Eigen::Vector3d(0, 0, -9.81);
+  const Eigen::Vector3d sum = R0.row(1).transpose() + R1.row(1).transpose() + applied;
+  std::printf("reactions: root (%.6g, %.6g, %.6g) N, side (%.6g, %.6g, %.6g) N, imbalance %.3g N of %.3g N\n", R0(1, 0),
+              R0(1, 1), R0(1, 2), R1(1, 0), R1(1, 1), R1(1, 2), sum.norm(), applied.norm());
+  // Exact balance holds at equilibrium: the internal forces have no net
+  // translation, so sum(R) + applied = sum of the residual left on the free
+  // coordinates, at most sqrt(n_free) ||G|| (28 nodes x 6), plus round-off.
+  const double bound = std::sqrt(6.0 * 28) * r.final_residual_N + 1e-13 * applied.norm();
+  std::printf("  final residual %.3g N, bound %.3g N\n", r.final_residual_N, bound);
+  EXPECT_LT(sum.norm(), bound);
+  EXPECT_EQ(R1(1, 0), 0.0);  // the side holds uy only among the translations
+  EXPECT_EQ(R1(1, 2), 0.0);
+  EXPECT_NE(R1(1, 1), 0.0);
+  EXPECT_EQ(R0.row(0).norm(), 0.0);  // t = 0: nothing applied yet
+}
+
+// Self-weight with linear: true against the cantilever under a uniform line
+// load q = rho g t W: w_tip = q L^4 / (8 E I) (nu = 0 strip, 16 quads). The
+// element's discretisation error for the point load is 0.09%; tolerance 5e-3.
+TEST(SurfaceStageGeneric, SelfWeightCantileverMatchesBeamTheory) {
+  write_plate_obj("self_weight", 16, 100, 10);
+  const std::string scene = write_scene("self_weight", R"(surface:
+  scenarios:
+    c:
+      mesh: self_weight.obj
+      poisson_ratio: 0
+      density_kg_per_m3: 1000
+      end_time_s: 1
+      steady_state: true
+      linear: true
+      node_sets: ["root: plane 1 0 0 0", "all: all"]
+      constraints: ["root: all"]
+      loads: ["all: gravity 0 0 9.81"]
+      effects: [fixed_nodes, point_loads]
+)");
+  const SurfaceStageOptions o = stage_options(scene, "c", "self_weight.h5");
+  run_surface_stage(o);
+  const double L = 0.1, W = 0.01, t = 1e-3, E = 400e6, q = 1000 * 9.81 * t * W;
+  const double w_beam = q * std::pow(L, 4) / (8 * E * W * t * t * t / 12);
+  const double w = cantilever_tip(o.out, "self_weight");
+  std::printf("self-weight cantilever: tip %.6g m, beam %.6g m, error %.3g%%\n", w, w_beam, 100 * (w / w_beam - 1));
+  EXPECT_NEAR(w / w_beam, 1.0, 5e-3);
+  // The same load per unit volume (rho g = 9.81e-6 N/mm^3): the same tip up
+  // to the rounding of rho t g against t (rho g).
+  std::ifstream in(work_dir() + "/self_weight.yaml");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  text.replace(text.find("gravity 0 0 9.81"), 16, "body_force 0 0 9.81e-6");
+  const std::string body = work_dir() + "/body_force.yaml";
+  std::ofstream(body) << text;
+  const SurfaceStageOptions ob = stage_options(body, "c", "body_force.h5");
+  run_surface_stage(ob);
+  EXPECT_NEAR(cantilever_tip(ob.out, "self_weight") / w, 1.0, 1e-12);
+}
+
+// Bad set definitions are refused with the key and what is wrong.
+TEST(SurfaceStageGeneric, BadSetDefinitionsAreRefused) {
+  write_plate_obj("bad_sets", 4, 100, 10);
+  for (const auto& [key, line, expect] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"node_sets", "[\"a: cube 0 0 0\"]", "unknown set kind"},
+           {"constraints", "[\"nowhere: all\"]", "unknown node set 'nowhere'"},
+           {"constraints", "[\"a: ux wz\"]", "unknown component 'wz'"},
+           {"constraints", "[\"a: ux uy = 1\"]", "2 components but 1 values"},
+           {"loads", "[\"a: torque 0 0 1\"]", "unknown load 'torque'"}}) {
+    std::string body = "surface:\n  scenarios:\n    c:\n      mesh: bad_sets.obj\n      end_time_s: 1\n"
+                       "      steady_state: true\n      fixed_box_mm: [-0.001, -1, -1, 0.001, 11, 1]\n";
+    if (key != "node_sets") body += "      node_sets: [\"a: plane 1 0 0 100\"]\n";
+    body += "      " + key + ": " + line + "\n      effects: [fixed_nodes]\n";
+    const std::string scene = write_scene("bad_sets", body);
+    try {
+      run_surface_stage(stage_options(scene, "c", "bad_sets.h5"));
+      ADD_FAILURE() << key << ": " << line << " accepted";
+    } catch (const common::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+}
+
+// The Scordelis-Lo roof (data/scenes/verification/scordelis_lo_roof.yaml,
+// MacNeal & Harder 1985): linear, quarter model with symmetry planes and a
+// rigid diaphragm written as masked constraints, self-weight as a traction.
+// Reference: vertical deflection 0.3024 at the midpoint of the free edge. The
+// bundled 16 x 16 scene and the meshes 4, 8, 32 of the same generator
+// (make_scordelis_lo_mesh.py, mirrored here) give the convergence series of
+// docs/shell_element.md. Tolerance 1% at 16 x 16 and 32 x 32: the series
+// levels off 0.4% below the reference (0.9976 at 16, 0.9963 at 32), and
+// commercial bilinear shell quads are quoted within 1.3% at 10 nodes per side
+// for this problem (Altair OptiStruct verification OS-V 0730: QUAD4 1.013).
+TEST(SurfaceStageGeneric, ScordelisLoRoofMatchesTheReference) {
+  const std::string dir = std::string(ARTHROSIM_SOURCE_DIR) + "/data/scenes/verification";
+  auto tip_ratio = [](const std::string& file, const std::string& surface, int n) {
+    const common::H5File f(file, common::H5File::Mode::kRead);
+    const common::Tensor3d u = f.read_tensor3("/surfaces/" + surface + "/displacement");
+    return u(1, n * (n + 1), 2) / -0.3024e-3;  // free-edge midpoint, mm -> m
+  };
+  std::vector<std::pair<int, double>> series;
+  for (int n : {4, 8, 32}) {
+    const std::string name = "roof_" + std::to_string(n);
+    {
+      std::ofstream f(work_dir() + "/" + name + ".obj");
+      f.precision(17);
+      const double R = 25, half = 25, angle = 40 * std::numbers::pi / 180;
+      for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i) {
+          const double th = angle * j / n;
+          f << "v " << half * i / n << " " << R * std::sin(th) << " " << R * std::cos(th) << "\n";
+        }
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          const int a = j * (n + 1) + i + 1;
+          f << "f " << a << " " << a + 1 << " " << a + n + 2 << " " << a + n + 1 << "\n";
+        }
+    }
+    std::ifstream in(dir + "/scordelis_lo_roof.yaml");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    text.replace(text.find("scordelis_lo_roof_16.obj"), 24, name + ".obj");
+    text.replace(text.find("../../models"), 12, std::string(ARTHROSIM_SOURCE_DIR) + "/data/models");
+    const std::string scene = work_dir() + "/" + name + ".yaml";
+    std::ofstream(scene) << text;
+    const SurfaceStageOptions o = stage_options(scene, "roof", name + ".h5");
+    run_surface_stage(o);
+    series.emplace_back(n, tip_ratio(o.out, name, n));
+  }
+  const SurfaceStageOptions o = stage_options(dir + "/scordelis_lo_roof.yaml", "roof", "scordelis_lo_roof_16.h5");
+  const SurfaceStageResult r = run_surface_stage(o);
+  EXPECT_EQ(r.newton_iterations, 1);
+  series.insert(series.begin() + 2, {16, tip_ratio(o.out, "scordelis_lo_roof_16", 16)});
+  for (const auto& [n, ratio] : series) std::printf("Scordelis-Lo roof %2d x %2d: w / 0.3024 = %.4f\n", n, n, ratio);
+  EXPECT_NEAR(series[2].second, 1.0, 1e-2);
+  EXPECT_NEAR(series[3].second, 1.0, 1e-2);
+  for (size_t i = 1; i < series.size(); ++i)  // the error shrinks with refinement
+    EXPECT_LT(std::abs(series[i].second - series[3].second), std::abs(series[i - 1].second - series[3].second) + 1e-12);
+}
+
+// OBJ `g` groups as node sets: a traction on the faces of group `tip` (the
+// last quad of the strip) equals the same traction on a box holding exactly
+// that quad's nodes, bit for bit; an unknown group names the groups there are.
+TEST(SurfaceStageGeneric, ObjGroupsAreNodeSets) {
+  {
+    std::ofstream f(work_dir() + "/grouped_strip.obj");
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i <= 16; ++i) f << "v " << i * 6.25 << " " << j * 10 << " 0\n";
+    for (int i = 0; i < 16; ++i) {
+      if (i == 0) f << "g root\n";
+      if (i == 1) f << "g body\n";
+      if (i == 15) f << "g tip loaded\n";
+      f << "f " << i + 1 << " " << i + 2 << " " << 17 + i + 2 << " " << 17 + i + 1 << "\n";
+    }
+  }
+  auto scene = [](const std::string& name, const std::string& tip_set) {
+    return write_scene(name, "surface:\n  scenarios:\n    c:\n      mesh: grouped_strip.obj\n      poisson_ratio: 0\n"
+                             "      end_time_s: 1\n      steady_state: true\n"
+                             "      node_sets: [\"root: plane 1 0 0 0\", \"tip: " +
+                                 tip_set +
+                                 "\"]\n      constraints: [\"root: all\"]\n      loads: [\"tip: traction 0 0 1e-6\"]\n"
+                                 "      effects: [fixed_nodes, point_loads]\n");
+  };
+  const SurfaceStageOptions og = stage_options(scene("grouped", "group loaded"), "c", "grouped.h5");
+  run_surface_stage(og);
+  const SurfaceStageOptions ob = stage_options(scene("grouped_box", "box 93.749 -1 -1 100.001 11 1"), "c", "grouped_box.h5");
+  run_surface_stage(ob);
+  const double wg = cantilever_tip(og.out, "grouped_strip"), wb = cantilever_tip(ob.out, "grouped_strip");
+  EXPECT_GT(wg, 0.0);
+  EXPECT_EQ(wg, wb);
+  try {
+    run_surface_stage(stage_options(scene("grouped_bad", "group nowhere"), "c", "grouped_bad.h5"));
+    FAIL() << "unknown group accepted";
+  } catch (const common::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no face group 'nowhere' (groups: body, loaded, root, tip)"), std::string::npos)
+        << e.what();
   }
 }
 

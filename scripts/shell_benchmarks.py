@@ -1,0 +1,170 @@
+#!/usr/bin/env python3
+"""Meshes of the standard shell benchmarks and their convergence series.
+
+  scripts/shell_benchmarks.py mesh scordelis_lo N OUT.obj   # one N x N quarter-roof mesh
+  scripts/shell_benchmarks.py series [--bin build/bin/arthrosim-surface] [--meshes 4 8 16]
+      # runs data/scenes/verification/<problem>.yaml at every mesh (a copy of the
+      # scene with `mesh` replaced) and prints value / reference per mesh
+
+Units: the benchmarks are stated in consistent units of length L and force
+F (ft and lb, in and lb, or none); the scenes read L as mm and F as N, so
+stresses F/L^2 become MPa and displacements come out in mm of the scene = the
+benchmark's length unit (the series prints them so). Node numbering of every mesh: node (i, j) =
+j (nx + 1) + i, 0-based, i along the first grid direction.
+"""
+import argparse
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+
+def scordelis_lo(n):
+    """Quarter Scordelis-Lo roof (data/scenes/verification/scordelis_lo_roof.yaml):
+    R 25, half length 25 (x from the midspan at x = 0 to the diaphragm at
+    x = 25), angle 0 (crown, y = 0) to 40 deg (free edge); outward normals.
+    Grid n x n, i along x, j along the angle."""
+    return cylinder_panel(n, n, 25.0, 25.0, math.radians(40.0))
+
+
+def pinched_cylinder(n):
+    """Octant of the pinched cylinder (pinched_cylinder.yaml): R 300, half
+    length 300 (x from the midspan at x = 0 to the diaphragm at x = 300),
+    angle 0 (loaded generator, y = 0) to 90 deg (z = 0); outward normals."""
+    return cylinder_panel(n, n, 300.0, 300.0, math.pi / 2)
+
+
+def cylinder_panel(nx, ny, R, length, phi):
+    nodes = []
+    for j in range(ny + 1):
+        th = phi * j / ny
+        for i in range(nx + 1):
+            nodes.append((length * i / nx, R * math.sin(th), R * math.cos(th)))
+    return nodes, grid_quads(nx, ny)
+
+
+def pinched_hemisphere(n):
+    """Quarter of the hemisphere with an 18 deg hole (pinched_hemisphere.yaml):
+    R 10, longitude 0 (x axis) to 90 deg (y axis) along i, latitude 0
+    (equator, z = 0) to 72 deg along j; outward normals."""
+    R, top = 10.0, math.radians(72.0)
+    nodes = []
+    for j in range(n + 1):
+        lat = top * j / n
+        for i in range(n + 1):
+            lon = (math.pi / 2) * i / n
+            nodes.append((R * math.cos(lat) * math.cos(lon), R * math.cos(lat) * math.sin(lon), R * math.sin(lat)))
+    return nodes, grid_quads(n, n)
+
+
+def twisted_beam(n):
+    """Twisted beam (twisted_beam.yaml): length 12 along x, width 1.1, twisted
+    by 90 deg from the root (x = 0, width along y, normal +z) to the tip
+    (width along z). Grid 6n x n: i along x (6n quads), j across the width
+    (n quads); the tip's mid-width node is (6n, n/2), n even."""
+    L, W, nx, ny = 12.0, 1.1, 6 * n, n
+    nodes = []
+    for j in range(ny + 1):
+        w = -W / 2 + W * j / ny
+        for i in range(nx + 1):
+            x = L * i / nx
+            th = (math.pi / 2) * x / L
+            nodes.append((x, w * math.cos(th), w * math.sin(th)))
+    return nodes, grid_quads(nx, ny)
+
+
+def end_shear_cantilever(n):
+    """Cantilever strip of Sze et al. 2004 (large_rotation_cantilever.yaml):
+    length 10 along x, width 1 along y, in z = 0, n x 1 quads; the tip's
+    nodes are n and 2n + 1."""
+    nodes = [(10.0 * i / n, float(j), 0.0) for j in range(2) for i in range(n + 1)]
+    return nodes, grid_quads(n, 1)
+
+
+def grid_quads(nx, ny):
+    quads = []
+    for j in range(ny):
+        for i in range(nx):
+            a = j * (nx + 1) + i
+            quads.append((a, a + 1, a + nx + 2, a + nx + 1))
+    return quads
+
+
+# name: (scene in data/scenes/verification[:scenario], generator, probe
+#        node(n), component, sign, reference in the benchmark's units)
+PROBLEMS = {
+    # vertical deflection of the free edge's midpoint, MacNeal & Harder 1985
+    "scordelis_lo": ("scordelis_lo_roof", scordelis_lo, lambda n: n * (n + 1), 2, -1.0, 0.3024),
+    # radial displacement under the load, MacNeal & Harder 1985
+    "pinched_cylinder": ("pinched_cylinder", pinched_cylinder, lambda n: 0, 2, -1.0, 1.8248e-5),
+    # radial displacement under the load, MacNeal & Harder 1985
+    "pinched_hemisphere": ("pinched_hemisphere", pinched_hemisphere, lambda n: 0, 0, 1.0, 0.094),
+    # tip displacement along the load, MacNeal & Harder 1985 (n = quads across the width)
+    # tip deflection at P_max = 4 against the elastica (docs/shell_element.md)
+    "large_rotation_cantilever": ("large_rotation_cantilever", end_shear_cantilever, lambda n: n, 2, 1.0, 6.699642),
+    "twisted_beam_in_plane": ("twisted_beam:in_plane", twisted_beam, lambda n: (n // 2) * (6 * n + 1) + 6 * n, 2, 1.0,
+                              5.424e-3),
+    "twisted_beam_out_of_plane": ("twisted_beam:out_of_plane", twisted_beam,
+                                  lambda n: (n // 2) * (6 * n + 1) + 6 * n, 1, 1.0, 1.754e-3),
+}
+
+
+def write_obj(path, title, nodes, quads):
+    with open(path, "w") as f:
+        f.write(f"# {title}\n# generated by scripts/shell_benchmarks.py; node (i, j) = j (nx + 1) + i\n")
+        for p in nodes:
+            f.write("v %.12g %.12g %.12g\n" % p)
+        for q in quads:
+            f.write("f %d %d %d %d\n" % tuple(a + 1 for a in q))
+
+
+def run_series(args):
+    import h5py  # /usr/bin/python3
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    print("problem, mesh parameter, elements, value, reference, value/reference")
+    for name in args.problems:
+        scene_name, gen, probe, comp, sign, ref = PROBLEMS[name]
+        scene_name, _, scenario = scene_name.partition(":")
+        scene_path = os.path.join(root, "data/scenes/verification", scene_name + ".yaml")
+        scene = open(scene_path).read()
+        for n in args.meshes:
+            with tempfile.TemporaryDirectory() as d:
+                nodes, quads = gen(n)
+                stem = name
+                write_obj(os.path.join(d, stem + ".obj"), f"{name} {n} x {n}", nodes, quads)
+                text = re.sub(r"mesh: \S+", f"mesh: {stem}.obj", scene)
+                text = re.sub(r"model: \S+", "model: " + os.path.join(root, "data/models/knee_parametric/coarse"), text)
+                sp = os.path.join(d, "scene.yaml")
+                open(sp, "w").write(text)
+                out = os.path.join(d, "out.h5")
+                cmd = [args.bin, "--scene", sp, "--out", out, "--quiet"] + (["--scenario", scenario] if scenario else [])
+                subprocess.run(cmd, check=True)
+                with h5py.File(out, "r") as h:
+                    u = h[f"/surfaces/{stem}/displacement"][-1]
+                value = sign * u[probe(n), comp] * 1e3  # m -> mm of the scene = benchmark unit
+                print(f"{name}, n = {n}, {len(quads)}, {value:.6g}, {ref}, {value / ref:.4f}", flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    m = sub.add_parser("mesh")
+    m.add_argument("problem", choices=sorted(PROBLEMS))
+    m.add_argument("n", type=int)
+    m.add_argument("out")
+    s = sub.add_parser("series")
+    s.add_argument("--bin", default="build/bin/arthrosim-surface")
+    s.add_argument("--meshes", type=int, nargs="+", default=[4, 8, 16, 32])
+    s.add_argument("--problems", nargs="+", default=sorted(PROBLEMS))
+    args = ap.parse_args()
+    if args.cmd == "mesh":
+        nodes, quads = PROBLEMS[args.problem][1](args.n)
+        write_obj(args.out, f"{args.problem} {args.n} x {args.n}", nodes, quads)
+    else:
+        run_series(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
