@@ -10,6 +10,14 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <ostream>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <iostream>
+
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "common/effects.h"
 #include "common/error.h"
@@ -575,6 +583,63 @@ int write_cohort_report(const fs::path& plan_file, const fs::path& report_dir) {
   rep.sections.push_back(plots);
   rh::write(rep, report_dir);
   return static_cast<int>(rows.size());
+}
+
+std::vector<std::string> workflow_command(const Cohort& cohort, const fs::path& out_dir, const fs::path& stage_dir,
+                                          WorkflowOptions o, std::ostream& log) {
+  const fs::path out = fs::absolute(out_dir).lexically_normal();
+  fs::path workflow = o.workflow_dir;
+  if (workflow.empty() && std::getenv("ARTHROSIM_WORKFLOW_DIR")) workflow = std::getenv("ARTHROSIM_WORKFLOW_DIR");
+  if (workflow.empty()) workflow = common::repository_of(stage_dir) / "workflow";
+  workflow = fs::absolute(workflow).lexically_normal();
+  if (!fs::is_regular_file(workflow / "Snakefile")) {
+    throw InputError((workflow / "Snakefile").string(), 0,
+                     "expected the workflow's Snakefile (give its folder with --workflow), found none");
+  }
+  const Plan plan = plan_cohort(cohort, out, stage_dir);
+  const fs::path plan_file = out / "plan.json";
+  write_if_changed(plan_file, plan_json(cohort, plan, stage_dir));
+  log << "arthrosim cohort: " << cohort.subjects.size() << " subject(s) x " << plan.settings.size()
+      << " setting(s): " << plan.jobs.size() << " stage runs planned in " << plan_file.string() << "\n";
+  std::vector<std::string> command = {o.snakemake, "--snakefile", (workflow / "Snakefile").string(),
+                                      "--configfile", (workflow / "config.yaml").string(),
+                                      "--directory", out.string(), "--rerun-incomplete"};
+  if (o.slurm && o.profile.empty()) o.profile = (workflow / "profiles" / "slurm").string();
+  if (!o.profile.empty()) {
+    command.insert(command.end(), {"--profile", fs::absolute(o.profile).lexically_normal().string()});
+    if (o.cores_given) command.insert(command.end(), {"--cores", std::to_string(o.cores)});
+  } else {
+    command.insert(command.end(), {"--cores", std::to_string(o.cores)});
+  }
+  if (o.dry_run) command.push_back("--dry-run");
+  for (const std::string& extra : o.extra) command.push_back(extra);
+  // Last: --config takes every following word up to the next option.
+  command.insert(command.end(), {"--config", "plan=" + plan_file.string()});
+  return command;
+}
+
+int run_command(const std::vector<std::string>& command) {
+  std::vector<std::string> words = command;
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(w.data());
+  argv.push_back(nullptr);
+  std::cout.flush();
+  const pid_t pid = fork();
+  if (pid < 0) {
+    std::cerr << "error: cannot start " << command.front() << " (" << std::strerror(errno) << ")\n";
+    return 127;
+  }
+  if (pid == 0) {
+    execvp(argv[0], argv.data());
+    std::cerr << "error: cannot run " << command.front() << " (" << std::strerror(errno)
+              << "): install it (scripts/install-deps.sh installs Debian's snakemake) or name it with --snakemake\n";
+    _exit(127);
+  }
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) return 127;
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
 }  // namespace arthrosim::pipelines::cohort

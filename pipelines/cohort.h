@@ -17,6 +17,7 @@
 // through each stage's key_outputs (the readers the accuracy study uses) plus
 // the peak tibiofemoral force of stage 1 (musculoskeletal/kinematics_file.h).
 #include <filesystem>
+#include <iosfwd>
 #include <map>
 #include <string>
 #include <utility>
@@ -137,5 +138,29 @@ std::string check_effects(const std::filesystem::path& file, const std::vector<s
 /// subjects and settings). Returns the number of rows. Missing or unreadable
 /// outputs are empty cells with the reason in the report.
 int write_cohort_report(const std::filesystem::path& plan_file, const std::filesystem::path& report_dir);
+
+/// How `arthrosim cohort` (and `arthrosim study accuracy --workflow`) hands a
+/// planned cohort to Snakemake.
+struct WorkflowOptions {
+  std::filesystem::path workflow_dir;  ///< holds Snakefile; empty: $ARTHROSIM_WORKFLOW_DIR or <repo>/workflow
+  std::string snakemake = "snakemake";
+  int cores = 1;
+  bool cores_given = false;  ///< with a profile, --cores is passed only when given
+  std::string profile;       ///< a Snakemake profile folder
+  bool slurm = false;        ///< profile workflow/profiles/slurm
+  bool dry_run = false;
+  std::vector<std::string> extra;  ///< passed to snakemake unchanged
+};
+
+/// Plans `cohort` into `out_dir` (scenes, OUT/plan.json; progress to `log`)
+/// and returns the snakemake command line that runs it. Throws InputError for
+/// a bad cohort or a missing Snakefile.
+std::vector<std::string> workflow_command(const Cohort& cohort, const std::filesystem::path& out_dir,
+                                          const std::filesystem::path& stage_dir, WorkflowOptions options,
+                                          std::ostream& log);
+
+/// Runs `command` (fork + exec, waits) and returns its exit status (127: it
+/// could not be started, with the reason on stderr).
+int run_command(const std::vector<std::string>& command);
 
 }  // namespace arthrosim::pipelines::cohort

@@ -689,230 +689,96 @@ std::vector<int> pareto_front(const std::vector<double>& time, const std::vector
   return front;
 }
 
-// ---------------------------------------------------------------------------
-// The study
-// ---------------------------------------------------------------------------
-StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
-  if (options.axes.empty()) {
-    throw InputError("--vary", 0, "expected at least one --vary KEY=V1,V2,...");
-  }
-  const common::Scene scene = load_scene(options.scene_file);
-  const fs::path out_dir = fs::absolute(options.out_dir).lexically_normal();
-
-  // Keys and reference values.
-  std::vector<VaryAxis> axes = options.axes;
-  std::set<std::string> seen_keys;
+namespace {
+// The grid as a cohort of one subject ("study") run by Snakemake
+// (pipelines/cohort.h): OUT/cohort.yaml, run folders
+// OUT/cohort/runs/study/<setting>. A stage counts as run when every output
+// it plans exists after the workflow (Snakemake removes the outputs of a
+// failed job); its key is the hash of its options and external inputs and
+// those of every stage it depends on (the runner's key also hashes the
+// files, which the workflow's own triggers cover). Time, CPU and memory are
+// not measured here.
+void run_grid_by_workflow(const StudyOptions& options, const fs::path& out_dir,
+                          const std::vector<VaryAxis>& axes, StudyResult& result,
+                          std::vector<std::vector<StageStep>>& plans,
+                          std::vector<std::map<std::string, std::set<std::string>>>& upstream,
+                          std::ostream& log) {
+  const fs::path cohort_file = out_dir / "cohort.yaml";
+  const fs::path cohort_out = out_dir / "cohort";
+  std::string text = "# written by arthrosim study accuracy --workflow: the study's grid as a cohort\n";
+  text += "description: accuracy study of " + fs::absolute(options.scene_file).lexically_normal().string() + "\n";
+  text += "scene: \"" + fs::absolute(options.scene_file).lexically_normal().string() + "\"\n";
+  text += "settings:\n";
   for (const VaryAxis& a : axes) {
-    common::find_settable_key(scene, a.key);  // throws for an unknown key
-    if (!seen_keys.insert(a.key).second) {
-      throw InputError("--vary", 0, a.key + " varied twice; give all its values in one --vary");
-    }
+    text += "  " + a.key + ": [";
+    for (std::size_t k = 0; k < a.values.size(); ++k) text += (k ? ", " : "") + a.values[k];
+    text += "]\n";
   }
-  for (const std::string& r : options.reference) {
-    const std::size_t eq = r.find('=');
-    std::string key = eq == std::string::npos ? std::string() : r.substr(0, eq);
-    std::string value = eq == std::string::npos ? r : r.substr(eq + 1);
-    if (key.empty() || std::none_of(axes.begin(), axes.end(), [&](const VaryAxis& a) { return a.key == key; })) {
-      // "V" alone, or "KEY=V" whose key is not an axis: a value of the only axis.
-      if (axes.size() != 1 || !key.empty()) {
-        throw InputError("--reference", 0,
-                         "expected KEY=VALUE with KEY one of the varied keys"
-                         " (or VALUE alone with a single --vary), found '" + r + "'");
-      }
-      key = axes[0].key;
-      value = r;
-    }
-    for (VaryAxis& a : axes) {
-      if (a.key != key) continue;
-      const auto it = std::find(a.values.begin(), a.values.end(), value);
-      if (it == a.values.end()) {
-        std::string list;
-        for (const std::string& v : a.values) list += (list.empty() ? "" : ", ") + v;
-        throw InputError("--reference", 0, "'" + value + "' is not one of the values of " +
-                                               key + " (" + list + ")");
-      }
-      a.reference = static_cast<std::size_t>(it - a.values.begin());
-    }
+  text += "subjects:\n  study: {}\n";
+  cohort::write_if_changed(cohort_file, text);
+  const cohort::Cohort c = cohort::load_cohort(cohort_file);
+  const std::vector<cohort::Setting> names = cohort::settings_grid(c);
+  if (names.size() != result.settings.size()) {
+    throw InputError(cohort_file.string(), 0, "expected " + std::to_string(result.settings.size()) +
+                                                  " settings in the cohort, found " + std::to_string(names.size()));
   }
-
-  // Every value alone (the other keys as in the scene), so a bad value is
-  // named by itself; and two values of one key must change what some stage
-  // runs, or the axis measures nothing.
-  const fs::path probe_dir = out_dir / "runs" / "probe";
-  for (const VaryAxis& a : axes) {
-    std::vector<std::pair<std::string, std::vector<StageStep>>> plans;
-    for (const std::string& v : a.values) {
-      common::Scene s;
-      checked_scene_text(options.scene_file, {{a.key, v}}, out_dir / "scenes" / "check.yaml", &s);
-      plans.emplace_back(v, plan_stages(s, probe_dir));
-    }
-    for (std::size_t i = 0; i < plans.size(); ++i) {
-      for (std::size_t j = i + 1; j < plans.size(); ++j) {
-        std::string si, sj;
-        for (const StageStep& st : plans[i].second) si += stage_signature(st, probe_dir);
-        for (const StageStep& st : plans[j].second) sj += stage_signature(st, probe_dir);
-        if (si == sj) {
-          throw InputError("--vary", 0,
-                           a.key + ": the values '" + plans[i].first + "' and '" + plans[j].first +
-                               "' run every stage with the same options and inputs (no stage "
-                               "this scene runs reads " + a.key + ", e.g. because a scenario "
-                               "sets it itself, or the two values mean the same)");
-        }
-      }
-    }
-  }
-
-  // The grid, last axis fastest (an odometer over the value indices).
-  std::vector<PlannedSetting> grid;
-  std::vector<std::size_t> idx(axes.size(), 0);
-  while (true) {
-    PlannedSetting p;
-    p.index = idx;
-    for (std::size_t a = 0; a < axes.size(); ++a) p.values.emplace_back(axes[a].key, axes[a].values[idx[a]]);
-    p.label = setting_label(p.values);
-    grid.push_back(std::move(p));
-    bool done = true;
-    for (std::size_t a = axes.size(); a-- > 0;) {
-      if (++idx[a] < axes[a].values.size()) {
-        done = false;
-        break;
-      }
-      idx[a] = 0;
-    }
-    if (done) break;
-  }
-
-  StudyResult result;
-  std::set<std::string> folders;
-  for (std::size_t i = 0; i < grid.size(); ++i) {
-    SettingResult r;
-    r.values = grid[i].values;
-    r.index = grid[i].index;
-    r.label = grid[i].label;
-    std::string folder = folder_name(r.label);
-    if (!folders.insert(folder).second) folder += "_" + std::to_string(i);
-    r.dir = out_dir / "runs" / folder;
-    r.scene = out_dir / "scenes" / (folder + ".yaml");
-    grid[i].text = checked_scene_text(options.scene_file, r.values, r.scene);
-    bool is_ref = true;
-    for (std::size_t a = 0; a < axes.size(); ++a) is_ref = is_ref && r.index[a] == axes[a].reference;
-    if (is_ref) result.reference = i;
-    result.settings.push_back(std::move(r));
-  }
-
-  fs::create_directories(out_dir / "scenes");
-  fs::create_directories(out_dir / "runs");
-  for (std::size_t i = 0; i < grid.size(); ++i) {
-    std::ofstream f(result.settings[i].scene, std::ios::binary);
-    f << grid[i].text;
-    if (!f) throw InputError(result.settings[i].scene.string(), 0, "cannot write the scene copy");
-  }
-
-  const fs::path measurements_file = out_dir / ".stage_measurements.tsv";
-  std::map<std::string, Measurement> measured = read_measurements(measurements_file);
-
-  log << "study: " << grid.size() << " setting" << (grid.size() == 1 ? "" : "s") << " of "
-      << scene.file.string() << ", reference " << result.settings[result.reference].label
-      << "; output in " << out_dir.string() << "\n";
+  const std::vector<std::string> command =
+      cohort::workflow_command(c, cohort_out, options.stage_dir, options.workflow, log);
+  std::string shown;
+  for (const std::string& w : command) shown += (shown.empty() ? "" : " ") + w;
+  log << "study: " << result.settings.size() << " settings through the workflow: $ " << shown << "\n";
   log.flush();
-
-  std::vector<std::vector<StageStep>> plans(grid.size());
-  std::vector<std::map<std::string, std::set<std::string>>> upstream(grid.size());
-  for (std::size_t i = 0; i < grid.size(); ++i) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int status = cohort::run_command(command);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  log << "study: the workflow " << (status == 0 ? "finished" : "FAILED (exit status " + std::to_string(status) + ")")
+      << " in " << fixed(wall, 1) << " s\n";
+  for (std::size_t i = 0; i < result.settings.size(); ++i) {
     SettingResult& r = result.settings[i];
+    // Grids are in the same order: first axis slowest.
+    if (names[i].values != r.values) {
+      throw InputError(cohort_file.string(), 0, "setting " + std::to_string(i + 1) + " of the cohort is not " + r.label);
+    }
+    r.dir = cohort_out / "runs" / "study" / names[i].name;
+    r.scene = cohort_out / "scenes" / "study" / (names[i].name + ".yaml");
     const common::Scene s = load_scene(r.scene);
     plans[i] = plan_stages(s, r.dir);
     upstream[i] = upstream_stages(plans[i]);
-    fs::create_directories(r.dir);
-    // Seed from the earlier setting that shares the most stages.
-    int donor = -1, best = 0;
-    for (std::size_t j = 0; j < i; ++j) {
-      if (options.force) continue;  // a failed setting still has the stamps of what worked
-      const int m = count_matching_stages(plans[j], result.settings[j].dir, plans[i], r.dir);
-      if (m > best) best = m, donor = static_cast<int>(j);
-    }
-    log << "study: [" << i + 1 << "/" << grid.size() << "] " << r.label
-        << (i == result.reference ? " (reference)" : "") << "\n";
-    if (donor >= 0) {
-      const std::vector<std::string> seeded = seed_run_folder(
-          plans[static_cast<std::size_t>(donor)], result.settings[static_cast<std::size_t>(donor)].dir,
-          plans[i], r.dir);
-      if (!seeded.empty()) {
-        std::string list;
-        for (const std::string& n : seeded) list += (list.empty() ? "" : ", ") + n;
-        log << "study: outputs of " << list << " copied from setting "
-            << result.settings[static_cast<std::size_t>(donor)].label
-            << " (same options and inputs; the runner checks their hashes)\n";
-      }
-    }
-    log.flush();
-    RunnerOptions ro;
-    ro.out_dir = r.dir;
-    ro.stage_dir = options.stage_dir;
-    ro.force = options.force;
-    const auto t0 = std::chrono::steady_clock::now();
-    const RunReport rep = run_scene(s, ro, log);
-    r.study_wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    r.ok = rep.status == RunStatus::kOk;
-    r.failure = rep.message;
-    for (const StageOutcome& o : rep.stages) {
+    std::map<std::string, std::string> signature;
+    for (const StageStep& st : plans[i]) signature[st.name] = stage_signature(st, r.dir);
+    bool ok = true;
+    for (const StageStep& st : plans[i]) {
       StageRecord rec;
-      rec.stage = o.name;
-      rec.key = o.key;
-      switch (o.status) {
-        case StageStatus::kRan: rec.run = "ran"; break;
-        case StageStatus::kSkipped: rec.run = "reused"; break;
-        case StageStatus::kFailed: rec.run = "failed"; break;
-        default: rec.run = "not run";
-      }
-      if (o.status == StageStatus::kFailed) {
-        rec.failure = o.reason;
-        for (const StageStep& st : plans[i]) {
-          if (st.name != o.name) continue;
-          rec.failed_with_output = std::all_of(st.outputs.begin(), st.outputs.end(),
-                                               [](const fs::path& f) { return fs::exists(f); });
-        }
-      }
-      if (o.status == StageStatus::kRan || o.status == StageStatus::kFailed) {
-        rec.wall_time_s = o.wall_time_s;
-        rec.cpu_time_s = o.cpu_time_s;
-        rec.max_rss_mb = static_cast<double>(o.max_rss_kb) / 1024.0;
-      }
-      if (o.status == StageStatus::kRan) {
-        measured[o.key] = {o.wall_time_s, o.cpu_time_s, o.max_rss_kb, r.label};
-        std::ofstream m(measurements_file, std::ios::app);
-        m << std::setprecision(17) << o.key << "\t" << o.name << "\t" << o.wall_time_s << "\t"
-          << o.cpu_time_s << "\t" << o.max_rss_kb << "\t" << r.label << "\n";
-      } else if (o.status == StageStatus::kSkipped) {
-        const auto it = measured.find(o.key);
-        if (it != measured.end()) {
-          rec.wall_time_s = it->second.wall_s;
-          rec.cpu_time_s = it->second.cpu_s;
-          rec.max_rss_mb = static_cast<double>(it->second.rss_kb) / 1024.0;
-          rec.produced_by = it->second.label == r.label ? "an earlier study run of this setting"
-                                                        : it->second.label;
-        } else {
-          rec.produced_by = "an earlier run (no measurement recorded)";
-        }
-      }
+      rec.stage = st.name;
+      std::string key = signature[st.name];
+      for (const std::string& u : upstream[i][st.name]) key += signature[u];
+      rec.key = common::sha256_hex(key);
+      const bool have = std::all_of(st.outputs.begin(), st.outputs.end(),
+                                    [](const fs::path& f) { return fs::exists(f); });
+      rec.run = have ? "ran" : "not run";
+      rec.produced_by = have ? "the workflow" : "";
+      if (!have) rec.failure = "an output is missing after the workflow (see its log)";
+      ok = ok && have;
       r.stages.push_back(rec);
     }
-    std::ostringstream line;
-    line << "study: [" << i + 1 << "/" << grid.size() << "] " << (r.ok ? "done" : "FAILED") << " in "
-         << fixed(r.study_wall_time_s, 1) << " s:";
-    for (const StageRecord& rec : r.stages) {
-      line << " " << rec.stage << " " << rec.run;
-      if (rec.run == "ran") {
-        line << " (" << fixed(rec.wall_time_s, 1) << " s, " << fixed(rec.max_rss_mb, 0) << " MB)";
-      }
-      if (rec.run == "reused") line << " (from " << rec.produced_by << ")";
-      line << (&rec == &r.stages.back() ? "" : ",");
-    }
-    log << line.str() << "\n";
-    if (!r.ok) log << "study: " << r.failure << "\n";
-    log.flush();
+    r.ok = ok;
+    r.study_wall_time_s = kNaN;
+    if (!ok) r.failure = "the workflow did not produce every output of this setting (exit status " +
+                         std::to_string(status) + ")";
   }
+  result.notes.push_back("run through the workflow (Snakemake, " + cohort_file.string() +
+                         "): time, CPU and memory per stage are not measured, so no cost enters the "
+                         "recommendation");
+}
+}  // namespace
 
+namespace {
+// The errors of every stage of every setting against the reference and the
+// recommendation per stage, from the settings' run folders and stage records
+// (filled by the scene runner or from a workflow run): both paths end here.
+void evaluate_grid(const StudyOptions& options,
+                   std::vector<std::map<std::string, std::set<std::string>>> upstream,
+                   StudyResult& result, std::ostream& log) {
   // Time to each output from scratch.
   for (std::size_t i = 0; i < result.settings.size(); ++i) {
     SettingResult& r = result.settings[i];
@@ -1056,6 +922,239 @@ StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
         << (rec.setting >= 0 ? result.settings[static_cast<std::size_t>(rec.setting)].label : "none")
         << " — " << rec.reason << "\n";
   }
+}
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// The study
+// ---------------------------------------------------------------------------
+StudyResult run_accuracy_study(const StudyOptions& options, std::ostream& log) {
+  if (options.axes.empty()) {
+    throw InputError("--vary", 0, "expected at least one --vary KEY=V1,V2,...");
+  }
+  const common::Scene scene = load_scene(options.scene_file);
+  const fs::path out_dir = fs::absolute(options.out_dir).lexically_normal();
+
+  // Keys and reference values.
+  std::vector<VaryAxis> axes = options.axes;
+  std::set<std::string> seen_keys;
+  for (const VaryAxis& a : axes) {
+    common::find_settable_key(scene, a.key);  // throws for an unknown key
+    if (!seen_keys.insert(a.key).second) {
+      throw InputError("--vary", 0, a.key + " varied twice; give all its values in one --vary");
+    }
+  }
+  for (const std::string& r : options.reference) {
+    const std::size_t eq = r.find('=');
+    std::string key = eq == std::string::npos ? std::string() : r.substr(0, eq);
+    std::string value = eq == std::string::npos ? r : r.substr(eq + 1);
+    if (key.empty() || std::none_of(axes.begin(), axes.end(), [&](const VaryAxis& a) { return a.key == key; })) {
+      // "V" alone, or "KEY=V" whose key is not an axis: a value of the only axis.
+      if (axes.size() != 1 || !key.empty()) {
+        throw InputError("--reference", 0,
+                         "expected KEY=VALUE with KEY one of the varied keys"
+                         " (or VALUE alone with a single --vary), found '" + r + "'");
+      }
+      key = axes[0].key;
+      value = r;
+    }
+    for (VaryAxis& a : axes) {
+      if (a.key != key) continue;
+      const auto it = std::find(a.values.begin(), a.values.end(), value);
+      if (it == a.values.end()) {
+        std::string list;
+        for (const std::string& v : a.values) list += (list.empty() ? "" : ", ") + v;
+        throw InputError("--reference", 0, "'" + value + "' is not one of the values of " +
+                                               key + " (" + list + ")");
+      }
+      a.reference = static_cast<std::size_t>(it - a.values.begin());
+    }
+  }
+
+  // Every value alone (the other keys as in the scene), so a bad value is
+  // named by itself; and two values of one key must change what some stage
+  // runs, or the axis measures nothing.
+  const fs::path probe_dir = out_dir / "runs" / "probe";
+  for (const VaryAxis& a : axes) {
+    std::vector<std::pair<std::string, std::vector<StageStep>>> plans;
+    for (const std::string& v : a.values) {
+      common::Scene s;
+      checked_scene_text(options.scene_file, {{a.key, v}}, out_dir / "scenes" / "check.yaml", &s);
+      plans.emplace_back(v, plan_stages(s, probe_dir));
+    }
+    for (std::size_t i = 0; i < plans.size(); ++i) {
+      for (std::size_t j = i + 1; j < plans.size(); ++j) {
+        std::string si, sj;
+        for (const StageStep& st : plans[i].second) si += stage_signature(st, probe_dir);
+        for (const StageStep& st : plans[j].second) sj += stage_signature(st, probe_dir);
+        if (si == sj) {
+          throw InputError("--vary", 0,
+                           a.key + ": the values '" + plans[i].first + "' and '" + plans[j].first +
+                               "' run every stage with the same options and inputs (no stage "
+                               "this scene runs reads " + a.key + ", e.g. because a scenario "
+                               "sets it itself, or the two values mean the same)");
+        }
+      }
+    }
+  }
+
+  // The grid, last axis fastest (an odometer over the value indices).
+  std::vector<PlannedSetting> grid;
+  std::vector<std::size_t> idx(axes.size(), 0);
+  while (true) {
+    PlannedSetting p;
+    p.index = idx;
+    for (std::size_t a = 0; a < axes.size(); ++a) p.values.emplace_back(axes[a].key, axes[a].values[idx[a]]);
+    p.label = setting_label(p.values);
+    grid.push_back(std::move(p));
+    bool done = true;
+    for (std::size_t a = axes.size(); a-- > 0;) {
+      if (++idx[a] < axes[a].values.size()) {
+        done = false;
+        break;
+      }
+      idx[a] = 0;
+    }
+    if (done) break;
+  }
+
+  StudyResult result;
+  std::set<std::string> folders;
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    SettingResult r;
+    r.values = grid[i].values;
+    r.index = grid[i].index;
+    r.label = grid[i].label;
+    std::string folder = folder_name(r.label);
+    if (!folders.insert(folder).second) folder += "_" + std::to_string(i);
+    r.dir = out_dir / "runs" / folder;
+    r.scene = out_dir / "scenes" / (folder + ".yaml");
+    grid[i].text = checked_scene_text(options.scene_file, r.values, r.scene);
+    bool is_ref = true;
+    for (std::size_t a = 0; a < axes.size(); ++a) is_ref = is_ref && r.index[a] == axes[a].reference;
+    if (is_ref) result.reference = i;
+    result.settings.push_back(std::move(r));
+  }
+
+  fs::create_directories(out_dir / "scenes");
+  fs::create_directories(out_dir / "runs");
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    std::ofstream f(result.settings[i].scene, std::ios::binary);
+    f << grid[i].text;
+    if (!f) throw InputError(result.settings[i].scene.string(), 0, "cannot write the scene copy");
+  }
+
+  const fs::path measurements_file = out_dir / ".stage_measurements.tsv";
+  std::map<std::string, Measurement> measured = read_measurements(measurements_file);
+
+  log << "study: " << grid.size() << " setting" << (grid.size() == 1 ? "" : "s") << " of "
+      << scene.file.string() << ", reference " << result.settings[result.reference].label
+      << "; output in " << out_dir.string() << "\n";
+  log.flush();
+
+  std::vector<std::vector<StageStep>> plans(grid.size());
+  std::vector<std::map<std::string, std::set<std::string>>> upstream(grid.size());
+  if (options.use_workflow) {
+    run_grid_by_workflow(options, out_dir, axes, result, plans, upstream, log);
+    evaluate_grid(options, upstream, result, log);
+    return result;
+  }
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    SettingResult& r = result.settings[i];
+    const common::Scene s = load_scene(r.scene);
+    plans[i] = plan_stages(s, r.dir);
+    upstream[i] = upstream_stages(plans[i]);
+    fs::create_directories(r.dir);
+    // Seed from the earlier setting that shares the most stages.
+    int donor = -1, best = 0;
+    for (std::size_t j = 0; j < i; ++j) {
+      if (options.force) continue;  // a failed setting still has the stamps of what worked
+      const int m = count_matching_stages(plans[j], result.settings[j].dir, plans[i], r.dir);
+      if (m > best) best = m, donor = static_cast<int>(j);
+    }
+    log << "study: [" << i + 1 << "/" << grid.size() << "] " << r.label
+        << (i == result.reference ? " (reference)" : "") << "\n";
+    if (donor >= 0) {
+      const std::vector<std::string> seeded = seed_run_folder(
+          plans[static_cast<std::size_t>(donor)], result.settings[static_cast<std::size_t>(donor)].dir,
+          plans[i], r.dir);
+      if (!seeded.empty()) {
+        std::string list;
+        for (const std::string& n : seeded) list += (list.empty() ? "" : ", ") + n;
+        log << "study: outputs of " << list << " copied from setting "
+            << result.settings[static_cast<std::size_t>(donor)].label
+            << " (same options and inputs; the runner checks their hashes)\n";
+      }
+    }
+    log.flush();
+    RunnerOptions ro;
+    ro.out_dir = r.dir;
+    ro.stage_dir = options.stage_dir;
+    ro.force = options.force;
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunReport rep = run_scene(s, ro, log);
+    r.study_wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    r.ok = rep.status == RunStatus::kOk;
+    r.failure = rep.message;
+    for (const StageOutcome& o : rep.stages) {
+      StageRecord rec;
+      rec.stage = o.name;
+      rec.key = o.key;
+      switch (o.status) {
+        case StageStatus::kRan: rec.run = "ran"; break;
+        case StageStatus::kSkipped: rec.run = "reused"; break;
+        case StageStatus::kFailed: rec.run = "failed"; break;
+        default: rec.run = "not run";
+      }
+      if (o.status == StageStatus::kFailed) {
+        rec.failure = o.reason;
+        for (const StageStep& st : plans[i]) {
+          if (st.name != o.name) continue;
+          rec.failed_with_output = std::all_of(st.outputs.begin(), st.outputs.end(),
+                                               [](const fs::path& f) { return fs::exists(f); });
+        }
+      }
+      if (o.status == StageStatus::kRan || o.status == StageStatus::kFailed) {
+        rec.wall_time_s = o.wall_time_s;
+        rec.cpu_time_s = o.cpu_time_s;
+        rec.max_rss_mb = static_cast<double>(o.max_rss_kb) / 1024.0;
+      }
+      if (o.status == StageStatus::kRan) {
+        measured[o.key] = {o.wall_time_s, o.cpu_time_s, o.max_rss_kb, r.label};
+        std::ofstream m(measurements_file, std::ios::app);
+        m << std::setprecision(17) << o.key << "\t" << o.name << "\t" << o.wall_time_s << "\t"
+          << o.cpu_time_s << "\t" << o.max_rss_kb << "\t" << r.label << "\n";
+      } else if (o.status == StageStatus::kSkipped) {
+        const auto it = measured.find(o.key);
+        if (it != measured.end()) {
+          rec.wall_time_s = it->second.wall_s;
+          rec.cpu_time_s = it->second.cpu_s;
+          rec.max_rss_mb = static_cast<double>(it->second.rss_kb) / 1024.0;
+          rec.produced_by = it->second.label == r.label ? "an earlier study run of this setting"
+                                                        : it->second.label;
+        } else {
+          rec.produced_by = "an earlier run (no measurement recorded)";
+        }
+      }
+      r.stages.push_back(rec);
+    }
+    std::ostringstream line;
+    line << "study: [" << i + 1 << "/" << grid.size() << "] " << (r.ok ? "done" : "FAILED") << " in "
+         << fixed(r.study_wall_time_s, 1) << " s:";
+    for (const StageRecord& rec : r.stages) {
+      line << " " << rec.stage << " " << rec.run;
+      if (rec.run == "ran") {
+        line << " (" << fixed(rec.wall_time_s, 1) << " s, " << fixed(rec.max_rss_mb, 0) << " MB)";
+      }
+      if (rec.run == "reused") line << " (from " << rec.produced_by << ")";
+      line << (&rec == &r.stages.back() ? "" : ",");
+    }
+    log << line.str() << "\n";
+    if (!r.ok) log << "study: " << r.failure << "\n";
+    log.flush();
+  }
+
+  evaluate_grid(options, upstream, result, log);
   return result;
 }
 

@@ -44,6 +44,7 @@
 #include <utility>
 #include <vector>
 
+#include "pipelines/cohort.h"
 #include "pipelines/stages.h"
 
 namespace arthrosim::pipelines::study {
@@ -78,6 +79,13 @@ struct StudyOptions {
   double tolerance = 0.05;
   /// The command line as typed, for the report.
   std::string command_line;
+  /// --workflow: run the grid as a one-subject cohort (OUT/cohort.yaml, run
+  /// folders OUT/cohort/runs/study/<setting>) through Snakemake
+  /// (pipelines/cohort.h) instead of the scene runner; the errors and
+  /// recommendations are computed from those folders exactly as for a local
+  /// run. Per-stage time, CPU and memory are not measured then (NaN).
+  bool use_workflow = false;
+  cohort::WorkflowOptions workflow;
 };
 
 /// One key output of a stage, compared with the reference (pipelines/stages.h).

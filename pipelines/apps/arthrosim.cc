@@ -101,6 +101,13 @@ Writes OUT/study.json (everything), OUT/study.csv (one row per setting and
 stage), OUT/report.html (error-versus-time plot with Pareto fronts, tables,
 recommended settings), OUT/scenes/ (each setting's scene).
 
+With --workflow the grid runs through Snakemake instead (grids too large for
+one machine): OUT/cohort.yaml, a cohort of one subject with the --vary values
+as its settings, run like `arthrosim cohort` into OUT/cohort/ (--cores N
+locally, --slurm or --profile P on a cluster; docs/cohorts.md), then evaluated
+by the same code into the same outputs. Time, CPU and memory per stage are
+not measured then.
+
 Sample runs (from the repository root, after scripts/build.sh):
   build/bin/arthrosim study accuracy data/studies/post_outline_points.yaml \
       --vary post.outline_points=50,100,200,400,800 --out out/study_post
@@ -116,6 +123,9 @@ Sample runs (from the repository root, after scripts/build.sh):
       --vary surface.scenarios.cantilever.shell_thickness_mm=1,2 --reference \
       surface.scenarios.cantilever.youngs_modulus_mpa=400 --out out/study_grid
       a 2 x 2 grid
+  build/bin/arthrosim study accuracy data/scenes/osmotic.yaml \
+      --vary prepare.edge_length_mm=3,2.5 --out out/study_wf --workflow --cores 2
+      a grid run by Snakemake (--slurm: on a cluster)
 
 Exit status: 0 every setting ran; 1 bad input (nothing runs) or a setting
 failed (the outputs are still written and name it).)";
@@ -203,6 +213,16 @@ int main(int argc, char** argv) {
                        "reference value: V (one --vary) or KEY=V; default the last value of each")
       ->allow_extra_args(false);
   accuracy->add_flag("--force", study_options.force, "rerun every stage of every setting");
+  accuracy->add_flag("--workflow", study_options.use_workflow,
+                     "run the grid as a one-subject cohort through Snakemake (OUT/cohort.yaml; docs/cohorts.md, "
+                     "\"Accuracy grids\"); time, CPU and memory per stage are then not measured");
+  study_options.workflow.cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  accuracy->add_option("--cores", study_options.workflow.cores, "with --workflow: cores Snakemake may use (snakemake -c)")
+      ->check(CLI::PositiveNumber);
+  accuracy->add_flag("--slurm", study_options.workflow.slurm, "with --workflow: every job on Slurm (workflow/profiles/slurm)");
+  accuracy->add_option("--profile", study_options.workflow.profile, "with --workflow: a Snakemake profile folder");
+  accuracy->add_option("--snakemake", study_options.workflow.snakemake, "with --workflow: the snakemake program")
+      ->capture_default_str();
 
   CLI::App* cohort = app.add_subcommand("cohort", kCohortDescription);
   std::string cohort_file, cohort_out, cohort_profile, snakemake_program = "snakemake", workflow_dir;
@@ -269,32 +289,16 @@ int main(int argc, char** argv) {
     try {
       const fs::path stage_dir = pl::default_stage_dir();
       const pl::cohort::Cohort c = pl::cohort::load_cohort(cohort_file);
-      const fs::path out = fs::absolute(cohort_out).lexically_normal();
-      fs::path workflow = workflow_dir;
-      if (workflow.empty() && std::getenv("ARTHROSIM_WORKFLOW_DIR")) workflow = std::getenv("ARTHROSIM_WORKFLOW_DIR");
-      if (workflow.empty()) workflow = cm::repository_of(stage_dir) / "workflow";
-      workflow = fs::absolute(workflow).lexically_normal();
-      if (!fs::is_regular_file(workflow / "Snakefile"))
-        throw cm::InputError((workflow / "Snakefile").string(), 0,
-                             "expected the workflow's Snakefile (give its folder with --workflow), found none");
-      const pl::cohort::Plan plan = pl::cohort::plan_cohort(c, out, stage_dir);
-      const fs::path plan_file = out / "plan.json";
-      pl::cohort::write_if_changed(plan_file, pl::cohort::plan_json(c, plan, stage_dir));
-      std::cout << "arthrosim cohort: " << c.subjects.size() << " subject(s) x " << plan.settings.size()
-                << " setting(s): " << plan.jobs.size() << " stage runs planned in " << plan_file.string() << "\n";
-      command = {snakemake_program, "--snakefile", (workflow / "Snakefile").string(), "--configfile",
-                 (workflow / "config.yaml").string(), "--directory", out.string(), "--rerun-incomplete"};
-      if (cohort_slurm && cohort_profile.empty()) cohort_profile = (workflow / "profiles" / "slurm").string();
-      if (!cohort_profile.empty()) {
-        command.insert(command.end(), {"--profile", fs::absolute(cohort_profile).lexically_normal().string()});
-        if (cohort->count("--cores") > 0) command.insert(command.end(), {"--cores", std::to_string(cohort_cores)});
-      } else {
-        command.insert(command.end(), {"--cores", std::to_string(cohort_cores)});
-      }
-      if (cohort_dry_run) command.push_back("--dry-run");
-      for (const std::string& extra : snakemake_args) command.push_back(extra);
-      // Last: --config takes every following word up to the next option.
-      command.insert(command.end(), {"--config", "plan=" + plan_file.string()});
+      pl::cohort::WorkflowOptions wo;
+      wo.workflow_dir = workflow_dir;
+      wo.snakemake = snakemake_program;
+      wo.cores = cohort_cores;
+      wo.cores_given = cohort->count("--cores") > 0;
+      wo.profile = cohort_profile;
+      wo.slurm = cohort_slurm;
+      wo.dry_run = cohort_dry_run;
+      wo.extra = snakemake_args;
+      command = pl::cohort::workflow_command(c, cohort_out, stage_dir, wo, std::cout);
     } catch (const cm::InputError& e) {
       std::cerr << "arthrosim cohort: " << e.what() << "\n";
       return 1;
@@ -323,6 +327,11 @@ int main(int argc, char** argv) {
         study_options.command_line += (i ? " " : "") + std::string(i ? argv[i] : "arthrosim");
       }
       for (const std::string& v : vary) study_options.axes.push_back(pl::study::parse_vary(v));
+      study_options.workflow.cores_given = accuracy->count("--cores") > 0;
+      if (!study_options.use_workflow &&
+          (study_options.workflow.cores_given || study_options.workflow.slurm || !study_options.workflow.profile.empty())) {
+        throw cm::InputError("--cores/--slurm/--profile", 0, "expected --workflow with them (they configure Snakemake)");
+      }
       const pl::study::StudyResult result = pl::study::run_accuracy_study(study_options, std::cout);
       pl::study::write_study_outputs(study_options, result);
       const fs::path out = fs::absolute(study_out).lexically_normal();

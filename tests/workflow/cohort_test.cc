@@ -4,8 +4,10 @@
 // programs: 2 subjects x 2 settings on the bundled knee with short trial
 // windows runs; a second call runs nothing; editing one subject's trial
 // reruns that subject's trial-dependent stages only; a changed post option
-// reruns the post stage only.
+// reruns the post stage only; an accuracy study run through the workflow
+// gives the local study's errors and recommendation.
 #include "pipelines/cohort.h"
+#include "pipelines/study.h"
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -13,6 +15,7 @@
 
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -260,6 +263,73 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
       EXPECT_NE(time, after.at(name)) << name << " was not rerun";
     if (f == "kinematics.h5" || f == "prepared.h5" || f == "surface_osmotic.h5")
       EXPECT_EQ(time, after.at(name)) << name << " was rerun";
+  }
+}
+
+// `arthrosim study accuracy --workflow` (pipelines/study.h): the same grid run
+// by the scene runner and as a one-subject cohort through Snakemake gives the
+// same per-stage errors (bit for bit: the same stage programs on the same
+// scenes, and stage outputs are deterministic) and the same recommendation.
+// Two shell resolutions of the osmotic-only scene: seconds.
+TEST(StudyWorkflow, SameErrorsAndRecommendationAsTheLocalStudy) {
+  if (which("snakemake").empty())
+    GTEST_SKIP() << "snakemake not found on PATH (scripts/install-deps.sh installs Debian's snakemake)";
+  const fs::path dir = fresh_scratch_dir("study_workflow");
+  ::arthrosim::pipelines::study::StudyOptions o;
+  o.scene_file = kSource / "data/scenes/osmotic.yaml";
+  o.axes.push_back(::arthrosim::pipelines::study::parse_vary("prepare.edge_length_mm=3,2.5"));
+  o.stage_dir = kBin;
+  o.out_dir = dir / "local";
+  std::ostringstream local_log, wf_log;
+  const ::arthrosim::pipelines::study::StudyResult local = ::arthrosim::pipelines::study::run_accuracy_study(o, local_log);
+  o.out_dir = dir / "wf";
+  o.use_workflow = true;
+  o.workflow.workflow_dir = kSource / "workflow";
+  o.workflow.cores = 2;
+  const ::arthrosim::pipelines::study::StudyResult wf = ::arthrosim::pipelines::study::run_accuracy_study(o, wf_log);
+  ::arthrosim::pipelines::study::write_study_outputs(o, wf);
+  EXPECT_TRUE(fs::exists(dir / "wf/cohort.yaml"));
+  EXPECT_TRUE(fs::exists(dir / "wf/study.csv"));
+  ASSERT_EQ(local.settings.size(), 2u);
+  ASSERT_EQ(wf.settings.size(), 2u);
+  EXPECT_EQ(local.reference, wf.reference);
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_TRUE(local.settings[i].ok) << local_log.str();
+    EXPECT_TRUE(wf.settings[i].ok) << wf_log.str();
+    EXPECT_EQ(local.settings[i].label, wf.settings[i].label);
+    EXPECT_NE(wf.settings[i].dir.string().find("/wf/cohort/runs/study/"), std::string::npos);
+    ASSERT_EQ(local.settings[i].stages.size(), wf.settings[i].stages.size());
+    for (std::size_t k = 0; k < local.settings[i].stages.size(); ++k) {
+      const ::arthrosim::pipelines::study::StageRecord& a = local.settings[i].stages[k];
+      const ::arthrosim::pipelines::study::StageRecord& b = wf.settings[i].stages[k];
+      EXPECT_EQ(a.stage, b.stage);
+      EXPECT_EQ(b.run, "ran");
+      EXPECT_TRUE(std::isnan(b.wall_time_s));  // not measured through the workflow
+      if (std::isnan(a.stage_error)) {
+        EXPECT_TRUE(std::isnan(b.stage_error)) << a.stage;
+      } else {
+        EXPECT_EQ(a.stage_error, b.stage_error) << a.stage;
+      }
+      ASSERT_EQ(a.metrics.size(), b.metrics.size());
+      for (std::size_t m = 0; m < a.metrics.size(); ++m) {
+        EXPECT_EQ(a.metrics[m].name, b.metrics[m].name);
+        if (std::isfinite(a.metrics[m].error)) EXPECT_EQ(a.metrics[m].error, b.metrics[m].error);
+      }
+    }
+  }
+  // The coarse setting's error is a real, non-zero difference (a test that
+  // compares two zeros would prove nothing).
+  const auto osmotic = [](const ::arthrosim::pipelines::study::SettingResult& r) {
+    for (const ::arthrosim::pipelines::study::StageRecord& s : r.stages)
+      if (s.stage == "surface.osmotic") return s.stage_error;
+    return ::arthrosim::pipelines::study::kNaN;
+  };
+  EXPECT_GT(osmotic(local.settings[0]), 0.0);
+  ASSERT_EQ(local.recommended.size(), wf.recommended.size());
+  for (std::size_t k = 0; k < local.recommended.size(); ++k) {
+    EXPECT_EQ(local.recommended[k].stage, wf.recommended[k].stage);
+    EXPECT_EQ(local.recommended[k].setting, wf.recommended[k].setting);
+    EXPECT_GE(wf.recommended[k].setting, 0);
   }
 }
 
