@@ -44,7 +44,60 @@ Eigen::Vector3d vector_of(const std::vector<std::string>& w, std::size_t from, c
   return {number_of(w[from], text), number_of(w[from + 1], text), number_of(w[from + 2], text)};
 }
 
+/// Removes a trailing "history NAME" from `rest` and returns NAME ("" if none).
+std::string take_history(std::string& rest, const std::string& text) {
+  std::vector<std::string> w = words_of(rest);
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    if (w[k] != "history") continue;
+    if (k + 2 != w.size())
+      throw std::invalid_argument("'" + text + "': expected one history name at the end ('... history NAME')");
+    rest.clear();  // the words before "history" (the rest is only read word by word)
+    for (std::size_t j = 0; j < k; ++j) rest += " " + w[j];
+    return w[k + 1];
+  }
+  return "";
+}
+
 }  // namespace
+
+double HistoryDefinition::at(double t) const {
+  if (t <= time_s.front()) return factor.front();
+  if (t >= time_s.back()) return factor.back();
+  const auto it = std::upper_bound(time_s.begin(), time_s.end(), t);
+  const std::size_t k = static_cast<std::size_t>(it - time_s.begin());  // time_s[k-1] <= t < time_s[k]
+  const double s = (t - time_s[k - 1]) / (time_s[k] - time_s[k - 1]);
+  return factor[k - 1] + s * (factor[k] - factor[k - 1]);
+}
+
+HistoryDefinition parse_history(const std::string& text) {
+  const auto [name, rest] = split_name(text);
+  const std::vector<std::string> w = words_of(rest);
+  HistoryDefinition h;
+  h.name = name;
+  if (w.empty()) throw std::invalid_argument("'" + text + "': expected 'ramp T' or 'table T0 F0 T1 F1 ...' after ':'");
+  if (w[0] == "ramp") {
+    if (w.size() != 2) throw std::invalid_argument("'" + text + "': expected 'ramp T' (T in s, > 0)");
+    const double T = number_of(w[1], text);
+    if (!(T > 0)) throw std::invalid_argument("'" + text + "': the ramp time must be > 0 s");
+    h.time_s = {0.0, T};
+    h.factor = {0.0, 1.0};
+  } else if (w[0] == "table") {
+    if (w.size() < 3 || (w.size() - 1) % 2 != 0)
+      throw std::invalid_argument("'" + text + "': expected 'table T0 F0 T1 F1 ...' ((time [s], factor) pairs)");
+    for (std::size_t k = 1; k < w.size(); k += 2) {
+      const double t = number_of(w[k], text), f = number_of(w[k + 1], text);
+      if (t < 0) throw std::invalid_argument("'" + text + "': time " + w[k] + " s is negative");
+      if (!h.time_s.empty() && !(t > h.time_s.back()))
+        throw std::invalid_argument("'" + text + "': times must increase strictly, found " + w[k] + " after " +
+                                    w[k - 2]);
+      h.time_s.push_back(t);
+      h.factor.push_back(f);
+    }
+  } else {
+    throw std::invalid_argument("'" + text + "': unknown history kind '" + w[0] + "' (ramp, table)");
+  }
+  return h;
+}
 
 NodeSetDefinition parse_node_set(const std::string& text) {
   const auto [name, rest] = split_name(text);
@@ -90,9 +143,10 @@ NodeSetDefinition parse_node_set(const std::string& text) {
 }
 
 ConstraintDefinition parse_constraint(const std::string& text) {
-  const auto [set, rest] = split_name(text);
+  auto [set, rest] = split_name(text);
   ConstraintDefinition c;
   c.set = set;
+  c.history = take_history(rest, text);
   const auto eq = rest.find('=');
   const std::vector<std::string> comps = words_of(rest.substr(0, eq));
   std::vector<int> order;
@@ -121,13 +175,16 @@ ConstraintDefinition parse_constraint(const std::string& text) {
                                   std::to_string(v.size()) + " values");
     for (std::size_t i = 0; i < v.size(); ++i) c.value(order[i]) = number_of(v[i], text) * (order[i] < 3 ? 1e-3 : 1.0);
   }
+  if (!c.history.empty() && !c.prescribed())
+    throw std::invalid_argument("'" + text + "': a history needs prescribed values ('= V ...', not all zero)");
   return c;
 }
 
 LoadDefinition parse_load(const std::string& text) {
-  const auto [set, rest] = split_name(text);
-  const std::vector<std::string> w = words_of(rest);
+  auto [set, rest] = split_name(text);
   LoadDefinition l;
+  l.history = take_history(rest, text);
+  const std::vector<std::string> w = words_of(rest);
   l.set = set;
   if (w.empty()) throw std::invalid_argument("'" + text + "': expected force, force_per_node, traction or gravity");
   if (w[0] == "force") l.kind = LoadDefinition::Kind::kForce;

@@ -408,14 +408,20 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
               "constraints on node sets, each 'SET: C C ... [= V V ...]' with C one of ux uy uz dx dy dz (global "
               "position and director components; u = ux uy uz, d = dx dy dz, all = both): the components are held at "
               "their reference value (effect fixed_nodes) or moved by V (mm for u, dimensionless for d), ramped like "
-              "point_load_n (effect prescribed_displacement); the reactions are written per constraint "
+              "point_load_n or following 'history H' at the end (effect prescribed_displacement); the reactions are written per constraint "
               "(docs/surface_output.md)");
   v.text_list("loads", loads, "",
               "loads on node sets (effect point_loads, ramped like point_load_n), each 'SET: force FX FY FZ' (total "
               "[N], equal shares), 'SET: force_per_node FX FY FZ' [N], 'SET: traction TX TY TZ' (fixed direction, "
               "MPa, on the quads with all four nodes in SET, consistent nodal forces) or 'SET: gravity GX GY GZ' "
               "(m/s^2: body force density_kg_per_m3 x g per unit volume on those quads) or 'SET: body_force FX FY FZ' "
-              "(N/mm^3, per unit volume, on those quads)");
+              "(N/mm^3, per unit volume, on those quads); each may end with 'history H' (a name of `histories`; "
+              "without one it ramps like point_load_n)");
+  v.text_list("histories", histories, "",
+              "time histories of loads and prescribed constraint values (items ending 'history H'), each 'H: ramp T' "
+              "(factor t / T, 1 after T; T in s, > 0) or 'H: table T0 F0 T1 F1 ...' ((time [s] >= 0, strictly "
+              "increasing; dimensionless factor) pairs, linear in between, the first factor before T0 and the last "
+              "after the last time); the factor multiplies the load or the prescribed value");
   v.effect_list("effects", effects, "surface", "surface effects to simulate in this scenario").required();
 }
 
@@ -562,7 +568,8 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   // Named sets, constraints and loads (generic mesh only).
   for (const auto& [key, items] : {std::pair<const char*, const std::vector<std::string>*>{"node_sets", &opt.node_sets},
                                     {"constraints", &opt.constraints},
-                                    {"loads", &opt.loads}})
+                                    {"loads", &opt.loads},
+                                    {"histories", &opt.histories}})
     if (!items->empty() && !c.generic)
       throw common::InputError(file, o.value(key).line, "scenario '" + sc->name + "': `" + key + "` needs a generic `mesh`");
   auto parse_list = [&](const char* key, const std::vector<std::string>& items, auto parse, auto& out) {
@@ -577,6 +584,24 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   parse_list("node_sets", opt.node_sets, cartilage::parse_node_set, c.node_sets);
   parse_list("constraints", opt.constraints, cartilage::parse_constraint, c.constraints);
   parse_list("loads", opt.loads, cartilage::parse_load, c.loads);
+  parse_list("histories", opt.histories, cartilage::parse_history, c.histories);
+  for (std::size_t i = 0; i < c.histories.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (c.histories[i].name == c.histories[j].name)
+        throw common::InputError(file, o.value("histories").line,
+                                 "scenario '" + sc->name + "': history '" + c.histories[i].name + "' defined twice");
+  auto known_history = [&](const std::string& name, const char* key) {
+    if (name.empty()) return;
+    for (const auto& h : c.histories)
+      if (h.name == name) return;
+    std::string have;
+    for (const auto& h : c.histories) have += (have.empty() ? "" : ", ") + h.name;
+    throw common::InputError(file, o.value(key).line,
+                             "scenario '" + sc->name + "': " + key + ": unknown history '" + name + "' (histories: " +
+                                 (have.empty() ? "none" : have) + ")");
+  };
+  for (const auto& d : c.constraints) known_history(d.history, "constraints");
+  for (const auto& d : c.loads) known_history(d.history, "loads");
   for (std::size_t i = 0; i < c.node_sets.size(); ++i)
     for (std::size_t j = 0; j < i; ++j)
       if (c.node_sets[i].name == c.node_sets[j].name)
@@ -770,13 +795,14 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
                                  "scenario '" + c.name + "': node set '" + d.name + "' holds no node of " + mesh_file);
     }
     for (const cartilage::ConstraintDefinition& d : c.constraints) g.constraints.push_back({d, sets.at(d.set)});
+    for (const cartilage::HistoryDefinition& h : c.histories) g.histories[h.name] = h;
     for (const cartilage::LoadDefinition& d : c.loads) {
       const std::vector<int>& nodes = sets.at(d.set);
       Eigen::MatrixXd f;
       using K = cartilage::LoadDefinition::Kind;
       if (d.kind == K::kForce || d.kind == K::kForcePerNode) {
         const double share = d.kind == K::kForce ? 1.0 / static_cast<double>(nodes.size()) : 1.0;
-        for (int n : nodes) g.set_loads_N.emplace_back(n, share * d.vector);
+        for (int n : nodes) (d.history.empty() ? g.set_loads_N : g.history_loads_N[d.history]).emplace_back(n, share * d.vector);
         continue;
       }
       const Eigen::Vector3d per_area =
@@ -789,7 +815,8 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
                                  "scenario '" + c.name + "': load on node set '" + d.set +
                                      "': no quad has all four nodes in the set");
       for (int n = 0; n < f.rows(); ++n)
-        if (!f.row(n).isZero(0.0)) g.set_loads_N.emplace_back(n, f.row(n).transpose());
+        if (!f.row(n).isZero(0.0))
+          (d.history.empty() ? g.set_loads_N : g.history_loads_N[d.history]).emplace_back(n, f.row(n).transpose());
     }
     r.model = cartilage::build_surface_model(r.input, par, c.effects, cartilage::BoneMotion::fixed(), &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
