@@ -133,11 +133,17 @@ NodeSetDefinition parse_node_set(const std::string& text) {
     if (w.size() != 2) throw std::invalid_argument("'" + text + "': expected 'group G' (an OBJ 'g' name)");
     s.kind = NodeSetDefinition::Kind::kGroup;
     s.group = w[1];
+  } else if (w[0] == "vtk_point_field" || w[0] == "vtk_cell_field") {
+    if (w.size() != 3)
+      throw std::invalid_argument("'" + text + "': expected '" + w[0] + " F V' (a scalar field of the VTK mesh and a value)");
+    s.kind = w[0] == "vtk_point_field" ? NodeSetDefinition::Kind::kPointField : NodeSetDefinition::Kind::kCellField;
+    s.group = w[1];
+    s.field_value = number_of(w[2], text);
   } else if (w[0] == "all") {
     if (w.size() != 1) throw std::invalid_argument("'" + text + "': nothing may follow 'all'");
     s.kind = NodeSetDefinition::Kind::kAll;
   } else {
-    throw std::invalid_argument("'" + text + "': unknown set kind '" + w[0] + "' (box, plane, nodes, all, group)");
+    throw std::invalid_argument("'" + text + "': unknown set kind '" + w[0] + "' (box, plane, nodes, all, group, vtk_point_field, vtk_cell_field)");
   }
   return s;
 }
@@ -200,7 +206,8 @@ LoadDefinition parse_load(const std::string& text) {
   return l;
 }
 
-std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh& m, const FaceGroups& groups) {
+std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh& m, const FaceGroups& groups,
+                              const std::vector<common::VtkField>& fields) {
   std::vector<int> out;
   const int n = m.num_nodes();
   switch (s.kind) {
@@ -230,6 +237,35 @@ std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh
       }
       for (int q : it->second)
         for (int a = 0; a < 4; ++a) out.push_back(m.Q(q, a));
+      std::sort(out.begin(), out.end());
+      out.erase(std::unique(out.begin(), out.end()), out.end());
+      break;
+    }
+    case NodeSetDefinition::Kind::kPointField:
+    case NodeSetDefinition::Kind::kCellField: {
+      const bool point = s.kind == NodeSetDefinition::Kind::kPointField;
+      const auto loc = point ? common::VtkField::Location::kPoint : common::VtkField::Location::kCell;
+      const common::VtkField* f = nullptr;
+      std::string have;
+      for (const common::VtkField& x : fields) {
+        if (x.location != loc) continue;
+        have += (have.empty() ? "" : ", ") + x.name;
+        if (x.name == s.group) f = &x;
+      }
+      if (f == nullptr)
+        throw std::invalid_argument("node set '" + s.name + "': the mesh has no VTK " + (point ? "point" : "cell") +
+                                    " field '" + s.group + "' (" + (point ? "point" : "cell") +
+                                    " fields: " + (have.empty() ? "none" : have) + ")");
+      if (f->values.cols() != 1)
+        throw std::invalid_argument("node set '" + s.name + "': VTK field '" + s.group + "' has " +
+                                    std::to_string(f->values.cols()) + " components, expected a scalar field");
+      for (Eigen::Index i = 0; i < f->values.rows(); ++i) {
+        if (f->values(i, 0) != s.field_value) continue;
+        if (point)
+          out.push_back(static_cast<int>(i));
+        else
+          for (int a = 0; a < 4; ++a) out.push_back(m.Q(i, a));
+      }
       std::sort(out.begin(), out.end());
       out.erase(std::unique(out.begin(), out.end()), out.end());
       break;

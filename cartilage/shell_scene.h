@@ -9,6 +9,8 @@
 //                "NAME: nodes I J K ..."                       (0-based node indices, as in the output)
 //                "NAME: all"
 //                "NAME: group G"                               (nodes of the faces after an OBJ 'g' line naming G)
+//                "NAME: vtk_point_field F V"                   (nodes whose VTK point field F equals V)
+//                "NAME: vtk_cell_field F V"                    (nodes of the quads whose VTK cell field F equals V)
 //   constraints: "SET: C C ... [= V V ...]" with C in ux uy uz dx dy dz (u = ux uy uz, d = dx dy dz, all = both):
 //                the masked coordinates of the set's nodes (positions and
 //                director components, global frame) are prescribed at their
@@ -40,19 +42,21 @@
 #include <vector>
 
 #include "common/mesh.h"
+#include "common/mesh_io.h"
 
 namespace arthrosim::cartilage {
 
 struct NodeSetDefinition {
   std::string name;
-  enum class Kind { kBox, kPlane, kNodes, kAll, kGroup } kind = Kind::kAll;
+  enum class Kind { kBox, kPlane, kNodes, kAll, kGroup, kPointField, kCellField } kind = Kind::kAll;
   std::vector<double> numbers;  ///< box: 6 (SI); plane: unit normal (3), offset D and tolerance [m]
   std::vector<int> nodes;       ///< kNodes
-  std::string group;            ///< kGroup
+  std::string group;            ///< kGroup; the field's name for kPointField, kCellField
+  double field_value = 0;       ///< kPointField, kCellField: the value selected (exact equality)
 };
 
 /// Face groups of a mesh file (OBJ 'g' lines): group name -> quad indices.
-using FaceGroups = std::map<std::string, std::vector<int>>;
+using FaceGroups = common::FaceGroups;
 
 /// A time history: a piecewise linear factor of time (scene key histories).
 struct HistoryDefinition {
@@ -87,7 +91,7 @@ HistoryDefinition parse_history(const std::string& text);
 /// The nodes of `mesh` in the set (sorted, unique); an index out of range or
 /// an unknown group throws std::invalid_argument.
 std::vector<int> select_nodes(const NodeSetDefinition& set, const common::QuadMesh& mesh,
-                              const FaceGroups& groups = {});
+                              const FaceGroups& groups = {}, const std::vector<common::VtkField>& fields = {});
 
 /// Consistent nodal forces of a fixed-direction force per unit area f [Pa]
 /// on the quads whose four nodes are all in `nodes` (sorted): node a gets

@@ -18,7 +18,9 @@
 #include <Eigen/Core>
 
 #include "common/error.h"
+#include "cartilage/shell_scene.h"
 #include "common/hdf5.h"
+#include "common/mesh_io.h"
 #include "pipelines/surface_stage.h"
 
 namespace arthrosim::pipelines {
@@ -374,6 +376,69 @@ TEST(ShellBenchmarks, BadHistoriesAreInputErrors) {
       EXPECT_NE(std::string(e.what()).find(cases[i].expect), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find(".yaml:"), std::string::npos) << e.what();
     }
+  }
+}
+
+// Node sets from VTK fields: the 4 x 1 strip as legacy VTK with a point field
+// `region` (1 at x = 0, 2 at x = 40, 0 elsewhere) and a cell field `part`
+// (7 on the last quad). The clamp on `region 1` and the tip load on
+// `region 2` give the same run as the plane sets of the OBJ strip (displacement
+// bit-identical: same nodes, same order of assembly); `part 7` selects the
+// last quad's four nodes; a missing field is an error naming the fields.
+TEST(ShellBenchmarks, VtkFieldsAreNodeSets) {
+  const fs::path d = fs::path(ARTHROSIM_BINARY_DIR) / "tests" / "shell_benchmarks";
+  fs::create_directories(d);
+  {
+    std::ofstream f(d / "field_strip.vtk");
+    f << "# vtk DataFile Version 3.0\nstrip\nASCII\nDATASET POLYDATA\nPOINTS 10 double\n";
+    for (int j = 0; j <= 1; ++j)
+      for (int i = 0; i <= 4; ++i) f << 10 * i << " " << 10 * j << " 0\n";
+    f << "POLYGONS 4 20\n";
+    for (int i = 0; i < 4; ++i) f << "4 " << i << " " << i + 1 << " " << i + 6 << " " << i + 5 << "\n";
+    f << "POINT_DATA 10\nSCALARS region int 1\nLOOKUP_TABLE default\n";
+    for (int j = 0; j <= 1; ++j)
+      for (int i = 0; i <= 4; ++i) f << (i == 0 ? 1 : i == 4 ? 2 : 0) << "\n";
+    f << "CELL_DATA 4\nSCALARS part int 1\nLOOKUP_TABLE default\n0\n0\n0\n7\n";
+  }
+  auto scene = [&](const std::string& name, const std::string& mesh, const std::string& sets) {
+    const fs::path p = d / (name + ".yaml");
+    std::ofstream(p) << "model: " << ARTHROSIM_SOURCE_DIR << "/data/models/knee_parametric/coarse\n"
+                     << "outputs: [surface]\nsurface:\n  scenarios:\n    c:\n      mesh: " << mesh << "\n"
+                     << "      end_time_s: 1\n      steady_state: true\n      node_sets: [" << sets << "]\n"
+                     << "      constraints: [\"root: all\"]\n      loads: [\"tip: force 0 0 1e-4\", \"last: traction 0 1e-6 0\"]\n"
+                     << "      effects: [fixed_nodes, point_loads]\n";
+    return p.string();
+  };
+  auto run = [&](const std::string& name, const std::string& scene_path) {
+    SurfaceStageOptions o;
+    o.scene = scene_path;
+    o.out = out_path(name);
+    o.progress = false;
+    EXPECT_EQ(run_surface_stage(o).status, SurfaceStageStatus::kCompleted);
+    const common::H5File f(o.out, common::H5File::Mode::kRead);
+    return f.read_tensor3("/surfaces/" + std::string(name == "field_run" ? "field_strip" : "plane_strip") + "/displacement");
+  };
+  strip_scene("plane_strip", "");  // writes plane_strip.obj
+  const common::Tensor3d a = run(
+      "field_run", scene("field_run", "field_strip.vtk",
+                         "\"root: vtk_point_field region 1\", \"tip: vtk_point_field region 2\", "
+                         "\"last: vtk_cell_field part 7\""));
+  const common::Tensor3d b = run(
+      "plane_run", scene("plane_run", "plane_strip.obj",
+                         "\"root: plane 1 0 0 0\", \"tip: plane 1 0 0 40\", \"last: box 30 0 0 40 10 0\""));
+  ASSERT_EQ(a.data.size(), b.data.size());
+  EXPECT_TRUE(a.data == b.data);
+  EXPECT_GT(std::abs(a(a.dims[0] - 1, 4, 2)), 0.0);
+  // The cell set holds the last quad's nodes.
+  std::vector<common::VtkField> fields;
+  const common::QuadMesh m = common::read_quad_vtk((d / "field_strip.vtk").string(), {}, &fields);
+  const std::vector<int> last = cartilage::select_nodes(cartilage::parse_node_set("last: vtk_cell_field part 7"), m, {}, fields);
+  EXPECT_EQ(last, (std::vector<int>{3, 4, 8, 9}));
+  try {
+    cartilage::select_nodes(cartilage::parse_node_set("x: vtk_point_field labels 1"), m, {}, fields);
+    ADD_FAILURE() << "missing field accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("point fields: region"), std::string::npos) << e.what();
   }
 }
 
