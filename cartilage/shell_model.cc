@@ -592,17 +592,73 @@ void ShellModel::add_constraint(NodeConstraint c) {
   if (!c.node_masks.empty() && c.node_masks.size() != c.nodes.size())
     throw common::InputError("constraint '" + c.name + "': " + std::to_string(c.node_masks.size()) + " masks for " +
                              std::to_string(c.nodes.size()) + " nodes");
+  if (c.frames.size() > 1 && c.frames.size() != c.nodes.size())
+    throw common::InputError("constraint '" + c.name + "': " + std::to_string(c.frames.size()) + " frames for " +
+                             std::to_string(c.nodes.size()) + " nodes");
+  for (const Eigen::Matrix3d& R : c.frames)
+    if (!R.allFinite() || !(R.transpose() * R).isApprox(Eigen::Matrix3d::Identity(), 1e-9))
+      throw common::InputError("constraint '" + c.name + "': a local frame is not a rotation (orthonormal columns)");
   for (size_t i = 0; i < c.nodes.size(); ++i) {
     const int node = c.nodes[i];
     if (node < 0 || node >= num_nodes_)
       throw common::InputError("constraint '" + c.name + "': node " + std::to_string(node) + " out of range [0, " +
                                std::to_string(num_nodes_) + ")");
-    const std::array<bool, 6>& mask = c.node_masks.empty() ? c.mask : c.node_masks[i];
-    for (int j = 0; j < 6; ++j)
-      if (mask[j]) constrained_[6 * node + j] = 1;
   }
   record(c.name, static_cast<long>(c.nodes.size()));
   constraints_.push_back(std::move(c));
+  index_constraints();
+}
+
+void ShellModel::index_constraints() {
+  // Groups (3 coordinates: a node's position or director) touched by a
+  // local-frame constraint become skew groups; every other masked
+  // coordinate is eliminated as a world coordinate.
+  const int n_groups = 2 * num_nodes_;
+  std::vector<int> skew_of(static_cast<size_t>(n_groups), -1);
+  skew_groups_.clear();
+  for (const auto& c : constraints_) {
+    if (c.frames.empty()) continue;
+    for (size_t i = 0; i < c.nodes.size(); ++i) {
+      const std::array<bool, 6>& mask = c.node_masks.empty() ? c.mask : c.node_masks[i];
+      for (int g = 0; g < 2; ++g) {
+        const int group = 2 * c.nodes[i] + g;
+        if ((mask[3 * g] || mask[3 * g + 1] || mask[3 * g + 2]) && skew_of[static_cast<size_t>(group)] < 0) {
+          skew_of[static_cast<size_t>(group)] = static_cast<int>(skew_groups_.size());
+          skew_groups_.push_back({group, Eigen::Matrix3d::Zero(), {}});
+        }
+      }
+    }
+  }
+  constrained_.assign(static_cast<size_t>(6 * num_nodes_), 0);
+  for (size_t ci = 0; ci < constraints_.size(); ++ci) {
+    const NodeConstraint& c = constraints_[ci];
+    for (size_t i = 0; i < c.nodes.size(); ++i) {
+      const int node = c.nodes[i];
+      const std::array<bool, 6>& mask = c.node_masks.empty() ? c.mask : c.node_masks[i];
+      for (int j = 0; j < 6; ++j) {
+        if (!mask[j]) continue;
+        const int sg = skew_of[static_cast<size_t>(2 * node + j / 3)];
+        if (sg < 0) {
+          constrained_[6 * node + j] = 1;
+          continue;
+        }
+        const Eigen::Vector3d a = c.frames.empty()       ? Eigen::Vector3d::Unit(j % 3)
+                                  : c.frames.size() == 1 ? Eigen::Vector3d(c.frames[0].col(j % 3))
+                                                         : Eigen::Vector3d(c.frames[i].col(j % 3));
+        skew_groups_[static_cast<size_t>(sg)].held.push_back({static_cast<int>(ci), static_cast<int>(i), j, a});
+      }
+    }
+  }
+  for (SkewGroup& s : skew_groups_) {
+    // Orthonormal basis of the held directions (SVD; rank by a relative
+    // threshold far above round-off of unit vectors).
+    Eigen::Matrix<double, 3, Eigen::Dynamic> A(3, static_cast<Eigen::Index>(s.held.size()));
+    for (size_t k = 0; k < s.held.size(); ++k) A.col(static_cast<Eigen::Index>(k)) = s.held[k].a;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullU);
+    s.P.setZero();
+    for (Eigen::Index k = 0; k < svd.singularValues().size(); ++k)
+      if (svd.singularValues()(k) > 1e-8) s.P += svd.matrixU().col(k) * svd.matrixU().col(k).transpose();
+  }
 }
 
 void ShellModel::apply_constraints(double t, Eigen::VectorXd& q) const {
@@ -613,8 +669,75 @@ void ShellModel::apply_constraints(double t, Eigen::VectorXd& q) const {
       c.value(t, node, q6);
       const std::array<bool, 6>& mask = c.node_masks.empty() ? c.mask : c.node_masks[i];
       for (int j = 0; j < 6; ++j)
-        if (mask[j]) q(6 * node + j) = q6(j);
+        if (mask[j] && constrained_[6 * node + j]) q(6 * node + j) = q6(j);
     }
+  // Local-frame groups: the smallest change of x with a_k . x = b_k.
+  for (const SkewGroup& s : skew_groups_) {
+    const Eigen::Index k = static_cast<Eigen::Index>(s.held.size());
+    Eigen::MatrixXd A(k, 3);
+    Eigen::VectorXd b(k);
+    const int node = s.group / 2;
+    for (Eigen::Index r = 0; r < k; ++r) {
+      const HeldDirection& h = s.held[static_cast<size_t>(r)];
+      Eigen::Matrix<double, 6, 1> q6 = q.segment<6>(6 * node);
+      constraints_[static_cast<size_t>(h.constraint)].value(t, node, q6);
+      A.row(r) = h.a.transpose();
+      b(r) = h.a.dot(q6.segment<3>(3 * (h.coordinate / 3)));
+    }
+    Eigen::Vector3d x = q.segment<3>(3 * s.group);
+    x += A.completeOrthogonalDecomposition().solve(b - A * x);
+    q.segment<3>(3 * s.group) = x;
+  }
+}
+
+void ShellModel::project_vector(Eigen::VectorXd& x) const {
+  for (const SkewGroup& s : skew_groups_) {
+    const Eigen::Vector3d y = x.segment<3>(3 * s.group);
+    x.segment<3>(3 * s.group) = y - s.P * y;
+  }
+}
+
+void ShellModel::project_matrix(Eigen::SparseMatrix<double>& A) const {
+  // T = block diagonal, Q on the local-frame groups, 1 elsewhere; A <- T A T + P.
+  const Eigen::Index n = A.rows();
+  std::vector<Eigen::Triplet<double>> t, p;
+  std::vector<char> skew(static_cast<size_t>(n), 0);
+  for (const SkewGroup& s : skew_groups_) {
+    const Eigen::Matrix3d Q = Eigen::Matrix3d::Identity() - s.P;
+    // P scaled like the group's diagonal: T A T carries round-off of order
+    // eps |A| into the held directions, so a unit P would let the solve move
+    // the held components by eps |A| / 1 of the increment (1e-7 of it for a
+    // thin shell in SI); scaled, by eps of it.
+    double scale = 0;
+    for (int r = 0; r < 3; ++r) scale = std::max(scale, std::abs(A.coeff(3 * s.group + r, 3 * s.group + r)));
+    if (!(scale > 0)) scale = 1;
+    for (int r = 0; r < 3; ++r) {
+      skew[static_cast<size_t>(3 * s.group + r)] = 1;
+      for (int c = 0; c < 3; ++c) {
+        t.emplace_back(3 * s.group + r, 3 * s.group + c, Q(r, c));
+        p.emplace_back(3 * s.group + r, 3 * s.group + c, scale * s.P(r, c));
+      }
+    }
+  }
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (!skew[static_cast<size_t>(i)]) t.emplace_back(i, i, 1.0);
+  Eigen::SparseMatrix<double> T(n, n), P(n, n);
+  T.setFromTriplets(t.begin(), t.end());
+  P.setFromTriplets(p.begin(), p.end());
+  const Eigen::SparseMatrix<double> B = Eigen::SparseMatrix<double>(T * A * T) + P;
+  // Back into A's pattern (node blocks are dense in it, so B's entries are a subset).
+  long placed = 0;
+  for (int j = 0; j < A.outerSize(); ++j)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it) it.valueRef() = 0;
+  for (int j = 0; j < B.outerSize(); ++j)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(B, j); it; ++it) {
+      if (it.value() == 0) continue;
+      A.coeffRef(it.row(), j) = it.value();  // existing entry: no insertion
+      ++placed;
+    }
+  if (A.nonZeros() != pattern_.nonZeros() && A.rows() == pattern_.rows())
+    throw common::NumericalError("shell model: local-frame projection left the tangent pattern");
+  (void)placed;
 }
 
 bool ShellModel::tangent_symmetric() const {
@@ -631,6 +754,20 @@ std::string ShellModel::describe_dof(int i) const {
 }
 
 void ShellModel::evaluate(const numerics::EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+                          Eigen::SparseMatrix<double>* K) {
+  assemble(req, F, Ma, K);
+  if (skew_groups_.empty()) return;
+  project_vector(F);
+  if (Ma) project_vector(*Ma);
+  if (K) project_matrix(*K);
+}
+
+void ShellModel::evaluate_unprojected(const numerics::EvalRequest& req, Eigen::VectorXd& F,
+                                      Eigen::SparseMatrix<double>* K) {
+  assemble(req, F, nullptr, K);
+}
+
+void ShellModel::assemble(const numerics::EvalRequest& req, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
                           Eigen::SparseMatrix<double>* K) {
   const int n = num_dofs();
   if (!req.q || req.q->size() != n) throw common::NumericalError("ShellModel::evaluate: q has the wrong size");
@@ -714,6 +851,7 @@ void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {
     for (int j = 0; j < M.outerSize(); ++j)
       for (Eigen::SparseMatrix<double>::InnerIterator it(M, j); it; ++it)
         if (constrained_[it.row()] || constrained_[j]) it.valueRef() = (it.row() == j) ? 1.0 : 0.0;
+    if (!skew_groups_.empty()) project_matrix(M);
     mass_solver_ = std::make_unique<numerics::SparseDirectSolver>(numerics::LinearSolverKind::kCholmod);
     mass_solver_->analyze(M);
     if (!mass_solver_->factorize(M))
@@ -722,6 +860,7 @@ void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {
   Eigen::VectorXd b = rhs;
   for (int i = 0; i < b.size(); ++i)
     if (constrained_[i]) b(i) = 0;
+  project_vector(b);
   a = mass_solver_->solve(b);
 }
 

@@ -15,6 +15,17 @@
 // imposed by ELIMINATION: constrained coordinates take their prescribed
 // values before each Newton solve, and their rows/columns of the Newton matrix
 // are replaced by the identity (zero right-hand side). No penalty parameter.
+// A constraint may hold components in a local frame (NodeConstraint::frames,
+// e.g. an oblique symmetry plane): the standard skew boundary condition. For
+// each node group (position r_i or director d_i) that a local-frame
+// constraint touches, the held directions a_k (world unit vectors, from every
+// constraint on that group) span a subspace with orthogonal projector P; the
+// Newton system is taken in the rotated basis with those rows/columns
+// eliminated, written back in world coordinates: F -> Q F, M a -> Q M a,
+// K -> Q K Q + s P with Q = I - P, s the largest diagonal entry of the
+// group's block of K (so that P dq = 0 and Q K Q dq = -Q F). Such
+// groups are not listed in constrained(); apply_constraints sets a_k . x to
+// the prescribed values by the smallest change of x.
 //
 // Ownership: the model owns its elements and terms; term references returned
 // by add_* stay valid for the model's lifetime.
@@ -102,6 +113,12 @@ struct NodeConstraint {
   /// Per node (same order as `nodes`) instead of `mask`, when not empty.
   std::vector<std::array<bool, 6>> node_masks;
   std::function<void(double, int, Eigen::Matrix<double, 6, 1>&)> value;
+  /// Local frames R_WL (columns: the local axes in world) in which the mask
+  /// is read, for positions and directors alike: empty = world frame; one =
+  /// the same for every node; else one per node (same order as `nodes`).
+  /// With a frame, `value` still writes world coordinates; the constraint
+  /// holds their masked local components.
+  std::vector<Eigen::Matrix3d> frames;
 };
 
 struct ShellModelStatistics {
@@ -230,6 +247,12 @@ class ShellModel : public numerics::TimeIntegrable {
   const Eigen::SparseMatrix<double>& tangent_pattern() const override { return pattern_; }
   const std::vector<char>& constrained() const override { return constrained_; }
   void apply_constraints(double t, Eigen::VectorXd& q) const override;
+  /// F (and K) of the terms without the local-frame projection of evaluate()
+  /// (identical to evaluate() when no constraint has a frame): the forces
+  /// whose constrained components are the reactions.
+  void evaluate_unprojected(const numerics::EvalRequest& request, Eigen::VectorXd& F, Eigen::SparseMatrix<double>* K);
+  /// True when a constraint holds components in a local frame.
+  bool has_local_frames() const { return !skew_groups_.empty(); }
   void solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) override;
   const Eigen::VectorXd& increment_weights() const override { return weights_; }
   std::string describe_dof(int i) const override;
@@ -255,6 +278,13 @@ class ShellModel : public numerics::TimeIntegrable {
  private:
   void record(const std::string& name, long count);
   void build_pattern();
+  void assemble(const numerics::EvalRequest& request, Eigen::VectorXd& F, Eigen::VectorXd* Ma,
+                Eigen::SparseMatrix<double>* K);
+  /// Recomputes constrained_ and the local-frame groups from constraints_.
+  void index_constraints();
+  /// x -> Q x on the local-frame groups; A -> Q A Q + P (values in A's pattern).
+  void project_vector(Eigen::VectorXd& x) const;
+  void project_matrix(Eigen::SparseMatrix<double>& A) const;
 
   int num_nodes_ = 0;
   common::Quads quads_;
@@ -265,6 +295,18 @@ class ShellModel : public numerics::TimeIntegrable {
   std::vector<std::unique_ptr<ShellTerm>> terms_;
   std::vector<NodeConstraint> constraints_;
   std::vector<char> constrained_;
+  /// A held direction of a local-frame group: constraint, position in its
+  /// node list, coordinate 0..5 (its group offset), world unit vector.
+  struct HeldDirection {
+    int constraint, index, coordinate;
+    Eigen::Vector3d a;
+  };
+  struct SkewGroup {
+    int group;  ///< coordinates [3 group, 3 group + 3)
+    Eigen::Matrix3d P;
+    std::vector<HeldDirection> held;
+  };
+  std::vector<SkewGroup> skew_groups_;
   std::vector<std::string> built_;
   bool has_inertia_ = false;
   std::string part_;

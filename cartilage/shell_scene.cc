@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 
@@ -153,6 +154,44 @@ ConstraintDefinition parse_constraint(const std::string& text) {
   ConstraintDefinition c;
   c.set = set;
   c.history = take_history(rest, text);
+  {
+    // A trailing "frame KIND NUMBERS" (before any history).
+    const std::vector<std::string> w = words_of(rest);
+    for (std::size_t k = 0; k < w.size(); ++k) {
+      if (w[k] != "frame") continue;
+      if (k + 1 >= w.size())
+        throw std::invalid_argument("'" + text + "': expected normal, rotation or cylindrical after 'frame'");
+      const std::string& kind = w[k + 1];
+      std::vector<double> x;
+      for (std::size_t j = k + 2; j < w.size(); ++j) x.push_back(number_of(w[j], text));
+      auto unit = [&](std::size_t at, const char* what) {
+        Eigen::Vector3d a(x[at], x[at + 1], x[at + 2]);
+        if (!(a.norm() > 0)) throw std::invalid_argument("'" + text + "': the " + what + " must not be zero");
+        return Eigen::Vector3d(a.normalized());
+      };
+      if (kind == "normal") {
+        if (x.size() != 3) throw std::invalid_argument("'" + text + "': 'frame normal' takes NX NY NZ");
+        const Eigen::Vector3d n = unit(0, "normal");
+        c.frame = ConstraintDefinition::Frame::kNormal;
+        c.frame_numbers = {n(0), n(1), n(2)};
+      } else if (kind == "rotation") {
+        if (x.size() != 4) throw std::invalid_argument("'" + text + "': 'frame rotation' takes AX AY AZ DEG");
+        const Eigen::Vector3d a = unit(0, "rotation axis");
+        c.frame = ConstraintDefinition::Frame::kRotation;
+        c.frame_numbers = {a(0), a(1), a(2), x[3] * std::numbers::pi / 180.0};
+      } else if (kind == "cylindrical") {
+        if (x.size() != 6) throw std::invalid_argument("'" + text + "': 'frame cylindrical' takes PX PY PZ AX AY AZ");
+        const Eigen::Vector3d a = unit(3, "cylinder axis");
+        c.frame = ConstraintDefinition::Frame::kCylindrical;
+        c.frame_numbers = {1e-3 * x[0], 1e-3 * x[1], 1e-3 * x[2], a(0), a(1), a(2)};
+      } else {
+        throw std::invalid_argument("'" + text + "': unknown frame '" + kind + "' (normal, rotation, cylindrical)");
+      }
+      rest.clear();
+      for (std::size_t j = 0; j < k; ++j) rest += " " + w[j];
+      break;
+    }
+  }
   const auto eq = rest.find('=');
   const std::vector<std::string> comps = words_of(rest.substr(0, eq));
   std::vector<int> order;
@@ -183,7 +222,43 @@ ConstraintDefinition parse_constraint(const std::string& text) {
   }
   if (!c.history.empty() && !c.prescribed())
     throw std::invalid_argument("'" + text + "': a history needs prescribed values ('= V ...', not all zero)");
+  if (c.frame != ConstraintDefinition::Frame::kGlobal && c.prescribed())
+    throw std::invalid_argument("'" + text + "': a local-frame constraint takes no values (it holds the reference)");
   return c;
+}
+
+Eigen::Matrix3d ConstraintDefinition::local_frame(const Eigen::Vector3d& X) const {
+  const std::vector<double>& f = frame_numbers;
+  // Right-handed frame with first axis e1 (unit): e2 normal to e1 and to the
+  // global axis least aligned with it.
+  auto complete = [](const Eigen::Vector3d& e1) {
+    Eigen::Index k = 0;
+    e1.cwiseAbs().minCoeff(&k);
+    const Eigen::Vector3d e2 = e1.cross(Eigen::Vector3d::Unit(k)).normalized();
+    Eigen::Matrix3d R;
+    R << e1, e2, e1.cross(e2);
+    return R;
+  };
+  switch (frame) {
+    case Frame::kGlobal:
+      return Eigen::Matrix3d::Identity();
+    case Frame::kNormal:
+      return complete(Eigen::Vector3d(f[0], f[1], f[2]));
+    case Frame::kRotation:
+      return Eigen::AngleAxisd(f[3], Eigen::Vector3d(f[0], f[1], f[2])).toRotationMatrix();
+    case Frame::kCylindrical: {
+      const Eigen::Vector3d p(f[0], f[1], f[2]), a(f[3], f[4], f[5]);
+      Eigen::Vector3d r = X - p;
+      r -= a.dot(r) * a;
+      if (!(r.norm() > 1e-12 * std::max(1.0, (X - p).norm())))
+        throw std::invalid_argument("cylindrical frame: a node lies on the axis (no radial direction)");
+      r.normalize();
+      Eigen::Matrix3d R;
+      R << r, a.cross(r), a;
+      return R;
+    }
+  }
+  return Eigen::Matrix3d::Identity();
 }
 
 LoadDefinition parse_load(const std::string& text) {

@@ -17,6 +17,15 @@
 //                reference value plus V (mm for u, dimensionless for d; 0 if
 //                no values), reached linearly at the ramp time, or following
 //                history H when the item ends with "history H".
+//                "SET: C C ... frame F" reads the components in a local frame
+//                (positions and directors alike; ux = along the first local axis):
+//                  frame normal NX NY NZ          first axis n (normalised), the others
+//                                                  completing a right-handed frame
+//                                                  (a symmetry plane: "ux dx frame normal ...")
+//                  frame rotation AX AY AZ DEG    axes = the global ones rotated by DEG about A
+//                  frame cylindrical PX PY PZ AX AY AZ   per node: radial (from the axis
+//                                                  through P [mm] along A), circumferential, axial
+//                Local-frame constraints take no values (held at the reference).
 //   loads:       "SET: force FX FY FZ"            total force [N], equal shares per node
 //                "SET: force_per_node FX FY FZ"   [N] on every node of the set
 //                "SET: traction TX TY TZ"         fixed-direction force per unit reference area [MPa]
@@ -73,6 +82,13 @@ struct ConstraintDefinition {
   std::array<bool, 6> mask{};  ///< r_x, r_y, r_z, d_x, d_y, d_z
   Eigen::Matrix<double, 6, 1> value = Eigen::Matrix<double, 6, 1>::Zero();  ///< SI (m; 1)
   bool prescribed() const { return !value.isZero(0.0); }
+  enum class Frame { kGlobal, kNormal, kRotation, kCylindrical } frame = Frame::kGlobal;
+  /// kNormal: unit normal (3); kRotation: unit axis (3), angle [rad];
+  /// kCylindrical: point on the axis (3) [m], unit axis (3).
+  std::vector<double> frame_numbers;
+  /// R_WL (columns: the local axes in world) at reference position X [m];
+  /// identity for kGlobal. kCylindrical throws std::invalid_argument for X on the axis.
+  Eigen::Matrix3d local_frame(const Eigen::Vector3d& X) const;
 };
 
 struct LoadDefinition {

@@ -190,8 +190,11 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
               "constraints on node sets, each 'SET: C C ... [= V V ...]' with C one of ux uy uz dx dy dz (global "
               "position and director components; u = ux uy uz, d = dx dy dz, all = both): the components are held at "
               "their reference value (effect fixed_nodes) or moved by V (mm for u, dimensionless for d), ramped like "
-              "point_load_n or following 'history H' at the end (effect prescribed_displacement); the reactions are written per constraint "
-              "(docs/surface_output.md)");
+              "point_load_n or following 'history H' at the end (effect prescribed_displacement); 'SET: C C ... frame F' reads "
+              "the components in a local frame instead (no values; F = 'normal NX NY NZ': first axis n, e.g. an oblique "
+              "symmetry plane 'ux dx frame normal ...'; 'rotation AX AY AZ DEG': the global axes rotated by DEG about A; "
+              "'cylindrical PX PY PZ AX AY AZ': radial, circumferential, axial about the axis through P [mm] along A); "
+              "the reactions are written per constraint (docs/surface_output.md)");
   v.text_list("loads", loads, "",
               "loads on node sets (effect point_loads, ramped like point_load_n), each 'SET: force FX FY FZ' (total "
               "[N], equal shares), 'SET: force_per_node FX FY FZ' [N], 'SET: traction TX TY TZ' (fixed direction, "
@@ -402,6 +405,10 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   for (const auto& d : c.constraints) {
     known_set(d.set, "constraints");
     (d.prescribed() ? prescribed_sets : fixed_sets) = true;
+    if (d.frame != cartilage::ConstraintDefinition::Frame::kGlobal && c.contact)
+      throw common::InputError(file, o.value("constraints").line,
+                               "scenario '" + sc->name + "': local-frame constraints cannot be combined with mesh_contact "
+                               "(the contact tangent is added outside the surface's constraint projection)");
   }
   for (const auto& d : c.loads) known_set(d.set, "loads");
   // Every constraint and load must be built by a listed effect.
@@ -799,16 +806,38 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       r.model->apply_constraints(t, q0);
       Eigen::SparseMatrix<double> K;
       req.q = &q0;
-      r.model->evaluate(req, F, nullptr, &K);
+      r.model->evaluate_unprojected(req, F, &K);
       F += K * (q - q0);
     } else {
       req.q = &q;
-      r.model->evaluate(req, F, nullptr, nullptr);
+      r.model->evaluate_unprojected(req, F, nullptr);
     }
     // A coordinate held by several constraints counts for the first of them.
     std::vector<char> claimed(static_cast<size_t>(F.size()), 0);
+    // With local frames: per node the directions already counted
+    // (orthonormal); a constraint counts F's part along its own held
+    // position directions orthogonal to those.
+    const bool frames = r.model->has_local_frames();
+    std::map<int, std::vector<Eigen::Vector3d>> counted;
     for (size_t i = 0; i < cons.size(); ++i) {
       Eigen::Vector3d R = Eigen::Vector3d::Zero();
+      if (frames) {
+        for (int n : cons[i].nodes) {
+          const Eigen::Matrix3d L = cons[i].definition.local_frame(r.model->reference_position(n));
+          const Eigen::Vector3d f = F.segment<3>(6 * n);
+          for (int j = 0; j < 3; ++j) {
+            if (!cons[i].definition.mask[static_cast<size_t>(j)]) continue;
+            Eigen::Vector3d a = L.col(j);
+            for (const Eigen::Vector3d& b : counted[n]) a -= b.dot(a) * b;
+            if (a.norm() < 1e-8) continue;
+            a.normalize();
+            counted[n].push_back(a);
+            R += a.dot(f) * a;
+          }
+        }
+        reactions[k][i].push_back(R);
+        continue;
+      }
       for (int n : cons[i].nodes)
         for (int j = 0; j < 3; ++j) {
           const size_t dof = static_cast<size_t>(6 * n + j);
