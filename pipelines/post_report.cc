@@ -9,6 +9,7 @@
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "pipelines/shockwave_output.h"
+#include "pipelines/surface_output.h"
 
 namespace arthrosim::pipelines::post_report {
 namespace {
@@ -123,7 +124,8 @@ std::vector<SummaryRow> summary_rows(const KeyFigures& k) {
 
 report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files,
                                       const std::string& kinematics,
-                                      const std::vector<std::pair<std::string, double>>& key_times) {
+                                      const std::vector<std::pair<std::string, double>>& key_times,
+                                      const std::vector<std::pair<std::string, std::string>>& surfaces) {
   report_html::Section sec;
   sec.id = "sec-biphasic";
   sec.title = "Biphasic layers";
@@ -229,12 +231,25 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
       missing.push_back("stage 1 elastic-foundation pressure: " + kinematics + " has no " + ef);
     }
   }
-  missing.push_back("shell stage contact pressure: not part of this comparison yet");
+  if (surfaces.empty()) missing.push_back("shell stage contact pressure: no surface-stage file");
+  for (const auto& [scenario, path] : surfaces) {
+    std::string why;
+    const std::optional<surface_output::Series> s = surface_output::Reader(path).max_contact_pressure(why);
+    if (!s || s->time.size() == 0) {
+      missing.push_back("shell stage " + scenario + ": " + (s ? path + " has no complete frame" : why));
+      continue;
+    }
+    sources.push_back({"shell stage " + scenario + ": contact pressure", to_vector(s->time),
+                       to_vector(Eigen::VectorXd(s->values.col(0)), 1e-6)});
+  }
   sec.blocks.push_back(report_html::Text{
       "Peak contact pressure: per biphasic layer the largest applied total normal stress and contact fluid "
       "pressure over its articular vertices per step (surface/total_normal_stress, surface/fluid_pressure), beside "
       "stage 1's largest elastic-foundation pressure over the tibiofemoral contact (kinematics file " + ef +
-          "). The table gives them at the key frames (the step or frame nearest each key time). Not shown: " +
+          ") and, per surface-stage scenario, the shell stage's largest contact pressure over its surfaces' nodes per "
+          "stored frame on the trial clock (surface_<scenario>.h5 contact_pressure at /trial_time; the seating "
+          "frames sit at the trial's first time). The table gives them at the key frames: each source at its stored "
+          "step or frame nearest each key time (not interpolated), with the time used. Not shown: " +
           [&] {
             std::string m;
             for (const auto& x : missing) m += (m.empty() ? "" : "; ") + x;
@@ -243,7 +258,7 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
       {}, false});
   report_html::LinePlot pp;
   pp.id = "fig-biphasic-pressure";
-  pp.title = "Peak contact pressure: biphasic layers and stage-1 elastic foundation";
+  pp.title = "Peak contact pressure: biphasic layers, stage-1 elastic foundation and shell stage";
   pp.x_label = "time [s]";
   pp.y_label = "pressure [MPa]";
   int c = 0;
