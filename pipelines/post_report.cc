@@ -248,8 +248,9 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
       "stage 1's largest elastic-foundation pressure over the tibiofemoral contact (kinematics file " + ef +
           ") and, per surface-stage scenario, the shell stage's largest contact pressure over its surfaces' nodes per "
           "stored frame on the trial clock (surface_<scenario>.h5 contact_pressure at /trial_time; the seating "
-          "frames sit at the trial's first time). The table gives them at the key frames: each source at its stored "
-          "step or frame nearest each key time (not interpolated), with the time used. Not shown: " +
+          "ramp's frames come before the trial's first frame). The table gives them at the key frames: each source at its stored "
+          "step or frame nearest each key time (not interpolated), with the time used; \"-\" where the key time is "
+          "farther from the source's stored times than their largest spacing. Not shown: " +
           [&] {
             std::string m;
             for (const auto& x : missing) m += (m.empty() ? "" : "; ") + x;
@@ -283,12 +284,16 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
     }
     for (const auto& s : sources) {
       std::vector<report_html::Cell> row{s.label};
+      // A key time outside the source's stored times by more than its largest
+      // spacing has no nearby frame: "-" rather than the last frame's value.
+      double gap = 0.0;
+      for (std::size_t i = 1; i < s.t.size(); ++i) gap = std::max(gap, s.t[i] - s.t[i - 1]);
       for (const auto& kv : key_times) {
         const double tk = kv.second;
         std::size_t best = 0;
         for (std::size_t i = 1; i < s.t.size(); ++i)
           if (std::abs(s.t[i] - tk) < std::abs(s.t[best] - tk)) best = i;
-        if (s.t.empty()) {
+        if (s.t.empty() || std::abs(s.t[best] - tk) > gap) {
           row.push_back(kNaN);
           row.push_back(kNaN);
         } else {

@@ -6,6 +6,7 @@
 // for the shell stage), and the section draws in headless Chromium.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <variant>
 
@@ -124,7 +125,7 @@ TEST(PostBiphasicPressure, SeriesAndKeyFramesAreTheFilesValues) {
 
 // A surface-stage output written by its one writer: surfaces "femur" and
 // "tibia" (4 nodes, one quad each), frames on the trial clock `trial_t`
-// (the first a seating frame at the trial's first time), contact pressure
+// (the first a seating-ramp frame, before the trial's first frame), contact pressure
 // per surface and frame (rows) and node (columns) [Pa]. `contact` false: a
 // run without contact (no contact_pressure); `trial` false: no /trial_time.
 void write_surface(const std::string& path, const std::vector<double>& trial_t, const Eigen::MatrixXd& p_femur,
@@ -181,8 +182,8 @@ TEST(PostBiphasicPressure, ShellStageContactPressureAtTheNearestStoredFrames) {
   Eigen::MatrixXd sigma(3, 4);
   sigma << 0.0, 1e6, 3e6, 2e6, 5e6, 4e6, 0.0, 1e6, 0.5e6, 0.2e6, 0.7e6, 0.1e6;
   write_biphasic((dir / "biphasic.h5").string(), sigma, 0.9 * sigma);
-  // Frames: seating (trial 0.10 s), then 0.10, 0.16, 0.22, 0.31 s.
-  const std::vector<double> tt{0.10, 0.10, 0.16, 0.22, 0.31};
+  // Frames: seating (trial 0.09 s), then 0.10, 0.16, 0.22, 0.31 s.
+  const std::vector<double> tt{0.09, 0.10, 0.16, 0.22, 0.31};
   Eigen::MatrixXd pf(5, 4), pt(5, 4);
   pf << 0, 0, 0, 0,  //
       1e6, 2e6, 0, 0,  //
@@ -200,7 +201,7 @@ TEST(PostBiphasicPressure, ShellStageContactPressureAtTheNearestStoredFrames) {
   write_surface((dir / "surface_clock.h5").string(), tt, pf, pt, true, /*trial=*/false);
 
   const report_html::Section sec =
-      biphasic_section({{"run", (dir / "biphasic.h5").string()}}, {}, {{"first peak", 0.21}, {"second peak", 0.29}},
+      biphasic_section({{"run", (dir / "biphasic.h5").string()}}, {}, {{"first peak", 0.21}, {"second peak", 0.29}, {"late", 0.36}, {"after", 0.60}},
                        {{"gait", (dir / "surface_gait.h5").string()},
                         {"free", (dir / "surface_free.h5").string()},
                         {"clock", (dir / "surface_clock.h5").string()}});
@@ -222,6 +223,16 @@ TEST(PostBiphasicPressure, ShellStageContactPressureAtTheNearestStoredFrames) {
   EXPECT_DOUBLE_EQ(d(kt->rows[2][2]), 0.22);
   EXPECT_DOUBLE_EQ(d(kt->rows[2][3]), 3.0);
   EXPECT_DOUBLE_EQ(d(kt->rows[2][4]), 0.31);
+  // 0.36 s: 0.05 s after the shell run's last frame (largest spacing 0.09 s)
+  // -> 0.31 s; 0.06 s after the biphasic run's last step (spacing 0.10 s) ->
+  // 0.30 s. 0.60 s is farther from both than their spacing: no value (NaN,
+  // drawn "-").
+  EXPECT_DOUBLE_EQ(d(kt->rows[2][6]), 0.31);
+  EXPECT_DOUBLE_EQ(d(kt->rows[0][6]), 0.30);
+  for (std::size_t r = 0; r < kt->rows.size(); ++r) {
+    EXPECT_TRUE(std::isnan(d(kt->rows[r][7]))) << r;
+    EXPECT_TRUE(std::isnan(d(kt->rows[r][8]))) << r;
+  }
 
   std::string text;
   for (const auto& b : sec.blocks)
@@ -231,7 +242,7 @@ TEST(PostBiphasicPressure, ShellStageContactPressureAtTheNearestStoredFrames) {
   EXPECT_EQ(text.find("shell stage contact pressure: no surface-stage file"), std::string::npos);
 
   // Drawn in a real browser (the page's own check after Plotly.newPlot of
-  // every figure: the pressure plot, the four series plots, two maps).
+  // every figure: the pressure plot, the four series plots, one map per key frame).
   const std::string chromium = arthrosim::testing::chromium_path();
   if (chromium.empty()) GTEST_SKIP() << arthrosim::testing::kNoChromium;
   report_html::Report r;
@@ -242,7 +253,7 @@ TEST(PostBiphasicPressure, ShellStageContactPressureAtTheNearestStoredFrames) {
   EXPECT_EQ(check, "{\"ok\":true,\"figures\":" + std::to_string(report_html::figure_ids(r).size()) +
                        ",\"failed\":[],\"errors\":[]}")
       << "see " << (dir / "report" / "report.chromium.log");
-  EXPECT_EQ(report_html::figure_ids(r).size(), 7u);
+  EXPECT_EQ(report_html::figure_ids(r).size(), 9u);
 }
 
 TEST(PostBiphasicPressure, MissingSourcesAreListed) {
