@@ -5,7 +5,7 @@
 // only dataset excepted is named where it is compared: wall times).
 //
 // The runs are the stage programs on the coarse bundled knee with a few
-// frames (about a second each). Kill points: the kill tests' hook of
+// frames or steps (COMAK about 1 s, the surface stage a few seconds). Kill points: the kill tests' hook of
 // common/checkpoint.h (deterministic: right after checkpoint n is in place,
 // or after it was written and before its rename) and a SIGKILL from outside
 // while a frame is being solved.
@@ -15,6 +15,9 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstring>
+#include <set>
+#include <tuple>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -125,32 +128,28 @@ std::string kill_and_resume(const fs::path& dir, const std::string& kill_at) {
   return resumed;
 }
 
-TEST(ResumeComak, KilledAfterTheFirstFrameResumesBitIdentical) {
-  const fs::path dir = scratch("comak_after_1");
-  const std::string log = kill_and_resume(dir, "1");
-  EXPECT_NE(log.find("resuming from the checkpoint k.h5.checkpoint: 1 of 5 frames done"), std::string::npos) << log;
-  expect_same_as_reference(dir);
-}
-
-TEST(ResumeComak, KilledDuringTheSecondCheckpointResumesFromTheFirst) {
-  // The second checkpoint was written but not renamed: the first one stands.
-  const fs::path dir = scratch("comak_during_2");
-  const std::string log = kill_and_resume(dir, "2.partial");
-  EXPECT_NE(log.find("resuming from the checkpoint k.h5.checkpoint: 1 of 5 frames done"), std::string::npos) << log;
-  expect_same_as_reference(dir);
-}
-
-TEST(ResumeComak, KilledAfterTheLastCheckpointResumesBitIdentical) {
-  // 4 of 5: the last frame is never checkpointed (the output is finished next).
-  const fs::path dir = scratch("comak_after_4");
-  const std::string log = kill_and_resume(dir, "4");
-  EXPECT_NE(log.find("resuming from the checkpoint k.h5.checkpoint: 4 of 5 frames done"), std::string::npos) << log;
-  expect_same_as_reference(dir);
-}
-
-TEST(ResumeComak, KilledTwiceResumesTheResumedRun) {
+// One test case for the kill points (ctest runs each case in its own
+// process; they share the reference run). Each: killed, rerun with the same
+// command, which says where it resumes; datasets compared with the reference.
+TEST(ResumeComak, KilledAtCheckpointsResumesBitIdentical) {
+  struct Point {
+    const char* kill_at;  // the hook's kill point (common/checkpoint.h)
+    const char* resumes;  // what the rerun says
+  };
+  // 4 of 5: the last frame is never checkpointed (the output is finished
+  // next); "2.partial": the second checkpoint was written but not renamed, so
+  // the first one stands.
+  for (const Point& p : {Point{"1", "1 of 5 frames done"}, Point{"2.partial", "1 of 5 frames done"},
+                         Point{"4", "4 of 5 frames done"}}) {
+    SCOPED_TRACE(p.kill_at);
+    const fs::path dir = scratch(std::string("comak_at_") + p.kill_at);
+    const std::string log = kill_and_resume(dir, p.kill_at);
+    EXPECT_NE(log.find(std::string("resuming from the checkpoint k.h5.checkpoint: ") + p.resumes), std::string::npos)
+        << log;
+    expect_same_as_reference(dir);
+  }
+  // Killed twice: the first checkpoint of each process (frames 1, then 2).
   const fs::path dir = scratch("comak_twice");
-  // The first checkpoint of each process: frames 1, then 2 (the resumed run's first).
   const auto [first, p1] = run("cd " + dir.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=1 exec " + kComak);
   EXPECT_NE(first, 0) << p1;
   const std::string log = kill_and_resume(dir, "1");
@@ -209,6 +208,131 @@ TEST(ResumeComak, CheckpointOfAnotherRunIsNotUsed) {
   EXPECT_EQ(status2, 0) << log2;
   EXPECT_NE(log2.find("not resuming from k.h5.checkpoint: "), std::string::npos) << log2;
   expect_same_as_reference(dir);
+}
+
+// ---- surface stage: per step --------------------------------------------------
+
+// A short walking scenario: femur and medial tibial cartilage (prepared at
+// 10 mm edges: 628 nodes) in mesh contact, driven by the COMAK reference
+// run's kinematics (frames 10-14 of the synthetic trial) after a 10 ms
+// seating: 5 HHT steps of 10 ms, a frame after each, a checkpoint after
+// every step but the last (checkpoints 1-4).
+const fs::path& surface_inputs() {
+  static const fs::path dir = [] {
+    const fs::path d = scratch("surface_inputs");
+    const auto [status, printed] = run((kBin / "arthrosim-prepare").string() + " --model " +
+                                       (kSource / "data/models/knee_parametric/coarse").string() +
+                                       " --edge-length-mm 10 --out " + (d / "prepared.h5").string());
+    EXPECT_EQ(status, 0) << printed;
+    std::ofstream(d / "walk.yaml") << "model: " << (kSource / "data/models/knee_parametric/coarse").string()
+                                   << "\ntrial: " << (kSource / "data/trials/synthetic_gait").string() << R"(
+outputs: [surface]
+comak: {effects: [ligaments, muscles, tibiofemoral_contact, patellofemoral_contact]}
+surface:
+  scenarios:
+    walk:
+      surfaces: [femur, tibia_medial]
+      contact_pairs: ["femur:tibia_medial"]
+      time_step_s: 1e-2
+      output_interval_ms: 10
+      seating_time_s: 0.01
+      seating_offset_mm: 2.5
+      newton_tolerance: 1e-5
+      newton_residual_floor_n: 2
+      newton_increment_floor_mm: 1e-2
+      max_newton_iterations: 25
+      foundation_from_thickness: true
+      foundation_damping_n_s_per_mm3: 1e-3
+      contact_stiffness_n_per_mm3: 300
+      contact_max_depth_mm: 3
+      contact_smoothing_mm: 0.02
+      periphery_normal: foundation
+      checkpoint_interval_s: 0
+      effects: [foundation_springs, foundation_damping, periphery_fixed, imposed_kinematics, inertia, mesh_contact]
+)";
+    return d;
+  }();
+  return dir;
+}
+
+std::string surface_command() {
+  const fs::path in = surface_inputs();
+  return (kBin / "arthrosim-surface").string() + " --prepared " + (in / "prepared.h5").string() + " --kinematics " +
+         (comak_reference() / "k.h5").string() + " --scene " + (in / "walk.yaml").string() + " --out s.h5";
+}
+
+const fs::path& surface_reference() {
+  static const fs::path dir = [] {
+    const fs::path d = scratch("surface_reference");
+    const auto [status, printed] = run("cd " + d.string() + " && " + surface_command());
+    EXPECT_EQ(status, 0) << printed;
+    return d;
+  }();
+  return dir;
+}
+
+// Every dataset and attribute of the two surface outputs equal, except the
+// step wall times (/solver/wall_s) and the timing attributes of /solver
+// (and its symbolic_analyses count, below).
+void expect_same_surface_output(const fs::path& a, const fs::path& b) {
+  auto [status, report] = h5diff(a, b, {"/solver"});
+  EXPECT_EQ(status, 0) << report;
+  const arthrosim::common::H5File fa(a.string(), arthrosim::common::H5File::Mode::kRead);
+  const arthrosim::common::H5File fb(b.string(), arthrosim::common::H5File::Mode::kRead);
+  ASSERT_EQ(fa.list("/solver"), fb.list("/solver"));
+  for (const std::string& d : fa.list("/solver")) {
+    if (d == "wall_s") continue;
+    std::tie(status, report) = run("h5diff " + a.string() + " " + b.string() + " /solver/" + d);
+    EXPECT_EQ(status, 0) << "/solver/" << d << ": " << report;
+  }
+  // Timing attributes, and symbolic_analyses: a resumed process analyses the
+  // sparsity pattern once more (the pattern itself is restored exactly, and
+  // the analysis depends on nothing else).
+  const std::set<std::string> excepted = {"assembly_s", "contact_s",  "coupling_copy_s", "element_scatter_s",
+                                          "elements_s", "factorization_s", "solve_s",   "surfaces_s",
+                                          "total_s",    "wall_s",          "symbolic_analyses"};
+  ASSERT_EQ(fa.attribute_names("/solver"), fb.attribute_names("/solver"));
+  int compared = 0;
+  for (const std::string& k : fa.attribute_names("/solver")) {
+    if (excepted.count(k)) continue;
+    ++compared;
+    try {
+      EXPECT_EQ(fa.attribute_string("/solver", k), fb.attribute_string("/solver", k)) << k;
+    } catch (const std::exception&) {  // a number: compared bit for bit
+      const double x = fa.attribute_double("/solver", k), y = fb.attribute_double("/solver", k);
+      EXPECT_EQ(std::memcmp(&x, &y, sizeof x), 0) << k << ": " << x << " vs " << y;
+    }
+  }
+  EXPECT_GE(compared, 15);  // steps, newton_iterations, factorizations, symbolic_analyses, penetration ...
+}
+
+std::string surface_kill_and_resume(const fs::path& dir, const std::string& kill_at) {
+  const auto [killed, printed] =
+      run("cd " + dir.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=" + kill_at + " exec " + surface_command());
+  EXPECT_NE(killed, 0) << "not killed at checkpoint " << kill_at << ": " << printed;
+  EXPECT_FALSE(fs::exists(dir / "s.h5"));
+  EXPECT_TRUE(fs::exists(dir / "s.h5.checkpoint"));
+  const auto [status, resumed] = run("cd " + dir.string() + " && " + surface_command());
+  EXPECT_EQ(status, 0) << resumed;
+  expect_same_surface_output(surface_reference() / "s.h5", dir / "s.h5");
+  EXPECT_TRUE(slurp(surface_reference() / "s.xdmf") == slurp(dir / "s.xdmf"));
+  EXPECT_FALSE(fs::exists(dir / "s.h5.checkpoint"));
+  EXPECT_FALSE(fs::exists(dir / "s.h5.partial"));
+  return resumed;
+}
+
+// The kill points in one test case (they share the reference runs): after
+// the first step's checkpoint, while the third is written (the second stands),
+// after the last (4 of 5 steps).
+TEST(ResumeSurface, KilledAtCheckpointsResumesBitIdentical) {
+  for (const auto& [kill_at, resumes] :
+       std::vector<std::pair<std::string, std::string>>{{"1", "t = 0.010000 s, steps done: 1, frames written: 1"},
+                                                        {"3.partial", "t = 0.020000 s, steps done: 2, frames written: 2"},
+                                                        {"4", "t = 0.040000 s, steps done: 4, frames written: 4"}}) {
+    SCOPED_TRACE(kill_at);
+    const std::string log = surface_kill_and_resume(scratch("surface_at_" + kill_at), kill_at);
+    EXPECT_NE(log.find("resuming from the checkpoint s.h5.checkpoint: " + resumes), std::string::npos) << log;
+  }
 }
 
 }  // namespace
