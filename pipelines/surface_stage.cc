@@ -700,8 +700,7 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     if (options.kinematics.empty())
       throw common::InputError(file, c.line, "scenario '" + c.name + "' lists imposed_kinematics: give --kinematics");
     kin = std::make_unique<musculoskeletal::KinematicsFileReader>(options.kinematics);
-    b->partial_input = common::require_usable_file(kin->file(), options.kinematics, common::StageFile::kKinematics,
-                                                   options.allow_partial);
+    b->partial_input = kin->require_complete(options.allow_partial);  // kind, version, completeness
     const Eigen::VectorXd t = kin->time();
     b->kin_times.assign(t.data(), t.data() + t.size());
     if (b->kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
