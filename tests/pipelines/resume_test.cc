@@ -210,6 +210,47 @@ TEST(ResumeComak, CheckpointOfAnotherRunIsNotUsed) {
   expect_same_as_reference(dir);
 }
 
+// ---- the runner: a plain rerun of `arthrosim run` ------------------------------
+
+// The comak stage under `arthrosim run`, killed after its second checkpoint
+// (the hook's variable reaches the stage through the runner's environment):
+// the run fails naming the stage; the same `arthrosim run` again resumes the
+// stage (same command line, same stage key) and ends with the kinematics file
+// of an uninterrupted `arthrosim run`.
+TEST(ResumeRunner, PlainRerunOfArthrosimRunResumesTheKilledStage) {
+  const fs::path root = scratch("runner");
+  std::ofstream(root / "scene.yaml") << "model: " << (kSource / "data/models/knee_parametric/coarse").string()
+                                     << "\ntrial: " << (kSource / "data/trials/synthetic_gait").string() << R"(
+trial.start_s: 0.10
+trial.end_s: 0.14
+outputs: [kinematics]
+prepare: {edge_length_mm: 6}
+comak:
+  effects: [ligaments, muscles, tibiofemoral_contact, patellofemoral_contact]
+  checkpoint_interval_s: 0
+)";
+  // The same output folder for both runs (the runner gives the stages
+  // absolute paths, part of the files' metadata): the reference is moved aside.
+  const std::string arthrosim = (kBin / "arthrosim").string() + " run " + (root / "scene.yaml").string() +
+                                " --out " + (root / "out").string() + " --jobs 1";
+  auto [status, log] = run(arthrosim);
+  ASSERT_EQ(status, 0) << log;
+  fs::rename(root / "out", root / "reference");
+  std::tie(status, log) = run("ARTHROSIM_TEST_KILL_AT_CHECKPOINT=2 " + arthrosim);
+  EXPECT_NE(status, 0) << log;
+  EXPECT_NE(log.find("comak"), std::string::npos) << log;
+  ASSERT_TRUE(fs::exists(root / "out/kinematics.h5.checkpoint")) << log;
+  std::tie(status, log) = run(arthrosim);
+  ASSERT_EQ(status, 0) << log;
+  EXPECT_NE(log.find("resuming from the checkpoint " + (root / "out/kinematics.h5.checkpoint").string() +
+                     ": 2 of 5 frames done"),
+            std::string::npos)
+      << log;
+  std::tie(status, log) = h5diff(root / "reference/kinematics.h5", root / "out/kinematics.h5", {"/solver/wall_time"});
+  EXPECT_EQ(status, 0) << log;
+  EXPECT_FALSE(fs::exists(root / "out/kinematics.h5.checkpoint"));
+}
+
 // ---- surface stage: per step --------------------------------------------------
 
 // A short walking scenario: femur and medial tibial cartilage (prepared at
