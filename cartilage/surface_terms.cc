@@ -76,7 +76,7 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                }});
   t.push_back({"point_loads", "",
                [](const SurfaceInput& s) {
-                 if (s.generic.load_nodes.empty() && s.generic.set_loads_N.empty())
+                 if (s.generic.load_nodes.empty() && s.generic.set_loads_N.empty() && s.generic.history_loads_N.empty())
                    throw common::InputError("surface " + s.name + ": effect 'point_loads' is requested but neither "
                                             "its box nor `loads` puts a load on a node of the mesh");
                },
@@ -87,6 +87,12 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                    loads.emplace_back(n, g.total_force_N / static_cast<double>(g.load_nodes.size()));
                  for (const auto& l : g.set_loads_N) loads.push_back(l);
                  c.model.add_point_loads("point_loads", std::move(loads), c.ramp);
+                 // Loads with a history: one term each (named after it).
+                 for (const auto& [name, l] : g.history_loads_N) {
+                   const HistoryDefinition h = g.histories.at(name);
+                   c.model.add_point_loads("point_loads (history " + name + ")", l,
+                                           [h](double t) { return h.at(t); });
+                 }
                }});
   t.push_back({"pressure", "", {}, [](const SurfaceTermContext& c) {
                  const double p = c.surface.generic.pressure_Pa;
@@ -109,7 +115,12 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                  // twice must have one value).
                  const GenericLoads& g = c.surface.generic;
                  std::map<int, std::pair<std::array<bool, 6>, Eigen::Matrix<double, 6, 1>>> per_node;
-                 auto add = [&](int node, const std::array<bool, 6>& mask, const Eigen::Matrix<double, 6, 1>& v) {
+                 // Per node and component: the history's index in `hist`, -1 = the ramp.
+                 std::map<int, std::array<int, 6>> node_history;
+                 std::vector<HistoryDefinition> hist;
+                 auto add = [&](int node, const std::array<bool, 6>& mask, const Eigen::Matrix<double, 6, 1>& v,
+                                int h = -1) {
+                   if (h >= 0 && !node_history.count(node)) node_history[node].fill(-1);
                    auto [it, fresh] = per_node.try_emplace(node);
                    if (fresh) {
                      it->second.first.fill(false);
@@ -120,16 +131,26 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                      if (it->second.first[j] && it->second.second(j) != v(j))
                        throw common::InputError("surface " + c.surface.name + ": node " + std::to_string(node) +
                                                 " has two different prescribed values of one component");
+                     if (it->second.first[j] && (node_history.count(node) ? node_history[node][j] : -1) != h)
+                       throw common::InputError("surface " + c.surface.name + ": node " + std::to_string(node) +
+                                                " has two different histories of one prescribed component");
                      it->second.first[j] = true;
                      it->second.second(j) = v(j);
+                     if (h >= 0) node_history[node][j] = h;
                    }
                  };
                  Eigen::Matrix<double, 6, 1> u = Eigen::Matrix<double, 6, 1>::Zero();
                  u.head<3>() = g.displacement_m;
                  for (int n : g.displaced_nodes) add(n, {true, true, true, false, false, false}, u);
                  for (const auto& sc : g.constraints)
-                   if (sc.definition.prescribed())
-                     for (int n : sc.nodes) add(n, sc.definition.mask, sc.definition.value);
+                   if (sc.definition.prescribed()) {
+                     int h = -1;
+                     if (!sc.definition.history.empty()) {
+                       h = static_cast<int>(hist.size());
+                       hist.push_back(g.histories.at(sc.definition.history));
+                     }
+                     for (int n : sc.nodes) add(n, sc.definition.mask, sc.definition.value, h);
+                   }
                  NodeConstraint n;
                  n.name = "prescribed_displacement";
                  std::vector<Eigen::Matrix<double, 6, 1>> values(static_cast<size_t>(c.model.num_nodes()),
@@ -141,9 +162,23 @@ std::vector<SurfaceTermInfo> bundled_terms() {
                  }
                  const Eigen::VectorXd q0 = c.model.reference_state();
                  const std::function<double(double)> ramp = c.ramp;
-                 n.value = [q0, values, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
-                   q6 = q0.segment<6>(6 * node) + ramp(t) * values[static_cast<size_t>(node)];
-                 };
+                 if (node_history.empty()) {
+                   n.value = [q0, values, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+                     q6 = q0.segment<6>(6 * node) + ramp(t) * values[static_cast<size_t>(node)];
+                   };
+                 } else {
+                   std::vector<std::array<int, 6>> which(static_cast<size_t>(c.model.num_nodes()));
+                   for (auto& w : which) w.fill(-1);
+                   for (const auto& [node, w] : node_history) which[static_cast<size_t>(node)] = w;
+                   n.value = [q0, values, ramp, which, hist](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+                     const size_t i = static_cast<size_t>(node);
+                     q6 = q0.segment<6>(6 * node);
+                     for (int j = 0; j < 6; ++j) {
+                       const int h = which[i][static_cast<size_t>(j)];
+                       q6(j) += (h < 0 ? ramp(t) : hist[static_cast<size_t>(h)].at(t)) * values[i](j);
+                     }
+                   };
+                 }
                  c.model.add_constraint(std::move(n));
                }});
   return t;

@@ -87,7 +87,7 @@ struct SurfaceScenarioOptions {
   std::vector<double> displacement_m;   ///< [ux, uy, uz]; empty = none
   /// Named node sets, masked constraints and loads of `mesh`, one text item
   /// each (grammar: cartilage/shell_scene.h); empty = none.
-  std::vector<std::string> node_sets, constraints, loads;
+  std::vector<std::string> node_sets, constraints, loads, histories;
   std::vector<std::string> effects;     ///< the scenario's effects
 
   void declare_shared(common::OptionVisitor& v);
@@ -121,6 +121,7 @@ struct SurfaceScenarioConfig {
   std::vector<cartilage::NodeSetDefinition> node_sets;
   std::vector<cartilage::ConstraintDefinition> constraints;
   std::vector<cartilage::LoadDefinition> loads;
+  std::vector<cartilage::HistoryDefinition> histories;
 };
 
 /// The scenario `scenario` of `scene` ("" = the scene's only one) with every
