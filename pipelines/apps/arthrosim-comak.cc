@@ -128,7 +128,7 @@ int main(int argc, char** argv) {
       "      --trial data/trials/synthetic_gait --out comak_plain.h5 -v\n"
       "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n"
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --checkpoint-interval-s 0 \\\n"
-      "      --trial data/trials/synthetic_gait --out comak_coarse.h5 --first-frame 0 --last-frame 9\n"
+      "      --trial data/trials/synthetic_gait --out comak_checkpoints.h5 --first-frame 0 --last-frame 4\n"
       "      # a checkpoint after every frame; killed, the same command continues from the last one\n"
       "  arthrosim-comak --model data/models/lenhart2015 --scene data/scenes/lenhart2015_gait.yaml \\\n"
       "      --trial data/trials/lenhart2015_overground17 --out lenhart2015.h5 -v\n"
