@@ -6,6 +6,7 @@
 #include "common/effects.h"
 #include "common/finite.h"
 #include "common/error.h"
+#include "common/file_check.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
 #include "common/output_file.h"
@@ -314,6 +315,22 @@ const std::string& KinematicsFileReader::path() const { return f_->path(); }
 const common::H5File& KinematicsFileReader::file() const { return *f_; }
 
 Eigen::VectorXd KinematicsFileReader::time() const { return f_->read_vector("/time"); }
+
+std::int64_t KinematicsFileReader::frames_complete() const {
+  return f_->exists("/time") ? f_->dims("/time").at(0) : 0;
+}
+std::int64_t KinematicsFileReader::frames_expected() const {
+  return f_->has_attribute("/", "frames_expected") ? f_->attribute_int("/", "frames_expected") : -1;
+}
+bool KinematicsFileReader::finished() const {
+  return f_->has_attribute("/", "frames") && !f_->has_attribute("/", "stopped");
+}
+std::string KinematicsFileReader::incompleteness() const {
+  return common::incompleteness(*f_, common::StageFile::kKinematics);
+}
+std::string KinematicsFileReader::require_complete(bool allow_partial) const {
+  return common::require_usable_file(*f_, f_->path(), common::StageFile::kKinematics, allow_partial);
+}
 
 std::string KinematicsFileReader::body_poses_dataset(const std::string& body) { return "/bodies/" + body + "/X_W"; }
 

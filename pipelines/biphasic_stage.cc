@@ -18,6 +18,7 @@
 #include "common/log.h"
 #include "common/metadata.h"
 #include "common/progress.h"
+#include "musculoskeletal/kinematics_file.h"
 #include "pipelines/prepare.h"
 #include "pipelines/stages.h"
 #include "pipelines/study.h"
@@ -71,13 +72,16 @@ JointLayer read_layer(const common::H5File& f, const std::string& name, const bi
 struct KinematicsInput {
   std::vector<JointFrame> frames;
   int failed = 0;
+  std::string partial_input;  ///< "PARTIAL INPUT: ..." for an incomplete file read with allow_partial
 };
 
 // Frames of the kinematics file: bone poses and the compartment forces.
 KinematicsInput read_kinematics(const std::string& path, const std::set<std::string>& bones,
-                                const std::set<std::string>& compartments, double end_time_s) {
+                                const std::set<std::string>& compartments, double end_time_s, bool allow_partial) {
+  // Kind, version and completeness (a killed or stopped COMAK run): refused
+  // naming the file and what it holds unless allow_partial (common/file_check.h).
+  const std::string partial_input = musculoskeletal::KinematicsFileReader(path).require_complete(allow_partial);
   const common::H5File f(path, common::H5File::Mode::kRead);
-  common::require_file_format(f, path, common::StageFile::kKinematics);  // kind and version (common/file_check.h)
   const Eigen::VectorXd time = f.read_vector("/time");
   const Eigen::Index n = time.size();
   std::map<std::string, common::Tensor3d> poses;
@@ -137,6 +141,7 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
   Eigen::VectorXi status = Eigen::VectorXi::Zero(n);
   if (f.exists("/solver/status")) status = f.read_vector_int("/solver/status");
   KinematicsInput in;
+  in.partial_input = partial_input;
   for (Eigen::Index k = 0; k < n; ++k) {
     if (end_time_s >= 0.0 && time[k] > end_time_s + 1e-12) break;
     if (status[k] != 0) {
@@ -212,6 +217,7 @@ StageDescriptor biphasic_stage_descriptor() {
   StageDescriptor d;
   d.name = "biphasic";
   d.executable = "arthrosim-biphasic";
+  d.takes_allow_partial = true;  // an incomplete kinematics file (arthrosim run --allow-partial)
   d.summary = "cartilage layers as linear biphasic volumes loaded by the penetration method from stage 1's kinematics";
   d.block = block_schema<BiphasicOptions>("biphasic", "effects and options of the biphasic stage (docs/biphasic.md)");
   d.outputs = {"biphasic"};
@@ -322,7 +328,8 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   std::set<std::string> bones, compartments;
   for (const JointLayer& l : full) bones.insert(l.bone);
   for (const JointPair& p : pairs) compartments.insert(p.compartment);
-  const KinematicsInput kin = read_kinematics(o.kinematics, bones, compartments, o.end_time_s.value_or(-1.0));
+  const KinematicsInput kin = read_kinematics(o.kinematics, bones, compartments, o.end_time_s.value_or(-1.0), o.allow_partial);
+  result.partial_input = kin.partial_input;
   result.frames_failed = kin.failed;
   const std::vector<JointFrame>& frames = kin.frames;
   if (frames.size() < 2) {
@@ -439,6 +446,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   common::write_metadata(writer.file(),
                          common::collect_run_metadata("arthrosim-biphasic", static_cast<int>(argv.size()),
                                                       argv.data(), "", options_text(o)));
+  if (!kin.partial_input.empty()) writer.file().set_attribute("/", "partial_input", kin.partial_input);
   common::ProgressOptions po;
   if (!o.progress) po.mode = common::ProgressOptions::Mode::kOff;
   common::Progress progress("biphasic", expected, po);
@@ -584,6 +592,8 @@ std::pair<std::string, std::string> write_two_layer_case(const std::string& dir)
     f.set_attribute("/", "format_version", 1);
     f.set_attribute("/", "world_frame", "femur frame of the canonical case: Y superior");
     const int n = 101;
+    f.set_attribute("/", "frames_expected", n);  // a complete file (common/file_check.h)
+    f.set_attribute("/", "frames", n);
     Eigen::VectorXd t(n);
     std::vector<double> femur, tibia;
     Eigen::MatrixXd medial(n, 3), lateral = Eigen::MatrixXd::Zero(n, 3);

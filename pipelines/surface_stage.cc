@@ -10,10 +10,13 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "cartilage/coupled_system.h"
 #include "numerics/hht_integrator.h"
+#include "common/checkpoint.h"
+#include "pipelines/surface_checkpoint.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
@@ -121,6 +124,9 @@ void SurfaceScenarioOptions::declare_shared(common::OptionVisitor& v) {
            "time-stepping runs: end once the largest weighted coordinate change over one step (positions, and "
            "transverse gradients x h/2) is at most this, after the pressure ramp; 0: run to end_time_s. The output "
            "records where and why it stopped (docs/surface_output.md)");
+  v.number("checkpoint_interval_s", checkpoint_interval_s, Unit::kSecond, {0, 86400},
+           "wall time between checkpoints <out>.checkpoint (0: after every step); a rerun of the same command "
+           "continues from the last one (docs/surface_output.md, \"Checkpoints\")");
   physics.declare(v);
   v.text_list("osmotic_surfaces", osmotic_surfaces, "",
               "osmotic_pressure: the surfaces that carry it (each one of `surfaces`); empty: every simulated surface "
@@ -508,8 +514,7 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     if (options.kinematics.empty())
       throw common::InputError(file, c.line, "scenario '" + c.name + "' lists imposed_kinematics: give --kinematics");
     kin = std::make_unique<musculoskeletal::KinematicsFileReader>(options.kinematics);
-    b->partial_input = common::require_usable_file(kin->file(), options.kinematics, common::StageFile::kKinematics,
-                                                   options.allow_partial);
+    b->partial_input = kin->require_complete(options.allow_partial);  // kind, version, completeness
     const Eigen::VectorXd t = kin->time();
     b->kin_times.assign(t.data(), t.data() + t.size());
     if (b->kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
@@ -939,6 +944,53 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   const bool stop_on_penetration = opt.stop_on_penetration;
   double t = 0;
   int k_out = 1;
+  // ---- checkpoint and resume (pipelines/surface_checkpoint.h) -----------------
+  // Tied to this run's identity (program, command line, options, the bytes
+  // of the scene, prepared model, kinematics and mesh, the runner's key).
+  const std::filesystem::path checkpoint_path = common::checkpoint_name(options.out);
+  SurfaceCheckpoint checkpoint;
+  checkpoint.identity = common::run_identity(
+      options.argv, c.canonical_options,
+      {{options.scene, "--scene"}, {options.prepared, "--prepared"}, {options.kinematics, "--kinematics"},
+       {opt.mesh, "mesh"}});
+  // A kept factorisation (newton_reuse_factorization) cannot be carried over.
+  const bool checkpoints = !iopt.reuse_factorization && !steady;
+  common::CheckpointClock checkpoint_clock(opt.checkpoint_interval_s);
+  int checkpoints_written = 0;
+  if (checkpoints && std::filesystem::exists(checkpoint_path)) {
+    std::string why;
+    std::optional<SurfaceCheckpoint> found = read_surface_checkpoint(checkpoint_path, why);
+    if (found && found->identity != checkpoint.identity)
+      why = "it belongs to another run (inputs, options, command line or build differ)";
+    if (found && why.empty()) {
+      checkpoint = std::move(*found);
+      common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": t = " +
+                       std::to_string(checkpoint.t) + " s, steps done: " + std::to_string(checkpoint.steps.size()) +
+                       ", frames written: " + std::to_string(checkpoint.frame_times.size() + 1) + " (taken from it)");
+      // What the run wrote before, written again: frames from their coordinates.
+      for (std::size_t i = 0; i < checkpoint.frame_times.size(); ++i)
+        write_frame(checkpoint.frame_q[i], checkpoint.frame_times[i],
+                    contact ? contact_reports(checkpoint.frame_q[i]) : reports);
+      for (const surface_output::StepRecord& sr : checkpoint.steps) {
+        out.append_step(sr);
+        progress.step();
+      }
+      system.restore(checkpoint.pattern_q, checkpoint.system);
+      integrator.restore(checkpoint.hht);
+      t = checkpoint.t;
+      k_out = checkpoint.k_out;
+      penetration_warnings = checkpoint.penetration_warnings;
+      unfaded_over = checkpoint.unfaded_over;
+      worst_ratio = checkpoint.worst_ratio;
+      worst_unfaded_ratio = checkpoint.worst_unfaded_ratio;
+      rejections_logged = checkpoint.rejections_logged;
+      if (contact) reports = contact_reports(integrator.q());
+    } else {
+      common::log_warn("not resuming from " + checkpoint_path.string() + ": " + why + "; starting over");
+      std::filesystem::remove(checkpoint_path);
+      checkpoint = SurfaceCheckpoint{checkpoint.identity};
+    }
+  }
   // steady_state_change_mm: each step is taken by advance_to_steady_state
   // over that one step (same halving rules as advance_to), which returns
   // whether the step's weighted change was at most stop_change. The stop is
@@ -948,6 +1000,16 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   double last_change = std::numeric_limits<double>::quiet_NaN();
   long last_iterations = 0, last_rejections = 0;
   SurfaceStageResult res;
+  if (!checkpoint.steps.empty()) {  // resumed
+    last_change = checkpoint.last_change;
+    last_iterations = checkpoint.last_iterations;
+    last_rejections = checkpoint.last_rejections;
+    res.final_residual_N = checkpoint.final_residual_N;
+    res.residual_tolerance_N = checkpoint.residual_tolerance_N;
+    res.max_penetration_m = checkpoint.max_penetration_m;
+    res.contact_steps = checkpoint.contact_steps;
+    res.active_contacts_sum = checkpoint.active_contacts_sum;
+  }
   try {
     while (t < total_time * (1 - 1e-12)) {
       const double t_out = std::min(k_out * interval, total_time);
@@ -1032,6 +1094,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           }
         }
         out.append_step(sr);
+        if (checkpoints) checkpoint.steps.push_back(sr);
         last_iterations = s.newton_iterations;
         last_rejections = s.rejected_steps;
         t = t_next;
@@ -1040,8 +1103,37 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           stopped_steady = true;
           break;
         }
+        if (checkpoints && t < total_time * (1 - 1e-12) && checkpoint_clock.due()) {
+          SurfaceCheckpoint& k = checkpoint;
+          k.t = t;
+          k.k_out = k_out;
+          k.penetration_warnings = penetration_warnings;
+          k.unfaded_over = unfaded_over;
+          k.rejections_logged = rejections_logged;
+          k.last_iterations = last_iterations;
+          k.last_rejections = last_rejections;
+          k.worst_ratio = worst_ratio;
+          k.worst_unfaded_ratio = worst_unfaded_ratio;
+          k.last_change = last_change;
+          k.final_residual_N = res.final_residual_N;
+          k.residual_tolerance_N = res.residual_tolerance_N;
+          k.max_penetration_m = res.max_penetration_m;
+          k.contact_steps = res.contact_steps;
+          k.active_contacts_sum = res.active_contacts_sum;
+          k.hht = integrator.state();
+          k.pattern_q = system.pattern_coordinates();
+          k.system = system.statistics();
+          write_surface_checkpoint(checkpoint_path, k, ++checkpoints_written);
+          checkpoint_clock.mark();
+          common::log_debug("checkpoint " + checkpoint_path.string() + " at t = " + std::to_string(t) + " s: " +
+                            std::to_string(std::filesystem::file_size(checkpoint_path)) + " bytes");
+        }
       }
       write_frame(integrator.q(), t, reports);  // at a stop: the steady state is the last frame
+      if (checkpoints) {
+        checkpoint.frame_times.push_back(t);
+        checkpoint.frame_q.push_back(integrator.q());
+      }
       ++k_out;
       if (stopped_steady) break;
     }
@@ -1169,6 +1261,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.wall_s = now_s() - t_start;
   out.set_solver_attribute("wall_s", res.wall_s);
   out.complete();
+  std::filesystem::remove(checkpoint_path);
+  res.checkpoints = checkpoints_written;
   res.status = SurfaceStageStatus::kCompleted;
   return res;
 }

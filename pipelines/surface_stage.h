@@ -48,6 +48,11 @@ struct SurfaceScenarioOptions {
   /// > 0: a time-stepping run ends once the largest weighted coordinate change
   /// over one step is at most this [m].
   double steady_state_change_m = 0;
+  /// Wall time between checkpoints `<out>.checkpoint` [s] (0: after every
+  /// step). A rerun of the same command continues from the last one with
+  /// datasets bit-identical to an uninterrupted run
+  /// (pipelines/surface_checkpoint.h).
+  double checkpoint_interval_s = 60.0;
   /// Shell material, foundation, osmotic pressure (and its ramp).
   cartilage::SurfaceParameters physics;
   /// osmotic_pressure: the surfaces that carry it (empty: all simulated).
@@ -167,6 +172,7 @@ struct SurfaceStageResult {
   // mesh_contact only:
   double max_penetration_m = 0;        ///< largest interpenetration of any step
   long contact_steps = 0;              ///< steps with at least one active contact
+  int checkpoints = 0;                 ///< checkpoints written by this run
   long active_contacts_sum = 0;        ///< sum over steps of active contacts
   long penetration_warnings = 0;       ///< steps breaking the accuracy rule
   double worst_penetration_ratio = 0;  ///< largest penetration / deflection of those
