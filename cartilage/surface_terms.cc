@@ -6,6 +6,15 @@
 #include <stdexcept>
 
 #include "cartilage/surface_model.h"
+#include "cartilage/terms/fixed_nodes.h"
+#include "cartilage/terms/foundation_damping.h"
+#include "cartilage/terms/foundation_springs.h"
+#include "cartilage/terms/inertia.h"
+#include "cartilage/terms/osmotic_pressure.h"
+#include "cartilage/terms/periphery_fixed.h"
+#include "cartilage/terms/point_loads.h"
+#include "cartilage/terms/prescribed_displacement.h"
+#include "cartilage/terms/pressure.h"
 #include "common/effects.h"
 #include "common/error.h"
 
@@ -16,137 +25,15 @@ namespace {
 // The bundled terms, one registration each (the description of a bundled
 // term is its entry in common/effects.cc).
 std::vector<SurfaceTermInfo> bundled_terms() {
-  std::vector<SurfaceTermInfo> t;
-  t.push_back({"foundation_springs", "", {}, [](const SurfaceTermContext& c) {
-                 const Eigen::VectorXd& k = c.parameters.foundation_stiffness_per_node_N_m3;
-                 if (k.size() > 0) {
-                   if (k.size() != c.model.num_nodes())
-                     throw common::InputError("surface " + c.surface.name + ": " + std::to_string(k.size()) +
-                                              " nodal foundation stiffnesses for " +
-                                              std::to_string(c.model.num_nodes()) + " nodes");
-                   c.model.add_foundation_springs(k, c.bone);
-                 } else {
-                   c.model.add_foundation_springs(c.parameters.foundation_stiffness_N_m3, c.bone);
-                 }
-               }});
-  t.push_back({"foundation_damping", "", {}, [](const SurfaceTermContext& c) {
-                 c.model.add_foundation_damping(c.parameters.foundation_damping_N_s_m3, c.bone, true);
-               }});
-  t.push_back({"osmotic_pressure", "", {}, [](const SurfaceTermContext& c) {
-                 const double p = c.parameters.osmotic_pressure_Pa, T = c.parameters.osmotic_ramp_s;
-                 c.model.add_pressure("osmotic_pressure", -1.0, [p, T](double t) {
-                   if (!(T > 0) || t >= T) return p;
-                   const double u = std::max(t, 0.0) / T;
-                   return p * u * u * (3 - 2 * u);
-                 });
-               }});
-  t.push_back({"periphery_fixed", "", {}, [](const SurfaceTermContext& c) {
-                 if (c.parameters.periphery_tie_N_m3 > 0)
-                   c.model.add_periphery_tangential(c.parameters.periphery_tie_N_m3, c.bone);
-                 else
-                   c.model.add_periphery_fixed(c.bone);
-               }});
-  t.push_back({"inertia", "", {}, [](const SurfaceTermContext& c) { c.model.add_inertia(); }});
-  t.push_back({"fixed_nodes", "",
-               [](const SurfaceInput& s) {
-                 bool any = !s.generic.fixed_nodes.empty();
-                 for (const auto& c : s.generic.constraints) any = any || !c.definition.prescribed();
-                 if (!any)
-                   throw common::InputError("surface " + s.name + ": effect 'fixed_nodes' is requested but neither "
-                                            "its box nor a constraint without values holds a node of the mesh");
-               },
-               [](const SurfaceTermContext& c) {
-                 // One constraint: the box (all six coordinates) and every
-                 // constraint without values, masks united per node.
-                 std::map<int, std::array<bool, 6>> masks;
-                 for (int n : c.surface.generic.fixed_nodes) masks[n].fill(true);
-                 for (const auto& sc : c.surface.generic.constraints)
-                   if (!sc.definition.prescribed())
-                     for (int n : sc.nodes)
-                       for (int j = 0; j < 6; ++j) masks[n][j] = masks[n][j] || sc.definition.mask[j];
-                 NodeConstraint n;
-                 n.name = "fixed_nodes";
-                 for (const auto& [node, mask] : masks) {
-                   n.nodes.push_back(node);
-                   n.node_masks.push_back(mask);
-                 }
-                 const Eigen::VectorXd q0 = c.model.reference_state();
-                 n.value = [q0](double, int node, Eigen::Matrix<double, 6, 1>& q6) { q6 = q0.segment<6>(6 * node); };
-                 c.model.add_constraint(std::move(n));
-               }});
-  t.push_back({"point_loads", "",
-               [](const SurfaceInput& s) {
-                 if (s.generic.load_nodes.empty() && s.generic.set_loads_N.empty())
-                   throw common::InputError("surface " + s.name + ": effect 'point_loads' is requested but neither "
-                                            "its box nor `loads` puts a load on a node of the mesh");
-               },
-               [](const SurfaceTermContext& c) {
-                 const GenericLoads& g = c.surface.generic;
-                 std::vector<std::pair<int, Eigen::Vector3d>> loads;
-                 for (int n : g.load_nodes)
-                   loads.emplace_back(n, g.total_force_N / static_cast<double>(g.load_nodes.size()));
-                 for (const auto& l : g.set_loads_N) loads.push_back(l);
-                 c.model.add_point_loads("point_loads", std::move(loads), c.ramp);
-               }});
-  t.push_back({"pressure", "", {}, [](const SurfaceTermContext& c) {
-                 const double p = c.surface.generic.pressure_Pa;
-                 const std::function<double(double)> ramp = c.ramp;
-                 c.model.add_pressure("pressure", 0.0, [p, ramp](double t) { return p * ramp(t); });
-               }});
-  t.push_back({"prescribed_displacement", "",
-               [](const SurfaceInput& s) {
-                 bool any = !s.generic.displaced_nodes.empty();
-                 for (const auto& c : s.generic.constraints) any = any || c.definition.prescribed();
-                 if (!any)
-                   throw common::InputError("surface " + s.name + ": effect 'prescribed_displacement' is requested "
-                                            "but neither its box nor a constraint with values holds a node of the "
-                                            "mesh");
-               },
-               [](const SurfaceTermContext& c) {
-                 // One constraint: the box (positions moved by
-                 // displacement_m) and every constraint with values, per node
-                 // its united mask and its values (a component prescribed
-                 // twice must have one value).
-                 const GenericLoads& g = c.surface.generic;
-                 std::map<int, std::pair<std::array<bool, 6>, Eigen::Matrix<double, 6, 1>>> per_node;
-                 auto add = [&](int node, const std::array<bool, 6>& mask, const Eigen::Matrix<double, 6, 1>& v) {
-                   auto [it, fresh] = per_node.try_emplace(node);
-                   if (fresh) {
-                     it->second.first.fill(false);
-                     it->second.second.setZero();
-                   }
-                   for (int j = 0; j < 6; ++j) {
-                     if (!mask[j]) continue;
-                     if (it->second.first[j] && it->second.second(j) != v(j))
-                       throw common::InputError("surface " + c.surface.name + ": node " + std::to_string(node) +
-                                                " has two different prescribed values of one component");
-                     it->second.first[j] = true;
-                     it->second.second(j) = v(j);
-                   }
-                 };
-                 Eigen::Matrix<double, 6, 1> u = Eigen::Matrix<double, 6, 1>::Zero();
-                 u.head<3>() = g.displacement_m;
-                 for (int n : g.displaced_nodes) add(n, {true, true, true, false, false, false}, u);
-                 for (const auto& sc : g.constraints)
-                   if (sc.definition.prescribed())
-                     for (int n : sc.nodes) add(n, sc.definition.mask, sc.definition.value);
-                 NodeConstraint n;
-                 n.name = "prescribed_displacement";
-                 std::vector<Eigen::Matrix<double, 6, 1>> values(static_cast<size_t>(c.model.num_nodes()),
-                                                                 Eigen::Matrix<double, 6, 1>::Zero());
-                 for (const auto& [node, mv] : per_node) {
-                   n.nodes.push_back(node);
-                   n.node_masks.push_back(mv.first);
-                   values[static_cast<size_t>(node)] = mv.second;
-                 }
-                 const Eigen::VectorXd q0 = c.model.reference_state();
-                 const std::function<double(double)> ramp = c.ramp;
-                 n.value = [q0, values, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
-                   q6 = q0.segment<6>(6 * node) + ramp(t) * values[static_cast<size_t>(node)];
-                 };
-                 c.model.add_constraint(std::move(n));
-               }});
-  return t;
+  return {foundation_springs_term(),
+          foundation_damping_term(),
+          osmotic_pressure_term(),
+          periphery_fixed_term(),
+          inertia_term(),
+          fixed_nodes_term(),
+          point_loads_term(),
+          pressure_term(),
+          prescribed_displacement_term()};
 }
 
 std::vector<SurfaceTermInfo>& registry() {
