@@ -80,7 +80,16 @@ void CoupledShellSystem::add_contact(const std::string& name, int a, int b, cons
   rebuild_pattern(q);
 }
 
+void CoupledShellSystem::restore(const Eigen::VectorXd& pattern_coordinates, const CoupledSystemStatistics& statistics) {
+  if (pattern_coordinates.size() != n_)
+    throw common::InputError("coupled system: restored pattern coordinates of size " +
+                             std::to_string(pattern_coordinates.size()) + ", expected " + std::to_string(n_));
+  rebuild_pattern(pattern_coordinates);
+  stats_ = statistics;
+}
+
 void CoupledShellSystem::rebuild_pattern(const Eigen::VectorXd& q) {
+  pattern_q_ = q;
   const int nodes = n_ / 6;
   std::vector<std::vector<int>> adj(nodes);
   for (const Pair& p : contacts_) {

@@ -83,6 +83,12 @@ class CoupledShellSystem : public numerics::TimeIntegrable {
   /// Contact state of pair k at (q, v) (v may be nullptr: at rest).
   ContactPairReport contact_report(int k, const Eigen::VectorXd& q, const Eigen::VectorXd* v = nullptr) const;
   const CoupledSystemStatistics& statistics() const { return stats_; }
+  /// Checkpoint and resume (docs/testing.md): the coordinates the coupling
+  /// pattern was last built around (the pattern depends on them, and the
+  /// linear solver's ordering on the pattern), and setting them again with
+  /// the statistics on a system built from the same inputs.
+  const Eigen::VectorXd& pattern_coordinates() const { return pattern_q_; }
+  void restore(const Eigen::VectorXd& pattern_coordinates, const CoupledSystemStatistics& statistics);
 
   // ---- TimeIntegrable -----------------------------------------------------
   int num_dofs() const override { return n_; }
@@ -119,6 +125,7 @@ class CoupledShellSystem : public numerics::TimeIntegrable {
   int n_ = 0;
   std::vector<Pair> contacts_;
   Eigen::SparseMatrix<double> pattern_;
+  Eigen::VectorXd pattern_q_;  // the coordinates of the last rebuild_pattern
   std::vector<std::vector<int>> model_value_map_;  // model value index -> system value index
   long revision_ = 0;
   std::vector<char> constrained_;

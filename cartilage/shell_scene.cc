@@ -44,7 +44,60 @@ Eigen::Vector3d vector_of(const std::vector<std::string>& w, std::size_t from, c
   return {number_of(w[from], text), number_of(w[from + 1], text), number_of(w[from + 2], text)};
 }
 
+/// Removes a trailing "history NAME" from `rest` and returns NAME ("" if none).
+std::string take_history(std::string& rest, const std::string& text) {
+  std::vector<std::string> w = words_of(rest);
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    if (w[k] != "history") continue;
+    if (k + 2 != w.size())
+      throw std::invalid_argument("'" + text + "': expected one history name at the end ('... history NAME')");
+    rest.clear();  // the words before "history" (the rest is only read word by word)
+    for (std::size_t j = 0; j < k; ++j) rest += " " + w[j];
+    return w[k + 1];
+  }
+  return "";
+}
+
 }  // namespace
+
+double HistoryDefinition::at(double t) const {
+  if (t <= time_s.front()) return factor.front();
+  if (t >= time_s.back()) return factor.back();
+  const auto it = std::upper_bound(time_s.begin(), time_s.end(), t);
+  const std::size_t k = static_cast<std::size_t>(it - time_s.begin());  // time_s[k-1] <= t < time_s[k]
+  const double s = (t - time_s[k - 1]) / (time_s[k] - time_s[k - 1]);
+  return factor[k - 1] + s * (factor[k] - factor[k - 1]);
+}
+
+HistoryDefinition parse_history(const std::string& text) {
+  const auto [name, rest] = split_name(text);
+  const std::vector<std::string> w = words_of(rest);
+  HistoryDefinition h;
+  h.name = name;
+  if (w.empty()) throw std::invalid_argument("'" + text + "': expected 'ramp T' or 'table T0 F0 T1 F1 ...' after ':'");
+  if (w[0] == "ramp") {
+    if (w.size() != 2) throw std::invalid_argument("'" + text + "': expected 'ramp T' (T in s, > 0)");
+    const double T = number_of(w[1], text);
+    if (!(T > 0)) throw std::invalid_argument("'" + text + "': the ramp time must be > 0 s");
+    h.time_s = {0.0, T};
+    h.factor = {0.0, 1.0};
+  } else if (w[0] == "table") {
+    if (w.size() < 3 || (w.size() - 1) % 2 != 0)
+      throw std::invalid_argument("'" + text + "': expected 'table T0 F0 T1 F1 ...' ((time [s], factor) pairs)");
+    for (std::size_t k = 1; k < w.size(); k += 2) {
+      const double t = number_of(w[k], text), f = number_of(w[k + 1], text);
+      if (t < 0) throw std::invalid_argument("'" + text + "': time " + w[k] + " s is negative");
+      if (!h.time_s.empty() && !(t > h.time_s.back()))
+        throw std::invalid_argument("'" + text + "': times must increase strictly, found " + w[k] + " after " +
+                                    w[k - 2]);
+      h.time_s.push_back(t);
+      h.factor.push_back(f);
+    }
+  } else {
+    throw std::invalid_argument("'" + text + "': unknown history kind '" + w[0] + "' (ramp, table)");
+  }
+  return h;
+}
 
 NodeSetDefinition parse_node_set(const std::string& text) {
   const auto [name, rest] = split_name(text);
@@ -80,19 +133,26 @@ NodeSetDefinition parse_node_set(const std::string& text) {
     if (w.size() != 2) throw std::invalid_argument("'" + text + "': expected 'group G' (an OBJ 'g' name)");
     s.kind = NodeSetDefinition::Kind::kGroup;
     s.group = w[1];
+  } else if (w[0] == "vtk_point_field" || w[0] == "vtk_cell_field") {
+    if (w.size() != 3)
+      throw std::invalid_argument("'" + text + "': expected '" + w[0] + " F V' (a scalar field of the VTK mesh and a value)");
+    s.kind = w[0] == "vtk_point_field" ? NodeSetDefinition::Kind::kPointField : NodeSetDefinition::Kind::kCellField;
+    s.group = w[1];
+    s.field_value = number_of(w[2], text);
   } else if (w[0] == "all") {
     if (w.size() != 1) throw std::invalid_argument("'" + text + "': nothing may follow 'all'");
     s.kind = NodeSetDefinition::Kind::kAll;
   } else {
-    throw std::invalid_argument("'" + text + "': unknown set kind '" + w[0] + "' (box, plane, nodes, all, group)");
+    throw std::invalid_argument("'" + text + "': unknown set kind '" + w[0] + "' (box, plane, nodes, all, group, vtk_point_field, vtk_cell_field)");
   }
   return s;
 }
 
 ConstraintDefinition parse_constraint(const std::string& text) {
-  const auto [set, rest] = split_name(text);
+  auto [set, rest] = split_name(text);
   ConstraintDefinition c;
   c.set = set;
+  c.history = take_history(rest, text);
   const auto eq = rest.find('=');
   const std::vector<std::string> comps = words_of(rest.substr(0, eq));
   std::vector<int> order;
@@ -121,13 +181,16 @@ ConstraintDefinition parse_constraint(const std::string& text) {
                                   std::to_string(v.size()) + " values");
     for (std::size_t i = 0; i < v.size(); ++i) c.value(order[i]) = number_of(v[i], text) * (order[i] < 3 ? 1e-3 : 1.0);
   }
+  if (!c.history.empty() && !c.prescribed())
+    throw std::invalid_argument("'" + text + "': a history needs prescribed values ('= V ...', not all zero)");
   return c;
 }
 
 LoadDefinition parse_load(const std::string& text) {
-  const auto [set, rest] = split_name(text);
-  const std::vector<std::string> w = words_of(rest);
+  auto [set, rest] = split_name(text);
   LoadDefinition l;
+  l.history = take_history(rest, text);
+  const std::vector<std::string> w = words_of(rest);
   l.set = set;
   if (w.empty()) throw std::invalid_argument("'" + text + "': expected force, force_per_node, traction or gravity");
   if (w[0] == "force") l.kind = LoadDefinition::Kind::kForce;
@@ -143,7 +206,8 @@ LoadDefinition parse_load(const std::string& text) {
   return l;
 }
 
-std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh& m, const FaceGroups& groups) {
+std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh& m, const FaceGroups& groups,
+                              const std::vector<common::VtkField>& fields) {
   std::vector<int> out;
   const int n = m.num_nodes();
   switch (s.kind) {
@@ -173,6 +237,35 @@ std::vector<int> select_nodes(const NodeSetDefinition& s, const common::QuadMesh
       }
       for (int q : it->second)
         for (int a = 0; a < 4; ++a) out.push_back(m.Q(q, a));
+      std::sort(out.begin(), out.end());
+      out.erase(std::unique(out.begin(), out.end()), out.end());
+      break;
+    }
+    case NodeSetDefinition::Kind::kPointField:
+    case NodeSetDefinition::Kind::kCellField: {
+      const bool point = s.kind == NodeSetDefinition::Kind::kPointField;
+      const auto loc = point ? common::VtkField::Location::kPoint : common::VtkField::Location::kCell;
+      const common::VtkField* f = nullptr;
+      std::string have;
+      for (const common::VtkField& x : fields) {
+        if (x.location != loc) continue;
+        have += (have.empty() ? "" : ", ") + x.name;
+        if (x.name == s.group) f = &x;
+      }
+      if (f == nullptr)
+        throw std::invalid_argument("node set '" + s.name + "': the mesh has no VTK " + (point ? "point" : "cell") +
+                                    " field '" + s.group + "' (" + (point ? "point" : "cell") +
+                                    " fields: " + (have.empty() ? "none" : have) + ")");
+      if (f->values.cols() != 1)
+        throw std::invalid_argument("node set '" + s.name + "': VTK field '" + s.group + "' has " +
+                                    std::to_string(f->values.cols()) + " components, expected a scalar field");
+      for (Eigen::Index i = 0; i < f->values.rows(); ++i) {
+        if (f->values(i, 0) != s.field_value) continue;
+        if (point)
+          out.push_back(static_cast<int>(i));
+        else
+          for (int a = 0; a < 4; ++a) out.push_back(m.Q(i, a));
+      }
       std::sort(out.begin(), out.end());
       out.erase(std::unique(out.begin(), out.end()), out.end());
       break;

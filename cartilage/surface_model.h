@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include <map>
+
 #include "cartilage/shell_model.h"
 #include "cartilage/shell_scene.h"
 #include "common/mesh.h"
@@ -52,6 +54,12 @@ struct GenericLoads {
   /// Nodal forces [N] of the scene key loads at full value (point_loads),
   /// ramped like total_force_N.
   std::vector<std::pair<int, Eigen::Vector3d>> set_loads_N;
+  /// Scene key histories (by name); constraints name theirs in
+  /// definition.history ("" = the ramp).
+  std::map<std::string, HistoryDefinition> histories;
+  /// Nodal forces [N] of the loads with a history, at factor 1, per history
+  /// name (point_loads; one term per history).
+  std::map<std::string, std::vector<std::pair<int, Eigen::Vector3d>>> history_loads_N;
 };
 
 /// One surface to simulate.

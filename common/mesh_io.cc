@@ -731,8 +731,15 @@ TriangleMesh parse_ply_impl(const std::string& data, const std::string& name, co
 
 // ---------------------------------------------------------------- VTK ------
 
-TriangleMesh parse_vtk_impl(const std::string& data, const std::string& name, const MeshReadOptions& options,
-                            std::vector<VtkField>* fields) {
+/// The points, polygons (checked: >= 3 points, indices in range) and fields
+/// of a legacy VTK polydata file.
+struct VtkPolydata {
+  Builder b;
+  std::vector<std::vector<long long>> polys;
+  std::vector<int> poly_line;
+};
+
+VtkPolydata parse_vtk_polydata(const std::string& data, const std::string& name, std::vector<VtkField>* fields) {
   // Lines 1-4: version, title, ASCII, DATASET POLYDATA.
   LineReader lines{data};
   size_t& pos = lines.pos;
@@ -755,10 +762,11 @@ TriangleMesh parse_vtk_impl(const std::string& data, const std::string& name, co
   need("POLYDATA");
   if (tok != "POLYDATA") throw InputError(name, line, "VTK: expected DATASET POLYDATA, found " + shown(tok));
 
-  Builder b;
+  VtkPolydata out;
+  Builder& b = out.b;
   long long n_cells = 0;
-  std::vector<std::vector<long long>> polys;
-  std::vector<int> poly_line;
+  std::vector<std::vector<long long>>& polys = out.polys;
+  std::vector<int>& poly_line = out.poly_line;
   auto count = [&](const std::string& what) {
     need(what);
     const long long c = to_integer(tok, name, line, what);
@@ -846,10 +854,17 @@ TriangleMesh parse_vtk_impl(const std::string& data, const std::string& name, co
       if (v < 0 || v >= nv)
         throw InputError(name, poly_line[f], "VTK: expected point indices in 0.." + std::to_string(nv - 1) +
                                                  " in polygon " + std::to_string(f) + ", found " + std::to_string(v));
-    for (size_t k = 1; k + 1 < polys[f].size(); ++k)
-      b.F.push_back({static_cast<int>(polys[f][0]), static_cast<int>(polys[f][k]), static_cast<int>(polys[f][k + 1])});
   }
-  return finish(b, name, options, "VTK");
+  return out;
+}
+
+TriangleMesh parse_vtk_impl(const std::string& data, const std::string& name, const MeshReadOptions& options,
+                            std::vector<VtkField>* fields) {
+  VtkPolydata d = parse_vtk_polydata(data, name, fields);
+  for (const auto& poly : d.polys)
+    for (size_t k = 1; k + 1 < poly.size(); ++k)
+      d.b.F.push_back({static_cast<int>(poly[0]), static_cast<int>(poly[k]), static_cast<int>(poly[k + 1])});
+  return finish(d.b, name, options, "VTK");
 }
 
 // ---------------------------------------------------------------- writers --
@@ -1003,6 +1018,187 @@ TriangleMesh read_obj(const std::string& path, const MeshReadOptions& options) {
 }
 TriangleMesh read_ply(const std::string& path, const MeshReadOptions& options) {
   return parse_ply(read_whole_file(path), path, options);
+}
+
+namespace {
+/// Unit normals of the nodes, area-weighted over their quads (zero for a
+/// node of no quad): the orientation the quads' node order gives.
+Points3 area_weighted_quad_normals(const QuadMesh& mesh) {
+  Points3 N = Points3::Zero(mesh.num_nodes(), 3);
+  for (int e = 0; e < mesh.num_quads(); ++e) {
+    const Eigen::Vector3d d1 = mesh.V.row(mesh.Q(e, 2)) - mesh.V.row(mesh.Q(e, 0));
+    const Eigen::Vector3d d2 = mesh.V.row(mesh.Q(e, 3)) - mesh.V.row(mesh.Q(e, 1));
+    const Eigen::Vector3d a = 0.5 * d1.cross(d2);
+    for (int k = 0; k < 4; ++k) N.row(mesh.Q(e, k)) += a.transpose();
+  }
+  for (int i = 0; i < N.rows(); ++i) {
+    const double l = N.row(i).norm();
+    if (l > 0) N.row(i) /= l;
+  }
+  return N;
+}
+}  // namespace
+
+QuadMesh read_quad_obj(const std::string& path, const MeshReadOptions& options, Points3* normals,
+                       FaceGroups* groups) {
+  const double unit = metres_per_unit(options.unit);
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": error: cannot open the mesh file");
+  std::vector<Eigen::Vector3d> V, VN;
+  std::vector<Eigen::Vector4i> Q;
+  std::vector<std::string> current_groups;  // names on the last 'g' line
+  std::vector<int> node_normal;  // per vertex: index into VN, -1 none
+  std::vector<int> normal_line;  // per vertex: line that gave it
+  int faces_with_normals = 0;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::istringstream ls(line);
+    std::string kw;
+    if (!(ls >> kw)) continue;
+    if (kw == "v") {
+      Eigen::Vector3d p;
+      if (!(ls >> p.x() >> p.y() >> p.z()) || !p.allFinite())
+        throw InputError(path, line_no, "expected 'v x y z' with three finite numbers");
+      V.push_back(p * unit);
+    } else if (kw == "vn") {
+      Eigen::Vector3d n;
+      if (!(ls >> n.x() >> n.y() >> n.z()) || !n.allFinite() || !(n.norm() > 0))
+        throw InputError(path, line_no, "expected 'vn x y z' with three finite numbers, not all zero");
+      VN.push_back(n.normalized());
+    } else if (kw == "f") {
+      std::vector<int> idx, nidx;
+      std::string tok;
+      while (ls >> tok) {
+        const std::string head = tok.substr(0, tok.find('/'));
+        std::size_t used = 0;
+        int k = 0;
+        try {
+          k = std::stoi(head, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used != head.size() || head.empty() || k == 0)
+          throw InputError(path, line_no, "expected a vertex index, found '" + tok + "'");
+        const int i = k > 0 ? k - 1 : static_cast<int>(V.size()) + k;
+        if (i < 0 || i >= static_cast<int>(V.size()))
+          throw InputError(path, line_no,
+                                   "vertex index " + head + " out of range (" + std::to_string(V.size()) +
+                                       " vertices so far)");
+        idx.push_back(i);
+        // normal index: the third field of i/j/k or i//k
+        const std::size_t s1 = tok.find('/'), s2 = s1 == std::string::npos ? s1 : tok.find('/', s1 + 1);
+        if (s2 != std::string::npos) {
+          const std::string nh = tok.substr(s2 + 1);
+          int kn = 0;
+          std::size_t un = 0;
+          try {
+            kn = std::stoi(nh, &un);
+          } catch (const std::exception&) {
+            un = 0;
+          }
+          const int in = kn > 0 ? kn - 1 : static_cast<int>(VN.size()) + kn;
+          if (un != nh.size() || nh.empty() || kn == 0 || in < 0 || in >= static_cast<int>(VN.size()))
+            throw InputError(path, line_no,
+                                     "expected a normal index in 1.." + std::to_string(VN.size()) + ", found '" + tok +
+                                         "'");
+          nidx.push_back(in);
+        }
+      }
+      if (idx.size() != 4)
+        throw InputError(path, line_no,
+                                 "expected a quad (4 vertices), found a face with " + std::to_string(idx.size()));
+      if (!nidx.empty() && nidx.size() != 4)
+        throw InputError(path, line_no, "expected a normal index on all four vertices of the face or none");
+      if (!nidx.empty()) {
+        ++faces_with_normals;
+        node_normal.resize(V.size(), -1);
+        normal_line.resize(V.size(), 0);
+        for (int a = 0; a < 4; ++a) {
+          int& nn = node_normal[static_cast<size_t>(idx[static_cast<size_t>(a)])];
+          if (nn >= 0 && (VN[static_cast<size_t>(nn)] - VN[static_cast<size_t>(nidx[static_cast<size_t>(a)])]).norm() > 1e-12)
+            throw InputError(path, line_no,
+                                     "vertex " + std::to_string(idx[static_cast<size_t>(a)] + 1) +
+                                         " has two different normals (the first on line " +
+                                         std::to_string(normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])]) +
+                                         "): a shell node has one director");
+          if (nn < 0) {
+            nn = nidx[static_cast<size_t>(a)];
+            normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])] = line_no;
+          }
+        }
+      }
+      if (groups)
+        for (const std::string& g : current_groups) (*groups)[g].push_back(static_cast<int>(Q.size()));
+      Q.emplace_back(idx[0], idx[1], idx[2], idx[3]);
+    } else if (kw == "g") {
+      current_groups.clear();
+      std::string g;
+      while (ls >> g) current_groups.push_back(g);
+    } else if (kw == "vt" || kw == "vp" || kw == "o" || kw == "s" || kw == "usemtl" ||
+               kw == "mtllib" || kw == "l") {
+      continue;
+    } else {
+      throw InputError(path, line_no, "unknown OBJ keyword '" + kw + "'");
+    }
+  }
+  if (Q.empty()) throw InputError(path + ": error: no quad faces");
+  QuadMesh m;
+  m.V.resize(static_cast<Eigen::Index>(V.size()), 3);
+  for (size_t i = 0; i < V.size(); ++i) m.V.row(static_cast<Eigen::Index>(i)) = V[i].transpose();
+  m.Q.resize(static_cast<Eigen::Index>(Q.size()), 4);
+  for (size_t i = 0; i < Q.size(); ++i) m.Q.row(static_cast<Eigen::Index>(i)) = Q[i].transpose();
+  if (normals) normals->resize(0, 3);
+  if (faces_with_normals > 0) {
+    if (faces_with_normals != static_cast<int>(Q.size()))
+      throw InputError(path + ": error: " + std::to_string(faces_with_normals) + " of " +
+                               std::to_string(Q.size()) +
+                               " faces give vertex normals: give them on every face (they are the directors) or none");
+    const Points3 faces = area_weighted_quad_normals(m);
+    Points3 N(m.num_nodes(), 3);
+    for (int i = 0; i < m.num_nodes(); ++i) {
+      const int nn = node_normal[static_cast<size_t>(i)];
+      if (nn < 0) {  // a vertex of no face: keep the (zero) face normal
+        N.row(i) = faces.row(i);
+        continue;
+      }
+      N.row(i) = VN[static_cast<size_t>(nn)].transpose();
+      if (!(N.row(i).dot(faces.row(i)) > 0))
+        throw InputError(path, normal_line[static_cast<size_t>(i)],
+                                 "the normal of vertex " + std::to_string(i + 1) +
+                                     " points away from the side the faces' orientation gives (counter-clockwise "
+                                     "faces seen from the normal's side)");
+    }
+    if (normals) *normals = N;
+  }
+  return m;
+}
+
+QuadMesh parse_quad_vtk(const std::string& content, const std::string& name, const MeshReadOptions& options,
+                        std::vector<VtkField>* fields) {
+  const VtkPolydata d = parse_vtk_polydata(content, name, fields);
+  if (d.polys.empty()) throw InputError(name, 0, "VTK: expected a non-empty POLYGONS section of quads, found none");
+  QuadMesh m;
+  m.name = name;
+  const double s = metres_per_unit(options.unit);
+  m.V.resize(static_cast<Eigen::Index>(d.b.V.size()), 3);
+  for (size_t i = 0; i < d.b.V.size(); ++i)
+    for (int k = 0; k < 3; ++k) m.V(static_cast<Eigen::Index>(i), k) = d.b.V[i][k] * s;
+  m.Q.resize(static_cast<Eigen::Index>(d.polys.size()), 4);
+  for (size_t f = 0; f < d.polys.size(); ++f) {
+    if (d.polys[f].size() != 4)
+      throw InputError(name, d.poly_line[f], "VTK: expected a quad (4 points) in polygon " + std::to_string(f) +
+                                                 ", found " + std::to_string(d.polys[f].size()) + " points");
+    for (int k = 0; k < 4; ++k) m.Q(static_cast<Eigen::Index>(f), k) = static_cast<int>(d.polys[f][static_cast<size_t>(k)]);
+  }
+  return m;
+}
+
+QuadMesh read_quad_vtk(const std::string& path, const MeshReadOptions& options, std::vector<VtkField>* fields) {
+  return parse_quad_vtk(read_whole_file(path), path, options, fields);
 }
 
 TriangleMesh parse_vtk(const std::string& content, const std::string& name, const MeshReadOptions& options,

@@ -10,7 +10,8 @@
 //        binary_little_endian; vertex x,y,z as float or double; face list with
 //        uchar/char/ushort/short/int/uint counts and int/uint/short/ushort/char/
 //        uchar indices; other elements and properties are skipped).
-//        Legacy VTK ASCII polydata (see read_vtk).
+//        Legacy VTK ASCII polydata (see read_vtk). Quad meshes (shells):
+//        read_quad_obj (with vn, g), read_quad_vtk (with fields).
 // Write: STL (binary or ASCII), OBJ, PLY (binary or ASCII), legacy VTK ASCII
 //        polydata (with optional point/cell data fields); OBJ and VTK for quad
 //        meshes too.
@@ -18,6 +19,7 @@
 // Errors throw InputError: "file:line: error: expected ..., found ..." for text
 // formats; for binary content the message names the byte offset and the
 // face/vertex index. An empty mesh (no triangles) is an error on read.
+#include <map>
 #include <string>
 #include <vector>
 
@@ -98,6 +100,29 @@ TriangleMesh read_vtk(const std::string& path, const MeshReadOptions& options = 
                       std::vector<VtkField>* fields = nullptr);
 TriangleMesh parse_vtk(const std::string& content, const std::string& name,
                        const MeshReadOptions& options = {}, std::vector<VtkField>* fields = nullptr);
+
+/// Face groups of a quad OBJ ('g' lines): group name -> quad indices.
+using FaceGroups = std::map<std::string, std::vector<int>>;
+
+/// Quad OBJ (shell meshes): 'v x y z' and 4-node 'f' lines (index forms i,
+/// i/j, i/j/k, i//k; negative = relative); 'vn' vertex normals referenced by
+/// the faces (i/j/k, i//k) go to `normals` (unit rows, one per vertex) when
+/// every face gives them (left empty when none does); 'g' lines name the
+/// groups of the faces after them (into `groups`); comments,
+/// vt/vp/o/s/usemtl/mtllib/l lines are skipped. Anything else, a face that is
+/// not a quad, normals on some faces only, two different normals of one
+/// vertex or a normal on the side opposite to the faces' orientation
+/// (counter-clockwise seen from the normal) is an InputError with file:line.
+QuadMesh read_quad_obj(const std::string& path, const MeshReadOptions& options = {}, Points3* normals = nullptr,
+                       FaceGroups* groups = nullptr);
+/// Legacy VTK ASCII polydata whose POLYGONS are all quads (header and
+/// sections as read_vtk; POINT_DATA/CELL_DATA fields into `fields`, cell
+/// fields per quad). A polygon that is not a quad is an InputError with
+/// file:line.
+QuadMesh read_quad_vtk(const std::string& path, const MeshReadOptions& options = {},
+                       std::vector<VtkField>* fields = nullptr);
+QuadMesh parse_quad_vtk(const std::string& content, const std::string& name, const MeshReadOptions& options = {},
+                        std::vector<VtkField>* fields = nullptr);
 
 /// Writers throw InputError if the file cannot be written, and if a mesh has
 /// non-finite coordinates or out-of-range indices (a writer never produces a

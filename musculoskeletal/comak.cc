@@ -1,6 +1,7 @@
 #include "musculoskeletal/comak.h"
 
 #include <IpIpoptApplication.hpp>
+#include <stdexcept>
 #include <IpTNLP.hpp>
 #include <IpoptConfig.h>
 
@@ -1088,49 +1089,65 @@ ComakRunSummary run_comak(
     const ComakProblem& p, const std::vector<ComakFrameInput>& frames,
     const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
         on_frame) {
+  return run_comak(p, frames, on_frame, nullptr, {});
+}
+
+ComakRunSummary run_comak(
+    const ComakProblem& p, const std::vector<ComakFrameInput>& frames,
+    const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
+        on_frame,
+    const ComakRunState* resume, const std::function<void(const ComakRunState&)>& on_state) {
   common::register_dependency_version("ipopt", IPOPT_VERSION);
-  ComakRunSummary sum;
-  if (frames.empty()) return sum;
+  if (frames.empty()) return ComakRunSummary{};
   const Model& model = p.model();
   const ComakOptions& o = p.options();
   ModelData data = make_data(model);
   const int nm = static_cast<int>(model.muscles.size());
+  ComakRunState st;
+  ComakRunSummary& sum = st.summary;
+  double wall_before = 0.0;  // of the frames a resumed run did not solve itself
   auto t0 = std::chrono::steady_clock::now();  // restarted after the first settle
   // A non-finite input or evaluation stops the run at its frame; the
   // summary of the frames before goes with the exception.
   auto stop = [&](const ComakFrameInput& f, const common::NumericalError& e) {
-    sum.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    sum.wall_time = wall_before + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     sum.stopped = e.what();
     common::log_error(std::string(e.what()) + " -- run stopped after " +
                       std::to_string(sum.frames) + " frames");
     return ComakRunStopped(e.what(), f.index, sum);
   };
-  try {
-    check_frame_input(frames.front());
-  } catch (const common::NumericalError& e) {
-    throw stop(frames.front(), e);
+  if (resume != nullptr) {
+    if (resume->frames_done < 0 || resume->frames_done > static_cast<int>(frames.size()))
+      throw std::logic_error("run_comak: resume state of " + std::to_string(resume->frames_done) + " frames for " +
+                             std::to_string(frames.size()) + " frames");
+    st = *resume;
+    wall_before = st.summary.wall_time;
+  } else {
+    try {
+      check_frame_input(frames.front());
+    } catch (const common::NumericalError& e) {
+      throw stop(frames.front(), e);
+    }
+    // The first frame starts from the passive settle at its flexion.
+    sum.first_settle = settle_from_neutral(p, data, frames.front());
+    common::log_info("COMAK: first frame from the passive settle: " + sum.first_settle.message);
+    st.q = sum.first_settle.q;
+    st.a = Eigen::VectorXd::Constant(nm, o.activation_min);
+    // The previous pose of the coordinate dampers: the first frame's settle,
+    // one frame spacing before it; then the last converged frame.
+    st.q_prev = st.q;
+    st.t_prev = frames.front().time - (frames.size() > 1 ? frames[1].time - frames[0].time : 0.01);
   }
-  // The first frame starts from the passive settle at its flexion.
-  sum.first_settle = settle_from_neutral(p, data, frames.front());
-  common::log_info("COMAK: first frame from the passive settle: " + sum.first_settle.message);
-  Eigen::VectorXd q = sum.first_settle.q;
-  Eigen::VectorXd a = Eigen::VectorXd::Constant(nm, o.activation_min);
-  ComakMultipliers warm;
-  bool have_warm = false;
-  // The previous pose of the coordinate dampers: the first frame's settle,
-  // one frame spacing before it; then the last converged frame.
-  Eigen::VectorXd q_prev = q;
-  double t_prev = frames.front().time - (frames.size() > 1 ? frames[1].time - frames[0].time : 0.01);
   t0 = std::chrono::steady_clock::now();
-  for (const ComakFrameInput& frame : frames) {
-    ComakFrameInput f = frame;
+  for (std::size_t i = static_cast<std::size_t>(st.frames_done); i < frames.size(); ++i) {
+    ComakFrameInput f = frames[i];
     f.has_previous = true;
-    f.q_previous = q_prev;
-    f.dt_previous = f.time - t_prev;
+    f.q_previous = st.q_prev;
+    f.dt_previous = f.time - st.t_prev;
     ComakFrameResult r;
     try {
-      r = solve_comak_frame(p, data, f, q, a,
-                            have_warm && o.warm_start_multipliers ? &warm : nullptr);
+      r = solve_comak_frame(p, data, f, st.q, st.a,
+                            st.have_warm && o.warm_start_multipliers ? &st.warm : nullptr);
       // Evaluate the model at the reported solution for the writer.
       p.residual(data, f, r.q, r.activations, r.reserves);
     } catch (const common::NumericalError& e) {
@@ -1140,12 +1157,12 @@ ComakRunSummary run_comak(
     sum.total_iterations += r.iterations;
     if (r.status == ComakFrameStatus::kConverged) {
       ++sum.converged;
-      q = r.q;
-      q_prev = r.q;
-      t_prev = f.time;
-      a = r.activations;
-      warm = r.multipliers;
-      have_warm = true;
+      st.q = r.q;
+      st.q_prev = r.q;
+      st.t_prev = f.time;
+      st.a = r.activations;
+      st.warm = r.multipliers;
+      st.have_warm = true;
       common::log_debug(r.message);
     } else {
       ++sum.failed;
@@ -1154,8 +1171,11 @@ ComakRunSummary run_comak(
                                    "converged one");
     }
     on_frame(f, r, data);
+    st.frames_done = static_cast<int>(i) + 1;
+    sum.wall_time = wall_before + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (on_state) on_state(st);
   }
-  sum.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  sum.wall_time = wall_before + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return sum;
 }
 

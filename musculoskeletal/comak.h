@@ -430,6 +430,22 @@ class ComakRunStopped : public common::NumericalError {
   ComakRunSummary summary;  ///< of the frames before it; summary.stopped = what()
 };
 
+/// What run_comak carries from one frame to the next: with it (and the
+/// frames' inputs) the rest of a run is the same, bit for bit, as in an
+/// uninterrupted run (checkpoint and resume, pipelines/comak_checkpoint.h).
+/// Nothing else carries over: the model data's contact search caches change
+/// only the speed of an evaluation, not its result (contact.h).
+struct ComakRunState {
+  int frames_done = 0;         ///< frames of the list solved and handed to on_frame
+  Eigen::VectorXd q, a;        ///< start of the next frame (last converged frame, or the first settle)
+  Eigen::VectorXd q_prev;      ///< the coordinate dampers' previous pose
+  double t_prev = 0.0;         ///< its time [s]
+  ComakMultipliers warm;       ///< of the last converged frame
+  bool have_warm = false;
+  /// Of the frames done (wall_time: their solves' wall time [s]).
+  ComakRunSummary summary;
+};
+
 /// Runs frame after frame: the first from the passive settle at its flexion
 /// (muscle tone options.settle.muscle_tone), each next one warm-started from
 /// the previous converged frame. `on_frame` is called after every frame
@@ -441,6 +457,16 @@ ComakRunSummary run_comak(
     const ComakProblem& problem, const std::vector<ComakFrameInput>& frames,
     const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
         on_frame);
+
+/// The same, continuing from `resume` when given (the state after its
+/// frames_done frames of the same list; the settle is not repeated), and
+/// calling `on_state` after on_frame of every frame with the state the next
+/// frame starts from (for checkpoints).
+ComakRunSummary run_comak(
+    const ComakProblem& problem, const std::vector<ComakFrameInput>& frames,
+    const std::function<void(const ComakFrameInput&, const ComakFrameResult&, const ModelData&)>&
+        on_frame,
+    const ComakRunState* resume, const std::function<void(const ComakRunState&)>& on_state);
 
 const char* to_string(ComakFrameStatus status);
 

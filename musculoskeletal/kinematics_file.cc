@@ -7,6 +7,7 @@
 #include "common/effects.h"
 #include "common/finite.h"
 #include "common/error.h"
+#include "common/file_check.h"
 #include "common/hdf5.h"
 #include "common/metadata.h"
 #include "common/output_file.h"
@@ -311,6 +312,8 @@ void write_prescribed_kinematics(const std::string& path, const PrescribedKinema
   f.set_attribute("/", "format_version", 1);
   f.set_attribute("/", "world_frame", k.world_frame);
   const std::int64_t n = k.time_s.size();
+  f.set_attribute("/", "frames_expected", n);  // a complete, finished run (KinematicsFileReader::require_complete)
+  f.set_attribute("/", "frames", n);
   f.write("/time", k.time_s);
   for (const auto& [body, poses] : k.body_poses) {
     if (static_cast<std::int64_t>(poses.size()) != n)
@@ -341,6 +344,22 @@ const std::string& KinematicsFileReader::path() const { return f_->path(); }
 const common::H5File& KinematicsFileReader::file() const { return *f_; }
 
 Eigen::VectorXd KinematicsFileReader::time() const { return f_->read_vector("/time"); }
+
+std::int64_t KinematicsFileReader::frames_complete() const {
+  return f_->exists("/time") ? f_->dims("/time").at(0) : 0;
+}
+std::int64_t KinematicsFileReader::frames_expected() const {
+  return f_->has_attribute("/", "frames_expected") ? f_->attribute_int("/", "frames_expected") : -1;
+}
+bool KinematicsFileReader::finished() const {
+  return f_->has_attribute("/", "frames") && !f_->has_attribute("/", "stopped");
+}
+std::string KinematicsFileReader::incompleteness() const {
+  return common::incompleteness(*f_, common::StageFile::kKinematics);
+}
+std::string KinematicsFileReader::require_complete(bool allow_partial) const {
+  return common::require_usable_file(*f_, f_->path(), common::StageFile::kKinematics, allow_partial);
+}
 
 std::string KinematicsFileReader::body_poses_dataset(const std::string& body) { return "/bodies/" + body + "/X_W"; }
 

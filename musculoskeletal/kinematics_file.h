@@ -111,6 +111,27 @@ class KinematicsFileReader {
   double body_mass_kg() const;
   /// Muscle names and activations (frames x muscles), or nullopt.
   std::optional<std::pair<std::vector<std::string>, Eigen::MatrixXd>> activations() const;
+  /// Completeness (docs/kinematics_file.md, "Completeness"). Frames whose
+  /// write completed (/time entries: a killed run's file ends at its last
+  /// complete frame).
+  std::int64_t frames_complete() const;
+  /// Frames the run set out to solve (root attribute frames_expected); -1
+  /// when the file does not record it.
+  std::int64_t frames_expected() const;
+  /// True when the run that wrote the file finished it (its run summary,
+  /// root attribute `frames`, is written) and did not stop early (no
+  /// attribute `stopped`).
+  bool finished() const;
+  /// "" when the file is complete (finished() and frames_complete() ==
+  /// frames_expected()), else what it holds, e.g. "18 of 21 frames (the run
+  /// stopped: ...)" (common::incompleteness).
+  std::string incompleteness() const;
+  /// What every consumer calls before it uses the frames: kind and version
+  /// checked (InputError otherwise); an incomplete file is an InputError
+  /// naming the file and what it holds unless `allow_partial`, which returns
+  /// the line "PARTIAL INPUT: <file> is an incomplete kinematics file: ..."
+  /// for the top of the consumer's report ("" for a complete file).
+  std::string require_complete(bool allow_partial) const;
   /// The file (for generic listings: attributes, the force datasets under
   /// kContactGroup).
   const common::H5File& file() const;

@@ -186,6 +186,54 @@ void HhtIntegrator::initialize(double t0, const Eigen::VectorXd& q0, const Eigen
   stats_.status = IntegratorStatus::kRunning;
 }
 
+HhtState HhtIntegrator::state() const {
+  HhtState s;
+  s.t = t_;
+  s.dt = dt_;
+  s.h_prev = h_prev_;
+  s.successes_since_halving = successes_since_halving_;
+  s.q = q_;
+  s.v = v_;
+  s.a = a_;
+  s.F = F_;
+  s.q_initial = q_initial_;
+  s.dq_prev = dq_prev_;
+  s.steps = stats_.steps;
+  s.rejected_steps = stats_.rejected_steps;
+  s.rejections = stats_.rejections;
+  s.newton = newton_->statistics();
+  s.initial_assembly_s = initial_assembly_s_;
+  s.total_s = stats_.total_s;
+  return s;
+}
+
+void HhtIntegrator::restore(const HhtState& s) {
+  const Eigen::Index n = sys_.num_dofs();
+  for (const Eigen::VectorXd* v : {&s.q, &s.v, &s.a, &s.F, &s.q_initial})
+    if (v->size() != n)
+      throw common::InputError("HHT: restored state of size " + std::to_string(v->size()) + ", expected " +
+                               std::to_string(n));
+  if (stats_.status != IntegratorStatus::kRunning) throw common::InputError("HHT: restore() needs initialize() first");
+  t_ = s.t;
+  dt_ = s.dt;
+  h_prev_ = s.h_prev;
+  successes_since_halving_ = s.successes_since_halving;
+  q_ = s.q;
+  v_ = s.v;
+  a_ = s.a;
+  F_ = s.F;
+  q_initial_ = s.q_initial;
+  dq_prev_ = s.dq_prev;
+  stats_.steps = s.steps;
+  stats_.rejected_steps = s.rejected_steps;
+  stats_.rejections = s.rejections;
+  stats_.log.clear();
+  stats_.total_s = s.total_s;
+  initial_assembly_s_ = s.initial_assembly_s;
+  newton_->restore_statistics(s.newton);
+  copy_newton_statistics();
+}
+
 bool HhtIntegrator::attempt(double h, std::string& reason, double& last_residual) {
   const int n = sys_.num_dofs();
   const double t1 = t_ + h;

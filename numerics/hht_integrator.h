@@ -138,6 +138,20 @@ struct IntegratorStatistics {
   std::vector<StepRecord> log;          ///< accepted steps (if keep_step_log)
 };
 
+/// Everything an HhtIntegrator carries from one step to the next (checkpoint
+/// and resume, docs/testing.md): with it restored after initialize(), the
+/// following steps are the same, bit for bit, as without the interruption.
+struct HhtState {
+  double t = 0, dt = 0, h_prev = 0;
+  int successes_since_halving = 0;
+  Eigen::VectorXd q, v, a, F, q_initial, dq_prev;
+  long steps = 0, rejected_steps = 0;
+  std::vector<std::string> rejections;
+  /// The Newton solver's counters and linear solver in use (timings too).
+  NewtonStatistics newton;
+  double initial_assembly_s = 0, total_s = 0;
+};
+
 class HhtIntegrator {
  public:
   /// The system must outlive the integrator.
@@ -168,6 +182,12 @@ class HhtIntegrator {
   double current_dt() const { return dt_; }
   const IntegratorStatistics& statistics() const { return stats_; }
   const IntegratorOptions& options() const { return opts_; }
+
+  /// The state after the last accepted step (checkpoints).
+  HhtState state() const;
+  /// Continues from `s` (after initialize() on the same system and options;
+  /// the step log restarts empty). Sizes are checked (InputError).
+  void restore(const HhtState& s);
 
  private:
   class StepSystem;

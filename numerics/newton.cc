@@ -37,6 +37,18 @@ NewtonSolver::NewtonSolver(NewtonSystem& system, const NewtonOptions& options) :
 
 NewtonSolver::~NewtonSolver() = default;
 
+void NewtonSolver::restore_statistics(const NewtonStatistics& s) {
+  // The system's pattern as it is now (restored with the system), without
+  // counting a change: the counters are the earlier solver's.
+  sync_pattern();
+  const LinearSolverKind kind =
+      s.linear_solver == to_string(LinearSolverKind::kUmfpack) ? LinearSolverKind::kUmfpack : LinearSolverKind::kCholmod;
+  if (kind != solver_->kind()) solver_ = std::make_unique<SparseDirectSolver>(kind);
+  factor_valid_ = false;
+  stats_ = s;
+  stats_.linear_solver = to_string(kind);
+}
+
 void NewtonSolver::sync_pattern() {
   // Constraint elimination indices in the pattern (rows/cols -> identity).
   const auto& P = sys_.tangent_pattern();

@@ -166,6 +166,11 @@ class NewtonSolver {
   void invalidate_factorization() { factor_valid_ = false; }
 
   const NewtonStatistics& statistics() const { return stats_; }
+  /// Checkpoint and resume (docs/testing.md): the counters and the linear
+  /// solver in use (after a CHOLMOD -> UMFPACK switch) of an earlier solver,
+  /// set on a fresh one. A kept factorisation (reuse_factorization) is not
+  /// carried over: the next solve factorises anew.
+  void restore_statistics(const NewtonStatistics& s);
   const NewtonOptions& options() const { return opts_; }
 
  private:

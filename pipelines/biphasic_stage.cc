@@ -75,13 +75,16 @@ JointLayer read_layer(const common::PreparedModelReader& f, const std::string& n
 struct KinematicsInput {
   std::vector<JointFrame> frames;
   int failed = 0;
+  std::string partial_input;  ///< "PARTIAL INPUT: ..." for an incomplete file read with allow_partial
 };
 
 // Frames of the kinematics file: bone poses and the compartment forces.
 KinematicsInput read_kinematics(const std::string& path, const std::set<std::string>& bones,
-                                const std::set<std::string>& compartments, double end_time_s) {
+                                const std::set<std::string>& compartments, double end_time_s, bool allow_partial) {
   const musculoskeletal::KinematicsFileReader reader(path);
-  common::require_file_format(reader.file(), path, common::StageFile::kKinematics);  // kind and version (common/file_check.h)
+  // Kind, version and completeness (a killed or stopped COMAK run): refused
+  // naming the file and what it holds unless allow_partial (common/file_check.h).
+  const std::string partial_input = reader.require_complete(allow_partial);
   const Eigen::VectorXd time = reader.time();
   const Eigen::Index n = time.size();
   std::map<std::string, std::vector<Eigen::Isometry3d>> poses;
@@ -135,6 +138,7 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
   }
   const std::vector<bool> converged = reader.converged(n);
   KinematicsInput in;
+  in.partial_input = partial_input;
   for (Eigen::Index k = 0; k < n; ++k) {
     if (end_time_s >= 0.0 && time[k] > end_time_s + 1e-12) break;
     if (!converged[static_cast<std::size_t>(k)]) {
@@ -203,6 +207,7 @@ StageDescriptor biphasic_stage_descriptor() {
   StageDescriptor d;
   d.name = "biphasic";
   d.executable = "arthrosim-biphasic";
+  d.takes_allow_partial = true;  // an incomplete kinematics file (arthrosim run --allow-partial)
   d.summary = "cartilage layers as linear biphasic volumes loaded by the penetration method from stage 1's kinematics";
   d.block = block_schema<BiphasicOptions>("biphasic", "effects and options of the biphasic stage (docs/biphasic.md)");
   d.outputs = {"biphasic"};
@@ -313,7 +318,8 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   std::set<std::string> bones, compartments;
   for (const JointLayer& l : full) bones.insert(l.bone);
   for (const JointPair& p : pairs) compartments.insert(p.compartment);
-  const KinematicsInput kin = read_kinematics(o.kinematics, bones, compartments, o.end_time_s.value_or(-1.0));
+  const KinematicsInput kin = read_kinematics(o.kinematics, bones, compartments, o.end_time_s.value_or(-1.0), o.allow_partial);
+  result.partial_input = kin.partial_input;
   result.frames_failed = kin.failed;
   const std::vector<JointFrame>& frames = kin.frames;
   if (frames.size() < 2) {
@@ -430,6 +436,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   common::write_metadata(writer.file(),
                          common::collect_run_metadata("arthrosim-biphasic", static_cast<int>(argv.size()),
                                                       argv.data(), "", options_text(o)));
+  if (!kin.partial_input.empty()) writer.file().set_attribute("/", "partial_input", kin.partial_input);
   common::ProgressOptions po;
   if (!o.progress) po.mode = common::ProgressOptions::Mode::kOff;
   common::Progress progress("biphasic", expected, po);

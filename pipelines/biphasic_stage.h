@@ -59,6 +59,10 @@ struct BiphasicStageOptions : BiphasicOptions {
   std::string kinematics;  ///< kinematics HDF5 (arthrosim-comak)
   std::string out;         ///< output HDF5 (XDMF sidecar next to it)
   bool progress = true;
+  /// Go on with an incomplete kinematics file (a killed or stopped COMAK
+  /// run; refused otherwise); the output then holds the root attribute
+  /// partial_input saying so.
+  bool allow_partial = false;
   std::vector<std::string> argv;  ///< for the run metadata
 };
 
@@ -109,6 +113,8 @@ struct BiphasicStageResult {
   /// Mean fluid load support of each layer over the steps with contact.
   std::vector<double> mean_fluid_load_support;
   double preprocessing_s = 0.0, build_s = 0.0, stepping_s = 0.0, wall_s = 0.0;
+  /// "PARTIAL INPUT: ..." when run on an incomplete kinematics file (allow_partial), else "".
+  std::string partial_input;
 };
 
 BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& options);

@@ -5,8 +5,10 @@
 #include <tuple>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <sstream>
 
+#include "common/checkpoint.h"
 #include "common/effects.h"
 #include "common/error.h"
 #include "common/log.h"
@@ -21,6 +23,7 @@
 #include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/knee_loads.h"
 #include "musculoskeletal/model_io.h"
+#include "pipelines/comak_checkpoint.h"
 #include "pipelines/stages.h"
 #include "pipelines/study.h"
 
@@ -54,6 +57,9 @@ void ComakStageOptions::declare(common::OptionVisitor& v) {
   solver.declare(v);
   v.number("lowpass_cutoff_hz", trial.lowpass.cutoff_hz, Unit::kHertz, {0.1, 1000},
            "low-pass filter of trial kinematics and ground reactions");
+  v.number("checkpoint_interval_s", checkpoint_interval_s, Unit::kSecond, {0, 86400},
+           "wall time between checkpoints <out>.checkpoint (0: after every frame); a rerun of the same command "
+           "continues from the last one (docs/comak.md, \"Checkpoints\")");
 }
 
 void check_comak_effects(const std::vector<std::string>& effects, const std::string& where) {
@@ -208,8 +214,8 @@ ComakStageResult run_comak_stage(const ComakStageConfig& config) {
   info.expected_frames = static_cast<std::int64_t>(frames.size());
   info.pressure_fields = config.pressure_fields;
   const std::string out = config.out.string();
+  std::vector<common::NamedInput> inputs = common::files_of(config.model, "--model");
   {  // An output never replaces an input (common/output_file.h).
-    std::vector<common::NamedInput> inputs = common::files_of(config.model, "--model");
     for (const auto& f : {common::NamedInput{model_path, "the URDF of --model"}, {config.prepared, "--prepared"},
                           {config.scene, "--scene"}, {trial.source, "--trial"}})
       inputs.push_back(f);
@@ -233,11 +239,75 @@ ComakStageResult run_comak_stage(const ComakStageConfig& config) {
   }
   common::Progress progress("comak", static_cast<std::int64_t>(frames.size()));
   ComakStageResult result;
-  try {
-    result.summary = msk::run_comak(problem, frames, [&](const auto& f, const auto& r, const auto& d) {
-      writer.append(f, r, d);
+
+  // ---- checkpoint and resume (pipelines/comak_checkpoint.h) ----------------
+  // The checkpoint is tied to this run's identity: the program's bytes, its
+  // command line, the options and every input file's bytes (and the
+  // runner's stage key); any other checkpoint is discarded, never used.
+  const fs::path checkpoint_path = common::checkpoint_name(out);
+  ComakCheckpoint checkpoint;
+  checkpoint.identity = common::run_identity(config.argv, opts, inputs);
+  checkpoint.frames_total = static_cast<std::int64_t>(frames.size());
+  std::optional<msk::ComakRunState> resume;
+  if (fs::exists(checkpoint_path)) {
+    std::string why;
+    std::optional<ComakCheckpoint> found = read_comak_checkpoint(checkpoint_path, why);
+    if (found && found->identity != checkpoint.identity)
+      why = "it belongs to another run (inputs, options, command line or build differ)";
+    else if (found && found->frames_total != checkpoint.frames_total)
+      why = "it is of a run of " + std::to_string(found->frames_total) + " frames, not " +
+            std::to_string(checkpoint.frames_total);
+    if (found && why.empty()) {
+      common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": " +
+                       std::to_string(found->state.frames_done) + " of " + std::to_string(frames.size()) +
+                       " frames done (taken from it, not solved again)");
+      resume = found->state;
+      checkpoint.frames = std::move(found->frames);
+    } else {
+      common::log_warn("not resuming from " + checkpoint_path.string() + ": " + why + "; starting over");
+      fs::remove(checkpoint_path);
+    }
+  }
+  common::CheckpointClock clock(config.options.checkpoint_interval_s);
+  msk::ModelData replay_data = msk::make_data(model);
+  if (resume) {
+    // The frames done, appended again as the uninterrupted run appended
+    // them: each evaluated at its stored solution with the inputs it was
+    // solved with.
+    for (int i = 0; i < resume->frames_done; ++i) {
+      const ComakFrameRecord& rec = checkpoint.frames[static_cast<std::size_t>(i)];
+      msk::ComakFrameInput f = frames[static_cast<std::size_t>(i)];
+      f.has_previous = true;
+      f.q_previous = rec.q_previous;
+      f.dt_previous = rec.dt_previous;
+      problem.residual(replay_data, f, rec.result.q, rec.result.activations, rec.result.reserves);
+      writer.append(f, rec.result, replay_data);
       progress.step();
-    });
+    }
+    result.resumed_frames = resume->frames_done;
+  }
+  auto on_frame = [&](const msk::ComakFrameInput& f, const msk::ComakFrameResult& r, const msk::ModelData& d) {
+    writer.append(f, r, d);
+    ComakFrameRecord rec;
+    rec.result = r;
+    rec.result.multipliers = {};
+    rec.q_previous = f.q_previous;
+    rec.dt_previous = f.dt_previous;
+    checkpoint.frames.push_back(std::move(rec));
+    progress.step();
+  };
+  auto on_state = [&](const msk::ComakRunState& state) {
+    // After the last frame the output itself is finished next.
+    if (state.frames_done >= static_cast<int>(frames.size()) || !clock.due()) return;
+    checkpoint.state = state;
+    write_comak_checkpoint(checkpoint_path, checkpoint, ++result.checkpoints);
+    result.checkpoint_bytes = fs::file_size(checkpoint_path);
+    clock.mark();
+    common::log_debug("checkpoint " + checkpoint_path.string() + ": " + std::to_string(state.frames_done) +
+                      " frames, " + std::to_string(result.checkpoint_bytes) + " bytes");
+  };
+  try {
+    result.summary = msk::run_comak(problem, frames, on_frame, resume ? &*resume : nullptr, on_state);
   } catch (const msk::ComakRunStopped& e) {
     // Finish the file with the frames before the stop (attribute `stopped`);
     // run_comak has logged the reason, naming the frame.
@@ -246,11 +316,13 @@ ComakStageResult run_comak_stage(const ComakStageConfig& config) {
     result.summary = e.summary;
     result.stopped = true;
     result.stopped_frame = e.frame;
+    fs::remove(checkpoint_path);  // a rerun would stop there again
     return result;
   }
   progress.finish();
   writer.finish(result.summary, ledger, sto_prefix);
   atomic.commit();
+  fs::remove(checkpoint_path);
   return result;
 }
 

@@ -2,6 +2,7 @@
 // The musculoskeletal (COMAK) stage: its scene block (comak:) and descriptor.
 // Method: musculoskeletal/comak.h, docs/comak.md; output: the kinematics
 // file (docs/kinematics_file.md).
+#include <cstdint>
 #include <filesystem>
 #include <limits>
 #include <string>
@@ -34,6 +35,11 @@ struct ComakStageOptions {
   /// set, it replaces the frame range of ComakStageConfig.
   double start_time_s = std::numeric_limits<double>::quiet_NaN();
   double end_time_s = std::numeric_limits<double>::quiet_NaN();
+  /// Wall time between checkpoints `<out>.checkpoint` [s] (0: after every
+  /// frame). A rerun of the same command (same inputs, options, command line
+  /// and build) continues from the last checkpoint with datasets
+  /// bit-identical to an uninterrupted run (pipelines/comak_checkpoint.h).
+  double checkpoint_interval_s = 60.0;
   void declare(common::OptionVisitor& v);
 };
 
@@ -66,6 +72,11 @@ struct ComakStageConfig {
 
 struct ComakStageResult {
   musculoskeletal::ComakRunSummary summary;
+  /// Frames taken from a checkpoint of an earlier killed run (0: none).
+  int resumed_frames = 0;
+  /// Checkpoints written, and the size of the last one [bytes].
+  int checkpoints = 0;
+  std::uintmax_t checkpoint_bytes = 0;
   /// A non-finite value stopped the run at stopped_frame; the frames before
   /// it are in <out>.partial (attribute `stopped`; a previous <out> is kept).
   bool stopped = false;

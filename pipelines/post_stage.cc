@@ -266,7 +266,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     const auto t0 = Clock::now();
     const musculoskeletal::KinematicsFileReader kin(in.kinematics);
     const common::H5File& k = kin.file();
-    if (auto p = common::require_usable_file(k, in.kinematics, common::StageFile::kKinematics, in.allow_partial); !p.empty())
+    if (auto p = kin.require_complete(in.allow_partial); !p.empty())  // kind, version, completeness
       summary.partial_inputs.push_back(p);
     const std::string group = musculoskeletal::KinematicsFileReader::kContactGroup;
     auto s = contact_series(k, group, "stage 1");

@@ -206,9 +206,9 @@ std::string quote(const std::string& arg) {
 // output and progress display stream through); otherwise both go to that
 // file, which the runner shows in parts (stages running side by side would
 // interleave on a terminal). `omp_threads` > 0 sets OMP_NUM_THREADS in the
-// stage's environment.
+// stage's environment; ARTHROSIM_STAGE_KEY is the stage key.
 pid_t launch(const fs::path& exe, const std::vector<std::string>& args, const fs::path& log_file,
-             int omp_threads) {
+             int omp_threads, const std::string& stage_key) {
   std::cout.flush();
   std::cerr.flush();
   std::fflush(nullptr);
@@ -220,6 +220,8 @@ pid_t launch(const fs::path& exe, const std::vector<std::string>& args, const fs
   argv.push_back(nullptr);
   const std::string threads = std::to_string(omp_threads);
   const pid_t parent = getpid();
+  // The stage key: a stage ties its checkpoints to it (common/checkpoint.h).
+  const std::string key = stage_key;
   const pid_t pid = fork();
   if (pid != 0) return pid;
   // Child: only async-signal-safe calls until execv. Own process group,
@@ -233,6 +235,7 @@ pid_t launch(const fs::path& exe, const std::vector<std::string>& args, const fs
     ::close(fd);
   }
   if (omp_threads > 0) ::setenv("OMP_NUM_THREADS", threads.c_str(), 1);
+  ::setenv("ARTHROSIM_STAGE_KEY", key.c_str(), 1);
   execv(argv[0], argv.data());
   std::fprintf(stderr, "arthrosim: cannot execute %s: %s\n", argv[0], std::strerror(errno));
   _exit(127);
@@ -593,7 +596,7 @@ RunReport run_scene(const Scene& scene, const RunnerOptions& options, std::ostre
       std::error_code ec;
       fs::remove(stamp_path(out_dir, step.name), ec);
       common::forward_termination_signals();
-      const pid_t pid = launch(options.stage_dir / step.executable, step.arguments, log_file, threads);
+      const pid_t pid = launch(options.stage_dir / step.executable, step.arguments, log_file, threads, stamp_now[i].key);
       if (pid > 0) common::register_child(pid);
       phase[i] = Phase::kRunning;
       if (pid < 0) {

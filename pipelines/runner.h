@@ -53,7 +53,7 @@ struct RunnerOptions {
   /// Results are bit-identical for any value. 1: one stage after the other.
   int jobs = 1;
   /// Pass --allow-partial to the runs of stages that take it
-  /// (StageDescriptor::takes_allow_partial: surface, post): they go on with an
+  /// (StageDescriptor::takes_allow_partial: surface, biphasic, post): they go on with an
   /// incomplete input and say so at the top of their output. The flag is part
   /// of those runs' command lines, hence of their stage keys.
   bool allow_partial = false;

@@ -568,11 +568,13 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
   }
   if (!compression) {
     // Volumes (all three criteria, and each criterion) of cartilage and
-    // menisci against the EFD, as an SVG plot.
-    result.volumes_svg = fs::path(o.out.string() + "_volumes.svg");
-    std::ofstream svg(result.volumes_svg);
-    const double W = 640, H = 420, L = 70, R = 20, T = 30, B = 60;
+    // menisci against the EFD, as an SVG plot (none for the bar, which has
+    // no tissue volumes). Written as <name>.partial and renamed, like the
+    // other outputs (common/output_file.h).
     if (sm.bar) return result;
+    result.volumes_svg = fs::path(o.out.string() + "_volumes.svg");
+    std::ostringstream svg;
+    const double W = 640, H = 420, L = 70, R = 20, T = 30, B = 60;
     double vmax = 1e-12, emax = 0.0;
     for (const ShockwaveRunResult& rr : result.runs) {
       emax = std::max(emax, rr.efd_j_per_m2 * 1e-3);
@@ -617,6 +619,12 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       }
     }
     svg << "</svg>\n";
+    common::AtomicOutput atomic(result.volumes_svg);
+    std::ofstream file(atomic.temp());
+    file << svg.str();
+    file.close();
+    if (!file) throw common::InputError(atomic.temp().string(), 0, "write failed");
+    atomic.commit();
   }
   return result;
 }

@@ -10,10 +10,13 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "cartilage/coupled_system.h"
 #include "numerics/hht_integrator.h"
+#include "common/checkpoint.h"
+#include "pipelines/surface_checkpoint.h"
 #include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
@@ -50,225 +53,6 @@ cartilage::SurfaceInput read_prepared_surface(const common::PreparedModelReader&
   s.normals = std::move(q.normals);
   s.periphery = std::move(q.periphery);
   return s;
-}
-
-/// Quad OBJ reader for the generic case: 'v x y z' (millimetres) and 4-node
-/// 'f' lines (index forms i, i/j, i/j/k, i//k; negative = relative); 'vn'
-/// vertex normals referenced by the faces (i/j/k, i//k) become the nodes'
-/// directors when every face gives them (`normals`, unit rows; left empty
-/// when no face does); 'g' lines name the groups of the faces after them
-/// (into `groups` when given); comments, vt/vp/o/s/usemtl/mtllib/l lines are
-/// skipped. Anything else, a face that is not a quad, normals on some faces
-/// only, two different normals of one vertex or a normal on the side opposite
-/// to the faces' orientation is an InputError with file:line.
-common::QuadMesh read_quad_obj(const std::string& path, common::Points3* normals,
-                               cartilage::FaceGroups* groups = nullptr) {
-  std::ifstream in(path);
-  if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
-  std::vector<Eigen::Vector3d> V, VN;
-  std::vector<Eigen::Vector4i> Q;
-  std::vector<std::string> current_groups;  // names on the last 'g' line
-  std::vector<int> node_normal;  // per vertex: index into VN, -1 none
-  std::vector<int> normal_line;  // per vertex: line that gave it
-  int faces_with_normals = 0;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const auto hash = line.find('#');
-    if (hash != std::string::npos) line.resize(hash);
-    std::istringstream ls(line);
-    std::string kw;
-    if (!(ls >> kw)) continue;
-    if (kw == "v") {
-      Eigen::Vector3d p;
-      if (!(ls >> p.x() >> p.y() >> p.z()) || !p.allFinite())
-        throw common::InputError(path, line_no, "expected 'v x y z' with three finite numbers");
-      V.push_back(p * 1e-3);
-    } else if (kw == "vn") {
-      Eigen::Vector3d n;
-      if (!(ls >> n.x() >> n.y() >> n.z()) || !n.allFinite() || !(n.norm() > 0))
-        throw common::InputError(path, line_no, "expected 'vn x y z' with three finite numbers, not all zero");
-      VN.push_back(n.normalized());
-    } else if (kw == "f") {
-      std::vector<int> idx, nidx;
-      std::string tok;
-      while (ls >> tok) {
-        const std::string head = tok.substr(0, tok.find('/'));
-        std::size_t used = 0;
-        int k = 0;
-        try {
-          k = std::stoi(head, &used);
-        } catch (const std::exception&) {
-          used = 0;
-        }
-        if (used != head.size() || head.empty() || k == 0)
-          throw common::InputError(path, line_no, "expected a vertex index, found '" + tok + "'");
-        const int i = k > 0 ? k - 1 : static_cast<int>(V.size()) + k;
-        if (i < 0 || i >= static_cast<int>(V.size()))
-          throw common::InputError(path, line_no,
-                                   "vertex index " + head + " out of range (" + std::to_string(V.size()) +
-                                       " vertices so far)");
-        idx.push_back(i);
-        // normal index: the third field of i/j/k or i//k
-        const std::size_t s1 = tok.find('/'), s2 = s1 == std::string::npos ? s1 : tok.find('/', s1 + 1);
-        if (s2 != std::string::npos) {
-          const std::string nh = tok.substr(s2 + 1);
-          int kn = 0;
-          std::size_t un = 0;
-          try {
-            kn = std::stoi(nh, &un);
-          } catch (const std::exception&) {
-            un = 0;
-          }
-          const int in = kn > 0 ? kn - 1 : static_cast<int>(VN.size()) + kn;
-          if (un != nh.size() || nh.empty() || kn == 0 || in < 0 || in >= static_cast<int>(VN.size()))
-            throw common::InputError(path, line_no,
-                                     "expected a normal index in 1.." + std::to_string(VN.size()) + ", found '" + tok +
-                                         "'");
-          nidx.push_back(in);
-        }
-      }
-      if (idx.size() != 4)
-        throw common::InputError(path, line_no,
-                                 "expected a quad (4 vertices), found a face with " + std::to_string(idx.size()));
-      if (!nidx.empty() && nidx.size() != 4)
-        throw common::InputError(path, line_no, "expected a normal index on all four vertices of the face or none");
-      if (!nidx.empty()) {
-        ++faces_with_normals;
-        node_normal.resize(V.size(), -1);
-        normal_line.resize(V.size(), 0);
-        for (int a = 0; a < 4; ++a) {
-          int& nn = node_normal[static_cast<size_t>(idx[static_cast<size_t>(a)])];
-          if (nn >= 0 && (VN[static_cast<size_t>(nn)] - VN[static_cast<size_t>(nidx[static_cast<size_t>(a)])]).norm() > 1e-12)
-            throw common::InputError(path, line_no,
-                                     "vertex " + std::to_string(idx[static_cast<size_t>(a)] + 1) +
-                                         " has two different normals (the first on line " +
-                                         std::to_string(normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])]) +
-                                         "): a shell node has one director");
-          if (nn < 0) {
-            nn = nidx[static_cast<size_t>(a)];
-            normal_line[static_cast<size_t>(idx[static_cast<size_t>(a)])] = line_no;
-          }
-        }
-      }
-      if (groups)
-        for (const std::string& g : current_groups) (*groups)[g].push_back(static_cast<int>(Q.size()));
-      Q.emplace_back(idx[0], idx[1], idx[2], idx[3]);
-    } else if (kw == "g") {
-      current_groups.clear();
-      std::string g;
-      while (ls >> g) current_groups.push_back(g);
-    } else if (kw == "vt" || kw == "vp" || kw == "o" || kw == "s" || kw == "usemtl" ||
-               kw == "mtllib" || kw == "l") {
-      continue;
-    } else {
-      throw common::InputError(path, line_no, "unknown OBJ keyword '" + kw + "'");
-    }
-  }
-  if (Q.empty()) throw common::InputError(path + ": error: no quad faces");
-  common::QuadMesh m;
-  m.V.resize(static_cast<Eigen::Index>(V.size()), 3);
-  for (size_t i = 0; i < V.size(); ++i) m.V.row(static_cast<Eigen::Index>(i)) = V[i].transpose();
-  m.Q.resize(static_cast<Eigen::Index>(Q.size()), 4);
-  for (size_t i = 0; i < Q.size(); ++i) m.Q.row(static_cast<Eigen::Index>(i)) = Q[i].transpose();
-  if (normals) normals->resize(0, 3);
-  if (faces_with_normals > 0) {
-    if (faces_with_normals != static_cast<int>(Q.size()))
-      throw common::InputError(path + ": error: " + std::to_string(faces_with_normals) + " of " +
-                               std::to_string(Q.size()) +
-                               " faces give vertex normals: give them on every face (they are the directors) or none");
-    const common::Points3 faces = cartilage::quad_mesh_vertex_normals(m);
-    common::Points3 N(m.num_nodes(), 3);
-    for (int i = 0; i < m.num_nodes(); ++i) {
-      const int nn = node_normal[static_cast<size_t>(i)];
-      if (nn < 0) {  // a vertex of no face: keep the (zero) face normal
-        N.row(i) = faces.row(i);
-        continue;
-      }
-      N.row(i) = VN[static_cast<size_t>(nn)].transpose();
-      if (!(N.row(i).dot(faces.row(i)) > 0))
-        throw common::InputError(path, normal_line[static_cast<size_t>(i)],
-                                 "the normal of vertex " + std::to_string(i + 1) +
-                                     " points away from the side the faces' orientation gives (counter-clockwise "
-                                     "faces seen from the normal's side)");
-    }
-    if (normals) *normals = N;
-  }
-  return m;
-}
-
-/// Legacy VTK ASCII polydata quad reader for the generic case: POINTS
-/// (coordinates in mm) and POLYGONS whose cells all have 4 nodes; header
-/// lines, other sections (VERTICES, LINES, POINT_DATA, CELL_DATA, ...) end
-/// the geometry part and are ignored. Errors name file:line.
-common::QuadMesh read_quad_vtk(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw common::InputError(path + ": error: cannot open the mesh file");
-  // Tokens with their line numbers.
-  std::vector<std::pair<std::string, int>> tok;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line_no <= 2) continue;  // "# vtk DataFile Version x" and the title
-    std::istringstream ls(line);
-    std::string w;
-    while (ls >> w) tok.emplace_back(w, line_no);
-  }
-  size_t k = 0;
-  auto next = [&](const char* what) -> const std::pair<std::string, int>& {
-    if (k >= tok.size()) throw common::InputError(path, line_no, std::string("unexpected end of file, expected ") + what);
-    return tok[k++];
-  };
-  auto number = [&](const char* what) {
-    const auto& t = next(what);
-    try {
-      size_t used = 0;
-      const double x = std::stod(t.first, &used);
-      if (used == t.first.size() && std::isfinite(x)) return x;
-    } catch (const std::exception&) {
-    }
-    throw common::InputError(path, t.second, std::string("expected ") + what + ", found '" + t.first + "'");
-  };
-  common::QuadMesh m;
-  bool have_points = false, have_polys = false;
-  while (k < tok.size()) {
-    const auto& t = next("a keyword");
-    if (t.first == "ASCII" || t.first == "DATASET" || t.first == "POLYDATA") continue;
-    if (t.first == "BINARY") throw common::InputError(path, t.second, "expected ASCII, found BINARY");
-    if (t.first == "POINTS") {
-      const int n = static_cast<int>(number("the number of points"));
-      next("the point type");
-      m.V.resize(n, 3);
-      for (int i = 0; i < n; ++i)
-        for (int c = 0; c < 3; ++c) m.V(i, c) = number("a coordinate") * 1e-3;
-      have_points = true;
-    } else if (t.first == "POLYGONS") {
-      const int n = static_cast<int>(number("the number of polygons"));
-      number("the list size");
-      m.Q.resize(n, 4);
-      for (int i = 0; i < n; ++i) {
-        const int line_of_cell = k < tok.size() ? tok[k].second : line_no;
-        const int nv = static_cast<int>(number("a polygon size"));
-        if (nv != 4)
-          throw common::InputError(path, line_of_cell, "expected a quad (4 nodes), found a polygon with " + std::to_string(nv));
-        for (int c = 0; c < 4; ++c) {
-          const double x = number("a node index");
-          if (x < 0 || x >= static_cast<double>(m.V.rows()) || x != std::floor(x))
-            throw common::InputError(path, line_of_cell, "node index " + std::to_string(x) + " out of range [0, " +
-                                                             std::to_string(m.V.rows()) + ")");
-          m.Q(i, c) = static_cast<int>(x);
-        }
-      }
-      have_polys = true;
-    } else {
-      break;  // VERTICES, LINES, POINT_DATA, ...: not geometry of the shell
-    }
-  }
-  if (!have_points || !have_polys || m.Q.rows() == 0)
-    throw common::InputError(path + ": error: expected POINTS and a non-empty POLYGONS section of quads");
-  return m;
 }
 
 /// Nodes inside the box [xmin, ymin, zmin, xmax, ymax, zmax] (SI), sorted.
@@ -340,6 +124,9 @@ void SurfaceScenarioOptions::declare_shared(common::OptionVisitor& v) {
            "time-stepping runs: end once the largest weighted coordinate change over one step (positions, and "
            "transverse gradients x h/2) is at most this, after the pressure ramp; 0: run to end_time_s. The output "
            "records where and why it stopped (docs/surface_output.md)");
+  v.number("checkpoint_interval_s", checkpoint_interval_s, Unit::kSecond, {0, 86400},
+           "wall time between checkpoints <out>.checkpoint (0: after every step); a rerun of the same command "
+           "continues from the last one (docs/surface_output.md, \"Checkpoints\")");
   physics.declare(v);
   v.text_list("osmotic_surfaces", osmotic_surfaces, "",
               "osmotic_pressure: the surfaces that carry it (each one of `surfaces`); empty: every simulated surface "
@@ -402,20 +189,27 @@ void SurfaceScenarioOptions::declare_instance(common::OptionVisitor& v) {
   v.text_list("node_sets", node_sets, "",
               "named node sets of `mesh`, each 'NAME: box XMIN YMIN ZMIN XMAX YMAX ZMAX' (mm), 'NAME: plane NX NY NZ D "
               "[TOL]' (nodes with |n.x - D| <= TOL, n normalised, D and TOL in mm, TOL 0.001 by default), 'NAME: nodes "
-              "I J ...' (0-based indices), 'NAME: all' or 'NAME: group G' (the nodes of the faces after an OBJ 'g' line "
-              "naming G)");
+              "I J ...' (0-based indices), 'NAME: all', 'NAME: group G' (the nodes of the faces after an OBJ 'g' line "
+              "naming G), 'NAME: vtk_point_field F V' (the nodes whose scalar point field F of a .vtk mesh equals V) or "
+              "'NAME: vtk_cell_field F V' (the nodes of the quads whose scalar cell field F equals V)");
   v.text_list("constraints", constraints, "",
               "constraints on node sets, each 'SET: C C ... [= V V ...]' with C one of ux uy uz dx dy dz (global "
               "position and director components; u = ux uy uz, d = dx dy dz, all = both): the components are held at "
               "their reference value (effect fixed_nodes) or moved by V (mm for u, dimensionless for d), ramped like "
-              "point_load_n (effect prescribed_displacement); the reactions are written per constraint "
+              "point_load_n or following 'history H' at the end (effect prescribed_displacement); the reactions are written per constraint "
               "(docs/surface_output.md)");
   v.text_list("loads", loads, "",
               "loads on node sets (effect point_loads, ramped like point_load_n), each 'SET: force FX FY FZ' (total "
               "[N], equal shares), 'SET: force_per_node FX FY FZ' [N], 'SET: traction TX TY TZ' (fixed direction, "
               "MPa, on the quads with all four nodes in SET, consistent nodal forces) or 'SET: gravity GX GY GZ' "
               "(m/s^2: body force density_kg_per_m3 x g per unit volume on those quads) or 'SET: body_force FX FY FZ' "
-              "(N/mm^3, per unit volume, on those quads)");
+              "(N/mm^3, per unit volume, on those quads); each may end with 'history H' (a name of `histories`; "
+              "without one it ramps like point_load_n)");
+  v.text_list("histories", histories, "",
+              "time histories of loads and prescribed constraint values (items ending 'history H'), each 'H: ramp T' "
+              "(factor t / T, 1 after T; T in s, > 0) or 'H: table T0 F0 T1 F1 ...' ((time [s] >= 0, strictly "
+              "increasing; dimensionless factor) pairs, linear in between, the first factor before T0 and the last "
+              "after the last time); the factor multiplies the load or the prescribed value");
   v.effect_list("effects", effects, "surface", "surface effects to simulate in this scenario").required();
 }
 
@@ -562,7 +356,8 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   // Named sets, constraints and loads (generic mesh only).
   for (const auto& [key, items] : {std::pair<const char*, const std::vector<std::string>*>{"node_sets", &opt.node_sets},
                                     {"constraints", &opt.constraints},
-                                    {"loads", &opt.loads}})
+                                    {"loads", &opt.loads},
+                                    {"histories", &opt.histories}})
     if (!items->empty() && !c.generic)
       throw common::InputError(file, o.value(key).line, "scenario '" + sc->name + "': `" + key + "` needs a generic `mesh`");
   auto parse_list = [&](const char* key, const std::vector<std::string>& items, auto parse, auto& out) {
@@ -577,6 +372,24 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
   parse_list("node_sets", opt.node_sets, cartilage::parse_node_set, c.node_sets);
   parse_list("constraints", opt.constraints, cartilage::parse_constraint, c.constraints);
   parse_list("loads", opt.loads, cartilage::parse_load, c.loads);
+  parse_list("histories", opt.histories, cartilage::parse_history, c.histories);
+  for (std::size_t i = 0; i < c.histories.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (c.histories[i].name == c.histories[j].name)
+        throw common::InputError(file, o.value("histories").line,
+                                 "scenario '" + sc->name + "': history '" + c.histories[i].name + "' defined twice");
+  auto known_history = [&](const std::string& name, const char* key) {
+    if (name.empty()) return;
+    for (const auto& h : c.histories)
+      if (h.name == name) return;
+    std::string have;
+    for (const auto& h : c.histories) have += (have.empty() ? "" : ", ") + h.name;
+    throw common::InputError(file, o.value(key).line,
+                             "scenario '" + sc->name + "': " + key + ": unknown history '" + name + "' (histories: " +
+                                 (have.empty() ? "none" : have) + ")");
+  };
+  for (const auto& d : c.constraints) known_history(d.history, "constraints");
+  for (const auto& d : c.loads) known_history(d.history, "loads");
   for (std::size_t i = 0; i < c.node_sets.size(); ++i)
     for (std::size_t j = 0; j < i; ++j)
       if (c.node_sets[i].name == c.node_sets[j].name)
@@ -694,8 +507,7 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     if (options.kinematics.empty())
       throw common::InputError(file, c.line, "scenario '" + c.name + "' lists imposed_kinematics: give --kinematics");
     kin = std::make_unique<musculoskeletal::KinematicsFileReader>(options.kinematics);
-    b->partial_input = common::require_usable_file(kin->file(), options.kinematics, common::StageFile::kKinematics,
-                                                   options.allow_partial);
+    b->partial_input = kin->require_complete(options.allow_partial);  // kind, version, completeness
     const Eigen::VectorXd t = kin->time();
     b->kin_times.assign(t.data(), t.data() + t.size());
     if (b->kin_times.empty()) throw common::InputError(options.kinematics + ": error: dataset /time has no frame");
@@ -737,8 +549,10 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     std::string ext = opt.mesh.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
     common::Points3 given_normals;
-    cartilage::FaceGroups groups;  // OBJ 'g' groups (node sets "NAME: group G")
-    r.input.mesh = ext == ".vtk" ? read_quad_vtk(mesh_file) : read_quad_obj(mesh_file, &given_normals, &groups);
+    cartilage::FaceGroups groups;         // OBJ 'g' groups (node sets "NAME: group G")
+    std::vector<common::VtkField> fields;  // VTK fields (node sets "NAME: vtk_point_field F V", ...)
+    r.input.mesh = ext == ".vtk" ? common::read_quad_vtk(mesh_file, {}, &fields)
+                                 : common::read_quad_obj(mesh_file, {}, &given_normals, &groups);
     r.input.name = opt.mesh.stem().string();
     r.input.mesh.name = r.input.name;
     // Directors: the OBJ's vertex normals when given, else area-weighted quad normals.
@@ -761,7 +575,7 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
     std::map<std::string, std::vector<int>> sets;
     for (const cartilage::NodeSetDefinition& d : c.node_sets) {
       try {
-        sets[d.name] = cartilage::select_nodes(d, r.input.mesh, groups);
+        sets[d.name] = cartilage::select_nodes(d, r.input.mesh, groups, fields);
       } catch (const std::invalid_argument& e) {
         throw common::InputError(file, c.line, "scenario '" + c.name + "': " + e.what());
       }
@@ -770,13 +584,14 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
                                  "scenario '" + c.name + "': node set '" + d.name + "' holds no node of " + mesh_file);
     }
     for (const cartilage::ConstraintDefinition& d : c.constraints) g.constraints.push_back({d, sets.at(d.set)});
+    for (const cartilage::HistoryDefinition& h : c.histories) g.histories[h.name] = h;
     for (const cartilage::LoadDefinition& d : c.loads) {
       const std::vector<int>& nodes = sets.at(d.set);
       Eigen::MatrixXd f;
       using K = cartilage::LoadDefinition::Kind;
       if (d.kind == K::kForce || d.kind == K::kForcePerNode) {
         const double share = d.kind == K::kForce ? 1.0 / static_cast<double>(nodes.size()) : 1.0;
-        for (int n : nodes) g.set_loads_N.emplace_back(n, share * d.vector);
+        for (int n : nodes) (d.history.empty() ? g.set_loads_N : g.history_loads_N[d.history]).emplace_back(n, share * d.vector);
         continue;
       }
       const Eigen::Vector3d per_area =
@@ -789,7 +604,8 @@ std::unique_ptr<SurfaceBuild> build_surface_stage(const SurfaceScenarioConfig& c
                                  "scenario '" + c.name + "': load on node set '" + d.set +
                                      "': no quad has all four nodes in the set");
       for (int n = 0; n < f.rows(); ++n)
-        if (!f.row(n).isZero(0.0)) g.set_loads_N.emplace_back(n, f.row(n).transpose());
+        if (!f.row(n).isZero(0.0))
+          (d.history.empty() ? g.set_loads_N : g.history_loads_N[d.history]).emplace_back(n, f.row(n).transpose());
     }
     r.model = cartilage::build_surface_model(r.input, par, c.effects, cartilage::BoneMotion::fixed(), &ledger);
     r.basis = cartilage::node_strain_basis(*r.model);
@@ -1099,6 +915,53 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   const bool stop_on_penetration = opt.stop_on_penetration;
   double t = 0;
   int k_out = 1;
+  // ---- checkpoint and resume (pipelines/surface_checkpoint.h) -----------------
+  // Tied to this run's identity (program, command line, options, the bytes
+  // of the scene, prepared model, kinematics and mesh, the runner's key).
+  const std::filesystem::path checkpoint_path = common::checkpoint_name(options.out);
+  SurfaceCheckpoint checkpoint;
+  checkpoint.identity = common::run_identity(
+      options.argv, c.canonical_options,
+      {{options.scene, "--scene"}, {options.prepared, "--prepared"}, {options.kinematics, "--kinematics"},
+       {opt.mesh, "mesh"}});
+  // A kept factorisation (newton_reuse_factorization) cannot be carried over.
+  const bool checkpoints = !iopt.reuse_factorization && !steady;
+  common::CheckpointClock checkpoint_clock(opt.checkpoint_interval_s);
+  int checkpoints_written = 0;
+  if (checkpoints && std::filesystem::exists(checkpoint_path)) {
+    std::string why;
+    std::optional<SurfaceCheckpoint> found = read_surface_checkpoint(checkpoint_path, why);
+    if (found && found->identity != checkpoint.identity)
+      why = "it belongs to another run (inputs, options, command line or build differ)";
+    if (found && why.empty()) {
+      checkpoint = std::move(*found);
+      common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": t = " +
+                       std::to_string(checkpoint.t) + " s, steps done: " + std::to_string(checkpoint.steps.size()) +
+                       ", frames written: " + std::to_string(checkpoint.frame_times.size() + 1) + " (taken from it)");
+      // What the run wrote before, written again: frames from their coordinates.
+      for (std::size_t i = 0; i < checkpoint.frame_times.size(); ++i)
+        write_frame(checkpoint.frame_q[i], checkpoint.frame_times[i],
+                    contact ? contact_reports(checkpoint.frame_q[i]) : reports);
+      for (const surface_output::StepRecord& sr : checkpoint.steps) {
+        out.append_step(sr);
+        progress.step();
+      }
+      system.restore(checkpoint.pattern_q, checkpoint.system);
+      integrator.restore(checkpoint.hht);
+      t = checkpoint.t;
+      k_out = checkpoint.k_out;
+      penetration_warnings = checkpoint.penetration_warnings;
+      unfaded_over = checkpoint.unfaded_over;
+      worst_ratio = checkpoint.worst_ratio;
+      worst_unfaded_ratio = checkpoint.worst_unfaded_ratio;
+      rejections_logged = checkpoint.rejections_logged;
+      if (contact) reports = contact_reports(integrator.q());
+    } else {
+      common::log_warn("not resuming from " + checkpoint_path.string() + ": " + why + "; starting over");
+      std::filesystem::remove(checkpoint_path);
+      checkpoint = SurfaceCheckpoint{checkpoint.identity};
+    }
+  }
   // steady_state_change_mm: each step is taken by advance_to_steady_state
   // over that one step (same halving rules as advance_to), which returns
   // whether the step's weighted change was at most stop_change. The stop is
@@ -1108,6 +971,16 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   double last_change = std::numeric_limits<double>::quiet_NaN();
   long last_iterations = 0, last_rejections = 0;
   SurfaceStageResult res;
+  if (!checkpoint.steps.empty()) {  // resumed
+    last_change = checkpoint.last_change;
+    last_iterations = checkpoint.last_iterations;
+    last_rejections = checkpoint.last_rejections;
+    res.final_residual_N = checkpoint.final_residual_N;
+    res.residual_tolerance_N = checkpoint.residual_tolerance_N;
+    res.max_penetration_m = checkpoint.max_penetration_m;
+    res.contact_steps = checkpoint.contact_steps;
+    res.active_contacts_sum = checkpoint.active_contacts_sum;
+  }
   try {
     while (t < total_time * (1 - 1e-12)) {
       const double t_out = std::min(k_out * interval, total_time);
@@ -1192,6 +1065,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           }
         }
         out.append_step(sr);
+        if (checkpoints) checkpoint.steps.push_back(sr);
         last_iterations = s.newton_iterations;
         last_rejections = s.rejected_steps;
         t = t_next;
@@ -1200,8 +1074,37 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           stopped_steady = true;
           break;
         }
+        if (checkpoints && t < total_time * (1 - 1e-12) && checkpoint_clock.due()) {
+          SurfaceCheckpoint& k = checkpoint;
+          k.t = t;
+          k.k_out = k_out;
+          k.penetration_warnings = penetration_warnings;
+          k.unfaded_over = unfaded_over;
+          k.rejections_logged = rejections_logged;
+          k.last_iterations = last_iterations;
+          k.last_rejections = last_rejections;
+          k.worst_ratio = worst_ratio;
+          k.worst_unfaded_ratio = worst_unfaded_ratio;
+          k.last_change = last_change;
+          k.final_residual_N = res.final_residual_N;
+          k.residual_tolerance_N = res.residual_tolerance_N;
+          k.max_penetration_m = res.max_penetration_m;
+          k.contact_steps = res.contact_steps;
+          k.active_contacts_sum = res.active_contacts_sum;
+          k.hht = integrator.state();
+          k.pattern_q = system.pattern_coordinates();
+          k.system = system.statistics();
+          write_surface_checkpoint(checkpoint_path, k, ++checkpoints_written);
+          checkpoint_clock.mark();
+          common::log_debug("checkpoint " + checkpoint_path.string() + " at t = " + std::to_string(t) + " s: " +
+                            std::to_string(std::filesystem::file_size(checkpoint_path)) + " bytes");
+        }
       }
       write_frame(integrator.q(), t, reports);  // at a stop: the steady state is the last frame
+      if (checkpoints) {
+        checkpoint.frame_times.push_back(t);
+        checkpoint.frame_q.push_back(integrator.q());
+      }
       ++k_out;
       if (stopped_steady) break;
     }
@@ -1329,6 +1232,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   res.wall_s = now_s() - t_start;
   out.set_solver_attribute("wall_s", res.wall_s);
   out.complete();
+  std::filesystem::remove(checkpoint_path);
+  res.checkpoints = checkpoints_written;
   res.status = SurfaceStageStatus::kCompleted;
   return res;
 }

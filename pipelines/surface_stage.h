@@ -48,6 +48,11 @@ struct SurfaceScenarioOptions {
   /// > 0: a time-stepping run ends once the largest weighted coordinate change
   /// over one step is at most this [m].
   double steady_state_change_m = 0;
+  /// Wall time between checkpoints `<out>.checkpoint` [s] (0: after every
+  /// step). A rerun of the same command continues from the last one with
+  /// datasets bit-identical to an uninterrupted run
+  /// (pipelines/surface_checkpoint.h).
+  double checkpoint_interval_s = 60.0;
   /// Shell material, foundation, osmotic pressure (and its ramp).
   cartilage::SurfaceParameters physics;
   /// osmotic_pressure: the surfaces that carry it (empty: all simulated).
@@ -82,7 +87,7 @@ struct SurfaceScenarioOptions {
   std::vector<double> displacement_m;   ///< [ux, uy, uz]; empty = none
   /// Named node sets, masked constraints and loads of `mesh`, one text item
   /// each (grammar: cartilage/shell_scene.h); empty = none.
-  std::vector<std::string> node_sets, constraints, loads;
+  std::vector<std::string> node_sets, constraints, loads, histories;
   std::vector<std::string> effects;     ///< the scenario's effects
 
   void declare_shared(common::OptionVisitor& v);
@@ -116,6 +121,7 @@ struct SurfaceScenarioConfig {
   std::vector<cartilage::NodeSetDefinition> node_sets;
   std::vector<cartilage::ConstraintDefinition> constraints;
   std::vector<cartilage::LoadDefinition> loads;
+  std::vector<cartilage::HistoryDefinition> histories;
 };
 
 /// The scenario `scenario` of `scene` ("" = the scene's only one) with every
@@ -166,6 +172,7 @@ struct SurfaceStageResult {
   // mesh_contact only:
   double max_penetration_m = 0;        ///< largest interpenetration of any step
   long contact_steps = 0;              ///< steps with at least one active contact
+  int checkpoints = 0;                 ///< checkpoints written by this run
   long active_contacts_sum = 0;        ///< sum over steps of active contacts
   long penetration_warnings = 0;       ///< steps breaking the accuracy rule
   double worst_penetration_ratio = 0;  ///< largest penetration / deflection of those

@@ -103,7 +103,7 @@ PROBLEMS = {
     "pinched_hemisphere": ("pinched_hemisphere", pinched_hemisphere, lambda n: 0, 0, 1.0, 0.094),
     # tip displacement along the load, MacNeal & Harder 1985 (n = quads across the width)
     # tip deflection at P_max = 4 against the elastica (docs/shell_element.md)
-    "large_rotation_cantilever": ("large_rotation_cantilever", end_shear_cantilever, lambda n: n, 2, 1.0, 6.699642),
+    "large_rotation_cantilever": ("large_rotation_cantilever:end_shear", end_shear_cantilever, lambda n: n, 2, 1.0, 6.699642),
     "twisted_beam_in_plane": ("twisted_beam:in_plane", twisted_beam, lambda n: (n // 2) * (6 * n + 1) + 6 * n, 2, 1.0,
                               5.424e-3),
     "twisted_beam_out_of_plane": ("twisted_beam:out_of_plane", twisted_beam,

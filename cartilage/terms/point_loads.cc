@@ -44,7 +44,7 @@ std::unique_ptr<ShellTerm> make_point_loads_term(const ShellModel& model, std::s
 SurfaceTermInfo point_loads_term() {
   return {"point_loads", "",
           [](const SurfaceInput& s) {
-            if (s.generic.load_nodes.empty() && s.generic.set_loads_N.empty())
+            if (s.generic.load_nodes.empty() && s.generic.set_loads_N.empty() && s.generic.history_loads_N.empty())
               throw common::InputError("surface " + s.name +
                                        ": effect 'point_loads' is requested but neither "
                                        "its box nor `loads` puts a load on a node of the mesh");
@@ -56,6 +56,11 @@ SurfaceTermInfo point_loads_term() {
               loads.emplace_back(n, g.total_force_N / static_cast<double>(g.load_nodes.size()));
             for (const auto& l : g.set_loads_N) loads.push_back(l);
             c.model.add_point_loads("point_loads", std::move(loads), c.ramp);
+            // Loads with a history: one term each (named after it).
+            for (const auto& [name, l] : g.history_loads_N) {
+              const HistoryDefinition h = g.histories.at(name);
+              c.model.add_point_loads("point_loads (history " + name + ")", l, [h](double t) { return h.at(t); });
+            }
           }};
 }
 

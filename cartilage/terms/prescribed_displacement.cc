@@ -30,7 +30,12 @@ SurfaceTermInfo prescribed_displacement_term() {
             // twice must have one value).
             const GenericLoads& g = c.surface.generic;
             std::map<int, std::pair<std::array<bool, 6>, Eigen::Matrix<double, 6, 1>>> per_node;
-            auto add = [&](int node, const std::array<bool, 6>& mask, const Eigen::Matrix<double, 6, 1>& v) {
+            // Per node and component: the history's index in `hist`, -1 = the ramp.
+            std::map<int, std::array<int, 6>> node_history;
+            std::vector<HistoryDefinition> hist;
+            auto add = [&](int node, const std::array<bool, 6>& mask, const Eigen::Matrix<double, 6, 1>& v,
+                           int h = -1) {
+              if (h >= 0 && !node_history.count(node)) node_history[node].fill(-1);
               auto [it, fresh] = per_node.try_emplace(node);
               if (fresh) {
                 it->second.first.fill(false);
@@ -41,16 +46,26 @@ SurfaceTermInfo prescribed_displacement_term() {
                 if (it->second.first[j] && it->second.second(j) != v(j))
                   throw common::InputError("surface " + c.surface.name + ": node " + std::to_string(node) +
                                            " has two different prescribed values of one component");
+                if (it->second.first[j] && (node_history.count(node) ? node_history[node][j] : -1) != h)
+                  throw common::InputError("surface " + c.surface.name + ": node " + std::to_string(node) +
+                                           " has two different histories of one prescribed component");
                 it->second.first[j] = true;
                 it->second.second(j) = v(j);
+                if (h >= 0) node_history[node][j] = h;
               }
             };
             Eigen::Matrix<double, 6, 1> u = Eigen::Matrix<double, 6, 1>::Zero();
             u.head<3>() = g.displacement_m;
             for (int n : g.displaced_nodes) add(n, {true, true, true, false, false, false}, u);
             for (const auto& sc : g.constraints)
-              if (sc.definition.prescribed())
-                for (int n : sc.nodes) add(n, sc.definition.mask, sc.definition.value);
+              if (sc.definition.prescribed()) {
+                int h = -1;
+                if (!sc.definition.history.empty()) {
+                  h = static_cast<int>(hist.size());
+                  hist.push_back(g.histories.at(sc.definition.history));
+                }
+                for (int n : sc.nodes) add(n, sc.definition.mask, sc.definition.value, h);
+              }
             NodeConstraint n;
             n.name = "prescribed_displacement";
             std::vector<Eigen::Matrix<double, 6, 1>> values(static_cast<size_t>(c.model.num_nodes()),
@@ -62,9 +77,23 @@ SurfaceTermInfo prescribed_displacement_term() {
             }
             const Eigen::VectorXd q0 = c.model.reference_state();
             const std::function<double(double)> ramp = c.ramp;
-            n.value = [q0, values, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
-              q6 = q0.segment<6>(6 * node) + ramp(t) * values[static_cast<size_t>(node)];
-            };
+            if (node_history.empty()) {
+              n.value = [q0, values, ramp](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+                q6 = q0.segment<6>(6 * node) + ramp(t) * values[static_cast<size_t>(node)];
+              };
+            } else {
+              std::vector<std::array<int, 6>> which(static_cast<size_t>(c.model.num_nodes()));
+              for (auto& w : which) w.fill(-1);
+              for (const auto& [node, w] : node_history) which[static_cast<size_t>(node)] = w;
+              n.value = [q0, values, ramp, which, hist](double t, int node, Eigen::Matrix<double, 6, 1>& q6) {
+                const size_t i = static_cast<size_t>(node);
+                q6 = q0.segment<6>(6 * node);
+                for (int j = 0; j < 6; ++j) {
+                  const int h = which[i][static_cast<size_t>(j)];
+                  q6(j) += (h < 0 ? ramp(t) : hist[static_cast<size_t>(h)].at(t)) * values[i](j);
+                }
+              };
+            }
             c.model.add_constraint(std::move(n));
           }};
 }

@@ -74,6 +74,9 @@ int main(int argc, char** argv) {
                  "it (--prepared, --kinematics and --layers are then those of the case)");
   bool compare_only = false;
   app.add_flag("--compare-only", compare_only, "do not run; compare --out with --compare-to");
+  app.add_flag("--allow-partial", o.allow_partial,
+               "go on with an incomplete kinematics file (a killed or stopped COMAK run; refused otherwise): "
+               "the output says so (root attribute partial_input)");
   app.add_flag("--verbose", verbose, "more messages");
   app.add_flag("--quiet", quiet, "warnings and errors only (no progress)");
   app.footer(

@@ -104,6 +104,10 @@ int main(int argc, char** argv) {
                  "low-pass cutoff of the trial kinematics [Hz] (default: comak.lowpass_cutoff_hz)");
   app.add_option("--sto-prefix", sto_prefix,
                  "prefix of the .sto exports (default: --out without .h5)");
+  double checkpoint_interval_s = 60.0;
+  app.add_option("--checkpoint-interval-s", checkpoint_interval_s,
+                 "wall time between checkpoints <out>.checkpoint [s] (0: after every frame; default: "
+                 "comak.checkpoint_interval_s, 60); a rerun of the same command continues from the last one");
   app.add_flag("--no-pressure", no_pressure, "do not store per-triangle pressure / XDMF");
   app.add_option("--ipopt-print-level", o.print_level, "Ipopt output, 0..12")->capture_default_str();
   app.add_flag("-v,--verbose", verbose, "one line per frame");
@@ -123,6 +127,9 @@ int main(int argc, char** argv) {
       "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --no-move-limits \\\n"
       "      --trial data/trials/synthetic_gait --out comak_plain.h5 -v\n"
       "      # without step control, to compare (scripts/kinematics_branches.py comak_plain.h5)\n"
+      "  arthrosim-comak --model data/models/knee_parametric/knee_coarse.urdf --checkpoint-interval-s 0 \\\n"
+      "      --trial data/trials/synthetic_gait --out comak_checkpoints.h5 --first-frame 0 --last-frame 4\n"
+      "      # a checkpoint after every frame; killed, the same command continues from the last one\n"
       "  arthrosim-comak --model data/models/lenhart2015 --scene data/scenes/lenhart2015_gait.yaml \\\n"
       "      --trial data/trials/lenhart2015_overground17 --out lenhart2015.h5 -v\n"
       "      # the real subject (OpenSim-JAM's lenhart2015, walking window 1.21-2.32 s from the scene);\n"
@@ -151,6 +158,7 @@ int main(int argc, char** argv) {
     if (app.count("--retries")) so.retries = o.retries;
     if (app.count("--ipopt-print-level")) so.print_level = o.print_level;
     if (app.count("--lowpass-hz")) c.options.trial.lowpass.cutoff_hz = lowpass_hz;
+    if (app.count("--checkpoint-interval-s")) c.options.checkpoint_interval_s = checkpoint_interval_s;
     if (single_start) so.second_start = false;
     if (no_move_limits) so.move_limits_first = false;
     if (no_damping) so.coordinate_damping = false;

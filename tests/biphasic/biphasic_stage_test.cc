@@ -86,6 +86,8 @@ std::string write_kinematics(const std::string& file, const KinematicsSpec& k) {
   f.set_attribute("/", "format", "arthrosim kinematics file");  // what the stage checks (common/file_check.h)
   f.set_attribute("/", "format_version", 1);
   const int n = static_cast<int>(k.overlap_m.size());
+  f.set_attribute("/", "frames_expected", n);  // complete (the stage refuses an incomplete file)
+  f.set_attribute("/", "frames", n);
   Eigen::VectorXd t(n);
   std::vector<double> femur, tibia;
   Eigen::MatrixXd medial(n, 3), lateral = Eigen::MatrixXd::Zero(n, 3);

@@ -33,12 +33,14 @@
 #include "common/metadata.h"
 #include "common/output_file.h"
 #include "common/scene_edit.h"
+#include "musculoskeletal/kinematics_file.h"
 #include "musculoskeletal/model.h"
 #include "musculoskeletal/model_io.h"
 #include "pipelines/biphasic_stage.h"
 #include "pipelines/post_stage.h"
 #include "pipelines/prepare.h"
 #include "pipelines/runner.h"
+#include "pipelines/shockwave_stage.h"
 #include "pipelines/stages.h"
 #include "pipelines/study.h"
 #include "pipelines/surface_stage.h"
@@ -467,6 +469,37 @@ TEST(SafetyAtomic, KilledShockwaveRerunKeepsTheCompleteRunFile) {
   EXPECT_FALSE(partial.exists("/effects"));  // the killed run never finished its file
 }
 
+// Before: <stem>_volumes.svg was truncated and rewritten in place (a kill
+// in between destroyed the previous plot), and the bar geometry left it
+// empty. Now it is written as <name>.partial and renamed: a hard link to the
+// previous plot keeps the previous bytes (the old inode is never written),
+// and the bar writes no plot.
+TEST(SafetyAtomic, ShockwaveVolumesPlotIsReplacedByRename) {
+  const fs::path dir = scratch("atomic_shockwave_svg");
+  const fs::path svg = dir / "sw_volumes.svg", previous = dir / "previous.svg";
+  std::ofstream(svg) << "<svg>previous plot</svg>\n";
+  fs::create_hard_link(svg, previous);
+  ShockwaveStageOptions o;
+  o.prepared = coarse_prepared().string();
+  o.model = kCoarse.string();
+  o.out = (dir / "sw").string();
+  o.automaton_diameter_m = 2e-3;  // the shockwave stage test's short pulse run
+  o.end_time_s = 6e-6;
+  o.output_interval_s = 2e-6;
+  o.efd_j_per_m2 = {330.0};
+  const ShockwaveStageResult r = run_shockwave_stage(o, {"safety_test"}, false);
+  EXPECT_EQ(r.volumes_svg, svg);
+  EXPECT_NE(slurp(svg).find("Regeneration volumes"), std::string::npos);
+  EXPECT_EQ(slurp(previous), "<svg>previous plot</svg>\n");  // the old inode untouched
+  EXPECT_FALSE(fs::exists(common::partial_name(svg)));
+
+  const fs::path bar = scratch("atomic_shockwave_svg_bar");
+  const auto [status, printed] = run((kBin / "arthrosim-shockwave").string() + " --quiet --geometry bar --out " +
+                                     (bar / "sw").string() + " --end-time-us 5");
+  ASSERT_EQ(status, 0) << printed;
+  EXPECT_FALSE(fs::exists(bar / "sw_volumes.svg"));  // before: an empty file
+}
+
 class SafetyRunner : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -619,6 +652,48 @@ TEST(SafetyVersions, BiphasicStageAndStudyCheckTheKinematicsVersion) {
             std::string::npos);
   // The canonical case itself passes.
   EXPECT_EQ(error_of([&] { study::comak_metrics(kinematics, kinematics); }), "");
+}
+
+// Before: arthrosim-biphasic run by hand on the kinematics file of a killed
+// or stopped COMAK run simulated the frames it held as if they were the
+// whole trial. Now it is refused naming the file and what it holds, unless
+// --allow-partial, and the output then says so.
+TEST(SafetyPartial, BiphasicRefusesAnIncompleteKinematicsFileUnlessAllowed) {
+  const fs::path dir = scratch("partial_biphasic");
+  const auto [prepared, kinematics] = write_two_layer_case((dir / "case").string());
+  const fs::path stopped = dir / "kinematics_stopped.h5";
+  fs::copy_file(kinematics, stopped);
+  {
+    common::H5File f(stopped.string(), common::H5File::Mode::kReadWrite);
+    f.set_attribute("/", "frames_expected", 150);
+    f.set_attribute("/", "stopped", "COMAK frame 101 (t = 1.01 s): non-finite trial value");
+  }
+  const musculoskeletal::KinematicsFileReader reader(stopped.string());
+  EXPECT_EQ(reader.frames_complete(), 101);
+  EXPECT_EQ(reader.frames_expected(), 150);
+  EXPECT_FALSE(reader.finished());
+  EXPECT_EQ(reader.incompleteness(), "101 of 150 frames (the run stopped: COMAK frame 101 (t = 1.01 s): non-finite "
+                                     "trial value)");
+  EXPECT_TRUE(musculoskeletal::KinematicsFileReader(kinematics).finished());
+  EXPECT_EQ(musculoskeletal::KinematicsFileReader(kinematics).incompleteness(), "");
+
+  const std::string biphasic = (kBin / "arthrosim-biphasic").string() +
+                               " --quiet --layers femur tibia_medial --end-time-s 0.03 --prepared " + prepared +
+                               " --kinematics " + stopped.string() + " --out " + (dir / "out.h5").string();
+  auto [status, printed] = run(biphasic);
+  EXPECT_NE(status, 0) << printed;
+  EXPECT_NE(printed.find(stopped.string() + ": error: incomplete kinematics file: it holds 101 of 150 frames"),
+            std::string::npos)
+      << printed;
+  EXPECT_NE(printed.find("--allow-partial"), std::string::npos) << printed;
+  EXPECT_FALSE(fs::exists(dir / "out.h5"));
+
+  std::tie(status, printed) = run(biphasic + " --allow-partial");
+  ASSERT_EQ(status, 0) << printed;
+  const common::H5File out((dir / "out.h5").string(), common::H5File::Mode::kRead);
+  EXPECT_EQ(out.attribute_string("/", "partial_input"),
+            "PARTIAL INPUT: " + stopped.string() + " is an incomplete kinematics file: it holds 101 of 150 frames "
+            "(the run stopped: COMAK frame 101 (t = 1.01 s): non-finite trial value)");
 }
 
 // ---- 1. complete input identity -------------------------------------------

@@ -30,3 +30,10 @@ add_test(NAME sample.script.kinematics_branches
 set_tests_properties(sample.script.kinematics_branches PROPERTIES LABELS sample TIMEOUT 60
   FIXTURES_REQUIRED comak_coarse_h5
   PASS_REGULAR_EXPRESSION "3 frames \\(0\\.\\.2\\), 3 converged, objective sum [0-9.e+-]+ m\\^3.*largest \\|pf_flexion")
+# A checkpoint after every frame (docs/testing.md, "Checkpoint and resume"):
+# the run ends with the kinematics file and no checkpoint left.
+add_test(NAME sample.arthrosim-comak.checkpoints
+  COMMAND arthrosim-comak --model ${CMAKE_SOURCE_DIR}/data/models/knee_parametric/knee_coarse.urdf
+          --checkpoint-interval-s 0 --trial ${CMAKE_SOURCE_DIR}/data/trials/synthetic_gait
+          --out ${CMAKE_BINARY_DIR}/sample_runs/comak_checkpoints.h5 --first-frame 0 --last-frame 4)
+set_tests_properties(sample.arthrosim-comak.checkpoints PROPERTIES LABELS sample TIMEOUT 120)

@@ -1,0 +1,49 @@
+#pragma once
+// Checkpoints of long stages (docs/testing.md, "Checkpoint and resume"): the
+// parts every stage shares. A stage writes `<out>.checkpoint` (an HDF5 file of
+// its own layout, through AtomicOutput: "<out>.checkpoint.partial", then a
+// rename, so a kill leaves the previous checkpoint or the new one, never half
+// of one) at an interval of wall time, and on start continues from a
+// checkpoint whose identity is its own run's.
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "common/output_file.h"
+
+namespace arthrosim::common {
+
+/// "<out>.checkpoint".
+std::filesystem::path checkpoint_name(const std::filesystem::path& out);
+
+/// The identity a checkpoint is tied to: SHA-256 of the running program's
+/// own bytes (/proc/self/exe: another build never resumes), its command line,
+/// the options text the stage runs with, the bytes of every input file (a
+/// folder: every regular file directly in it; files_of), and the runner's
+/// stage key (environment ARTHROSIM_STAGE_KEY, set by `arthrosim run` for the
+/// stages it starts) when set. A checkpoint of another identity is never used.
+std::string run_identity(const std::vector<std::string>& argv, const std::string& options_text,
+                         const std::vector<NamedInput>& inputs);
+
+/// Wall-time interval between checkpoints: due() is true once interval_s
+/// has passed since construction or the last mark() (interval 0: always).
+class CheckpointClock {
+ public:
+  explicit CheckpointClock(double interval_s);
+  bool due() const;
+  void mark();
+
+ private:
+  double interval_s_;
+  std::chrono::steady_clock::time_point last_;
+};
+
+/// Test hook of the kill tests (tests/pipelines/resume_test.cc): with the
+/// environment variable ARTHROSIM_TEST_KILL_AT_CHECKPOINT = "<n>" the process
+/// kills itself (SIGKILL) right after its n-th checkpoint of this run is in
+/// place; "<n>.partial": after the n-th was written, before its rename. No
+/// effect without the variable.
+void checkpoint_test_kill(int n, bool before_rename);
+
+}  // namespace arthrosim::common

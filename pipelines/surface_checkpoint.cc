@@ -1,0 +1,265 @@
+#include "pipelines/surface_checkpoint.h"
+
+#include <exception>
+
+#include "common/checkpoint.h"
+#include "common/hdf5.h"
+#include "common/output_file.h"
+
+namespace arthrosim::pipelines {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kFormat = "arthrosim surface checkpoint";
+constexpr std::int64_t kFormatVersion = 1;
+
+void put(common::H5File& f, const std::string& name, const Eigen::VectorXd& v) {
+  if (v.size() > 0) f.write(name, v);
+}
+Eigen::VectorXd get(const common::H5File& f, const std::string& name) {
+  return f.exists(name) ? f.read_vector(name) : Eigen::VectorXd();
+}
+void put_long(common::H5File& f, const std::string& obj, const std::string& key, long v) {
+  f.set_attribute(obj, key, static_cast<std::int64_t>(v));
+}
+long get_long(const common::H5File& f, const std::string& obj, const std::string& key) {
+  return static_cast<long>(f.attribute_int(obj, key));
+}
+
+// One double (resp. int) column of the step records.
+template <typename T, typename Get>
+void put_column(common::H5File& f, const std::string& name, const std::vector<surface_output::StepRecord>& steps,
+                Get get) {
+  std::vector<T> v;
+  for (const auto& s : steps) v.push_back(static_cast<T>(get(s)));
+  f.write(name, v);
+}
+
+}  // namespace
+
+void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, int sequence) {
+  common::AtomicOutput atomic(path);
+  {
+    common::H5File f(atomic.temp().string(), common::H5File::Mode::kTruncate);
+    f.set_attribute("/", "format", kFormat);
+    f.set_attribute("/", "format_version", kFormatVersion);
+    f.set_attribute("/", "identity", c.identity);
+    // The step loop.
+    f.set_attribute("/", "t", c.t);
+    put_long(f, "/", "k_out", c.k_out);
+    put_long(f, "/", "penetration_warnings", c.penetration_warnings);
+    put_long(f, "/", "unfaded_over", c.unfaded_over);
+    put_long(f, "/", "rejections_logged", c.rejections_logged);
+    put_long(f, "/", "last_iterations", c.last_iterations);
+    put_long(f, "/", "last_rejections", c.last_rejections);
+    f.set_attribute("/", "worst_ratio", c.worst_ratio);
+    f.set_attribute("/", "worst_unfaded_ratio", c.worst_unfaded_ratio);
+    f.set_attribute("/", "last_change", c.last_change);
+    f.set_attribute("/", "final_residual_N", c.final_residual_N);
+    f.set_attribute("/", "residual_tolerance_N", c.residual_tolerance_N);
+    f.set_attribute("/", "max_penetration_m", c.max_penetration_m);
+    put_long(f, "/", "contact_steps", c.contact_steps);
+    put_long(f, "/", "active_contacts_sum", c.active_contacts_sum);
+    // Frames and steps written.
+    put_long(f, "/", "frames", static_cast<long>(c.frame_times.size()));
+    put_long(f, "/", "steps", static_cast<long>(c.steps.size()));
+    f.create_group("/frames");
+    if (!c.frame_times.empty()) {
+      f.write("/frames/time", c.frame_times);
+      Eigen::MatrixXd Q(static_cast<Eigen::Index>(c.frame_q.size()), c.frame_q.front().size());
+      for (std::size_t i = 0; i < c.frame_q.size(); ++i) Q.row(static_cast<Eigen::Index>(i)) = c.frame_q[i].transpose();
+      f.write("/frames/q", Q);
+    }
+    f.create_group("/steps");
+    if (!c.steps.empty()) {
+      using S = surface_output::StepRecord;
+      put_column<double>(f, "/steps/time", c.steps, [](const S& s) { return s.time; });
+      put_column<double>(f, "/steps/dt", c.steps, [](const S& s) { return s.dt; });
+      put_column<int>(f, "/steps/newton_iterations", c.steps, [](const S& s) { return s.newton_iterations; });
+      put_column<double>(f, "/steps/residual_N", c.steps, [](const S& s) { return s.residual_N; });
+      put_column<double>(f, "/steps/residual_tolerance_N", c.steps, [](const S& s) { return s.residual_tolerance_N; });
+      put_column<int>(f, "/steps/rejections", c.steps, [](const S& s) { return s.rejections; });
+      put_column<double>(f, "/steps/wall_s", c.steps, [](const S& s) { return s.wall_s; });
+      put_column<double>(f, "/steps/max_deflection_m", c.steps, [](const S& s) { return s.max_deflection_m; });
+      put_column<double>(f, "/steps/change_m", c.steps, [](const S& s) { return s.change_m; });
+      put_column<double>(f, "/steps/max_penetration_m", c.steps, [](const S& s) { return s.max_penetration_m; });
+      put_column<double>(f, "/steps/penetration_ratio", c.steps, [](const S& s) { return s.penetration_ratio; });
+      put_column<int>(f, "/steps/active_contacts", c.steps, [](const S& s) { return s.active_contacts; });
+      put_column<double>(f, "/steps/max_rim_depth_m", c.steps, [](const S& s) { return s.max_rim_depth_m; });
+      put_column<double>(f, "/steps/max_unfaded_penetration_m", c.steps,
+                         [](const S& s) { return s.max_unfaded_penetration_m; });
+      put_column<double>(f, "/steps/unfaded_penetration_ratio", c.steps,
+                         [](const S& s) { return s.unfaded_penetration_ratio; });
+    }
+    // The integrator.
+    const numerics::HhtState& h = c.hht;
+    f.create_group("/hht");
+    f.set_attribute("/hht", "t", h.t);
+    f.set_attribute("/hht", "dt", h.dt);
+    f.set_attribute("/hht", "h_prev", h.h_prev);
+    put_long(f, "/hht", "successes_since_halving", h.successes_since_halving);
+    put_long(f, "/hht", "steps", h.steps);
+    put_long(f, "/hht", "rejected_steps", h.rejected_steps);
+    f.set_attribute("/hht", "initial_assembly_s", h.initial_assembly_s);
+    f.set_attribute("/hht", "total_s", h.total_s);
+    put(f, "/hht/q", h.q);
+    put(f, "/hht/v", h.v);
+    put(f, "/hht/a", h.a);
+    put(f, "/hht/F", h.F);
+    put(f, "/hht/q_initial", h.q_initial);
+    put(f, "/hht/dq_prev", h.dq_prev);
+    if (!h.rejections.empty()) f.write("/hht/rejections", h.rejections);
+    const numerics::NewtonStatistics& n = h.newton;
+    f.create_group("/hht/newton");
+    put_long(f, "/hht/newton", "iterations", n.iterations);
+    put_long(f, "/hht/newton", "factorizations", n.factorizations);
+    put_long(f, "/hht/newton", "symbolic_analyses", n.symbolic_analyses);
+    put_long(f, "/hht/newton", "solver_switches", n.solver_switches);
+    put_long(f, "/hht/newton", "pattern_changes", n.pattern_changes);
+    put_long(f, "/hht/newton", "line_search_reductions", n.line_search_reductions);
+    put_long(f, "/hht/newton", "roundoff_acceptances", n.roundoff_acceptances);
+    f.set_attribute("/hht/newton", "assembly_s", n.assembly_s);
+    f.set_attribute("/hht/newton", "factorization_s", n.factorization_s);
+    f.set_attribute("/hht/newton", "solve_s", n.solve_s);
+    f.set_attribute("/hht/newton", "linear_solver", n.linear_solver);
+    // The coupled system.
+    f.create_group("/system");
+    put(f, "/system/pattern_q", c.pattern_q);
+    put_long(f, "/system", "evaluations", c.system.evaluations);
+    put_long(f, "/system", "tangent_evaluations", c.system.tangent_evaluations);
+    put_long(f, "/system", "pattern_rebuilds", c.system.pattern_rebuilds);
+    put_long(f, "/system", "max_active_contacts", c.system.max_active_contacts);
+    f.set_attribute("/system", "contact_time_s", c.system.contact_time_s);
+    f.set_attribute("/system", "models_time_s", c.system.models_time_s);
+    f.set_attribute("/system", "copy_time_s", c.system.copy_time_s);
+    f.flush();
+  }
+  common::checkpoint_test_kill(sequence, true);
+  atomic.commit();
+  common::checkpoint_test_kill(sequence, false);
+}
+
+std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, std::string& why) {
+  try {
+    const common::H5File f(path.string(), common::H5File::Mode::kRead);
+    if (!f.has_attribute("/", "format") || f.attribute_string("/", "format") != kFormat) {
+      why = "not a surface checkpoint";
+      return std::nullopt;
+    }
+    if (f.attribute_int("/", "format_version") != kFormatVersion) {
+      why = "format_version " + std::to_string(f.attribute_int("/", "format_version")) + " (this build writes " +
+            std::to_string(kFormatVersion) + ")";
+      return std::nullopt;
+    }
+    SurfaceCheckpoint c;
+    c.identity = f.attribute_string("/", "identity");
+    c.t = f.attribute_double("/", "t");
+    c.k_out = static_cast<int>(get_long(f, "/", "k_out"));
+    c.penetration_warnings = get_long(f, "/", "penetration_warnings");
+    c.unfaded_over = get_long(f, "/", "unfaded_over");
+    c.rejections_logged = get_long(f, "/", "rejections_logged");
+    c.last_iterations = get_long(f, "/", "last_iterations");
+    c.last_rejections = get_long(f, "/", "last_rejections");
+    c.worst_ratio = f.attribute_double("/", "worst_ratio");
+    c.worst_unfaded_ratio = f.attribute_double("/", "worst_unfaded_ratio");
+    c.last_change = f.attribute_double("/", "last_change");
+    c.final_residual_N = f.attribute_double("/", "final_residual_N");
+    c.residual_tolerance_N = f.attribute_double("/", "residual_tolerance_N");
+    c.max_penetration_m = f.attribute_double("/", "max_penetration_m");
+    c.contact_steps = get_long(f, "/", "contact_steps");
+    c.active_contacts_sum = get_long(f, "/", "active_contacts_sum");
+    const long frames = get_long(f, "/", "frames"), steps = get_long(f, "/", "steps");
+    if (frames > 0) {
+      const Eigen::VectorXd t = f.read_vector("/frames/time");
+      const Eigen::MatrixXd Q = f.read_matrix("/frames/q");
+      if (t.size() != frames || Q.rows() != frames) {
+        why = "it holds " + std::to_string(t.size()) + " frame times and " + std::to_string(Q.rows()) +
+              " frames of coordinates for " + std::to_string(frames) + " frames";
+        return std::nullopt;
+      }
+      for (long i = 0; i < frames; ++i) {
+        c.frame_times.push_back(t[i]);
+        c.frame_q.push_back(Q.row(i).transpose());
+      }
+    }
+    if (steps > 0) {
+      auto d = [&](const char* name) {
+        const Eigen::VectorXd v = f.read_vector(std::string("/steps/") + name);
+        if (v.size() != steps) throw std::runtime_error(std::string("/steps/") + name + ": wrong length");
+        return v;
+      };
+      auto i = [&](const char* name) {
+        const Eigen::VectorXi v = f.read_vector_int(std::string("/steps/") + name);
+        if (v.size() != steps) throw std::runtime_error(std::string("/steps/") + name + ": wrong length");
+        return v;
+      };
+      const Eigen::VectorXd time = d("time"), dt = d("dt"), res = d("residual_N"), tol = d("residual_tolerance_N"),
+                            wall = d("wall_s"), defl = d("max_deflection_m"), change = d("change_m"),
+                            pen = d("max_penetration_m"), ratio = d("penetration_ratio"), rim = d("max_rim_depth_m"),
+                            unf = d("max_unfaded_penetration_m"), unr = d("unfaded_penetration_ratio");
+      const Eigen::VectorXi it = i("newton_iterations"), rej = i("rejections"), act = i("active_contacts");
+      for (long k = 0; k < steps; ++k) {
+        surface_output::StepRecord s;
+        s.time = time[k];
+        s.dt = dt[k];
+        s.newton_iterations = it[k];
+        s.residual_N = res[k];
+        s.residual_tolerance_N = tol[k];
+        s.rejections = rej[k];
+        s.wall_s = wall[k];
+        s.max_deflection_m = defl[k];
+        s.change_m = change[k];
+        s.max_penetration_m = pen[k];
+        s.penetration_ratio = ratio[k];
+        s.active_contacts = act[k];
+        s.max_rim_depth_m = rim[k];
+        s.max_unfaded_penetration_m = unf[k];
+        s.unfaded_penetration_ratio = unr[k];
+        c.steps.push_back(s);
+      }
+    }
+    numerics::HhtState& h = c.hht;
+    h.t = f.attribute_double("/hht", "t");
+    h.dt = f.attribute_double("/hht", "dt");
+    h.h_prev = f.attribute_double("/hht", "h_prev");
+    h.successes_since_halving = static_cast<int>(get_long(f, "/hht", "successes_since_halving"));
+    h.steps = get_long(f, "/hht", "steps");
+    h.rejected_steps = get_long(f, "/hht", "rejected_steps");
+    h.initial_assembly_s = f.attribute_double("/hht", "initial_assembly_s");
+    h.total_s = f.attribute_double("/hht", "total_s");
+    h.q = get(f, "/hht/q");
+    h.v = get(f, "/hht/v");
+    h.a = get(f, "/hht/a");
+    h.F = get(f, "/hht/F");
+    h.q_initial = get(f, "/hht/q_initial");
+    h.dq_prev = get(f, "/hht/dq_prev");
+    if (f.exists("/hht/rejections")) h.rejections = f.read_strings("/hht/rejections");
+    numerics::NewtonStatistics& n = h.newton;
+    n.iterations = get_long(f, "/hht/newton", "iterations");
+    n.factorizations = get_long(f, "/hht/newton", "factorizations");
+    n.symbolic_analyses = get_long(f, "/hht/newton", "symbolic_analyses");
+    n.solver_switches = get_long(f, "/hht/newton", "solver_switches");
+    n.pattern_changes = get_long(f, "/hht/newton", "pattern_changes");
+    n.line_search_reductions = get_long(f, "/hht/newton", "line_search_reductions");
+    n.roundoff_acceptances = get_long(f, "/hht/newton", "roundoff_acceptances");
+    n.assembly_s = f.attribute_double("/hht/newton", "assembly_s");
+    n.factorization_s = f.attribute_double("/hht/newton", "factorization_s");
+    n.solve_s = f.attribute_double("/hht/newton", "solve_s");
+    n.linear_solver = f.attribute_string("/hht/newton", "linear_solver");
+    c.pattern_q = get(f, "/system/pattern_q");
+    c.system.evaluations = get_long(f, "/system", "evaluations");
+    c.system.tangent_evaluations = get_long(f, "/system", "tangent_evaluations");
+    c.system.pattern_rebuilds = get_long(f, "/system", "pattern_rebuilds");
+    c.system.max_active_contacts = get_long(f, "/system", "max_active_contacts");
+    c.system.contact_time_s = f.attribute_double("/system", "contact_time_s");
+    c.system.models_time_s = f.attribute_double("/system", "models_time_s");
+    c.system.copy_time_s = f.attribute_double("/system", "copy_time_s");
+    return c;
+  } catch (const std::exception& e) {
+    why = e.what();
+    return std::nullopt;
+  }
+}
+
+}  // namespace arthrosim::pipelines
