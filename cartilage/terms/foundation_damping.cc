@@ -28,11 +28,8 @@ class FoundationDampingTerm final : public ShellTerm {
   // bone rotates.
   bool symmetric() const override { return geo_.bone.at_rest; }
   void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
-    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
-    for (size_t i = 0; i < geo_.r0.size(); ++i) {
-      Eigen::Vector3d p, n, pd, nd;
-      geo_.at(X, V, static_cast<int>(i), p, n, pd, nd);
+    geo_.for_each_node(ctx.t, [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d& n, const Eigen::Vector3d& pd,
+                                  const Eigen::Vector3d& nd) {
       const Eigen::Vector3d r = ctx.q.segment<3>(6 * i);
       // Compressive-only: the damper engages with the compression delta
       // through the smoothstep gate H(delta/gate) (0 at delta <= 0, 1 from
@@ -42,7 +39,7 @@ class FoundationDampingTerm final : public ShellTerm {
       double H = 1, dH = 0;
       if (compressive_only_) {
         const double s = n.dot(p - r) / gate_;
-        if (s <= 0) continue;
+        if (s <= 0) return;
         if (s < 1) {
           H = s * s * (3 - 2 * s);
           dH = 6 * s * (1 - s) / gate_;
@@ -58,7 +55,7 @@ class FoundationDampingTerm final : public ShellTerm {
         if (!geo_.bone.at_rest) B += ctx.kq * cA * H * n * nd.transpose();
         K->add_block3(i, 0, i, 0, B);
       }
-    }
+    });
   }
 
  private:

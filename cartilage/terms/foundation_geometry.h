@@ -38,6 +38,18 @@ struct FoundationGeometry {
     p_dot = V.tail<3>() + w.cross(p - X_WB.translation());
     n_dot = w.cross(n);
   }
+  /// Calls f(i, p, n, p_dot, n_dot) for every node i in order, with its
+  /// anchor at time t.
+  template <class F>
+  void for_each_node(double t, F&& f) const {
+    const Eigen::Isometry3d X = bone.pose(t);
+    const Eigen::Matrix<double, 6, 1> V = bone.spatial_velocity(t);
+    for (int i = 0; i < static_cast<int>(r0.size()); ++i) {
+      Eigen::Vector3d p, n, pd, nd;
+      at(X, V, i, p, n, pd, nd);
+      f(i, p, n, pd, nd);
+    }
+  }
   BoneMotion bone;
   Eigen::Isometry3d X_WB0_inv;
   std::vector<Eigen::Vector3d> r0, n0;

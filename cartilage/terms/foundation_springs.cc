@@ -27,20 +27,17 @@ class FoundationSpringsTerm final : public ShellTerm {
                                  " at node " + std::to_string(i));
   }
   void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
-    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
-    for (size_t i = 0; i < geo_.r0.size(); ++i) {
-      Eigen::Vector3d p, n, pd, nd;
-      geo_.at(X, V, static_cast<int>(i), p, n, pd, nd);
+    geo_.for_each_node(ctx.t, [&](int i, const Eigen::Vector3d& p, const Eigen::Vector3d& n,
+                                  const Eigen::Vector3d& /*p_dot*/, const Eigen::Vector3d& /*n_dot*/) {
       const double delta = n.dot(p - ctx.q.segment<3>(6 * i));
       // Compressive-only (the seed's elements). At delta = 0 (the reference
       // state) the spring counts as engaged: zero force but its stiffness in
       // the tangent, so the first Newton step from rest sees the foundation.
-      if (compressive_only_ && delta < 0) continue;
-      const double kA = k_(static_cast<Eigen::Index>(i)) * geo_.area(i);
+      if (compressive_only_ && delta < 0) return;
+      const double kA = k_(i) * geo_.area(i);
       F.segment<3>(6 * i) -= kA * delta * n;
       if (K) K->add_block3(i, 0, i, 0, ctx.kq * kA * n * n.transpose());
-    }
+    });
   }
 
  private:
