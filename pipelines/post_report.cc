@@ -9,6 +9,7 @@
 #include "common/error.h"
 #include "common/hdf5.h"
 #include "pipelines/shockwave_output.h"
+#include "pipelines/surface_output.h"
 
 namespace arthrosim::pipelines::post_report {
 namespace {
@@ -123,7 +124,8 @@ std::vector<SummaryRow> summary_rows(const KeyFigures& k) {
 
 report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files,
                                       const std::string& kinematics,
-                                      const std::vector<std::pair<std::string, double>>& key_times) {
+                                      const std::vector<std::pair<std::string, double>>& key_times,
+                                      const std::vector<std::pair<std::string, std::string>>& surfaces) {
   report_html::Section sec;
   sec.id = "sec-biphasic";
   sec.title = "Biphasic layers";
@@ -229,12 +231,26 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
       missing.push_back("stage 1 elastic-foundation pressure: " + kinematics + " has no " + ef);
     }
   }
-  missing.push_back("shell stage contact pressure: not part of this comparison yet");
+  if (surfaces.empty()) missing.push_back("shell stage contact pressure: no surface-stage file");
+  for (const auto& [scenario, path] : surfaces) {
+    std::string why;
+    const std::optional<surface_output::Series> s = surface_output::Reader(path).max_contact_pressure(why);
+    if (!s || s->time.size() == 0) {
+      missing.push_back("shell stage " + scenario + ": " + (s ? path + " has no complete frame" : why));
+      continue;
+    }
+    sources.push_back({"shell stage " + scenario + ": contact pressure", to_vector(s->time),
+                       to_vector(Eigen::VectorXd(s->values.col(0)), 1e-6)});
+  }
   sec.blocks.push_back(report_html::Text{
       "Peak contact pressure: per biphasic layer the largest applied total normal stress and contact fluid "
       "pressure over its articular vertices per step (surface/total_normal_stress, surface/fluid_pressure), beside "
       "stage 1's largest elastic-foundation pressure over the tibiofemoral contact (kinematics file " + ef +
-          "). The table gives them at the key frames (the step or frame nearest each key time). Not shown: " +
+          ") and, per surface-stage scenario, the shell stage's largest contact pressure over its surfaces' nodes per "
+          "stored frame on the trial clock (surface_<scenario>.h5 contact_pressure at /trial_time; the seating "
+          "ramp's frames come before the trial's first frame). The table gives them at the key frames: each source at its stored "
+          "step or frame nearest each key time (not interpolated), with the time used; \"-\" where the key time is "
+          "farther from the source's stored times than their largest spacing. Not shown: " +
           [&] {
             std::string m;
             for (const auto& x : missing) m += (m.empty() ? "" : "; ") + x;
@@ -243,7 +259,7 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
       {}, false});
   report_html::LinePlot pp;
   pp.id = "fig-biphasic-pressure";
-  pp.title = "Peak contact pressure: biphasic layers and stage-1 elastic foundation";
+  pp.title = "Peak contact pressure: biphasic layers, stage-1 elastic foundation and shell stage";
   pp.x_label = "time [s]";
   pp.y_label = "pressure [MPa]";
   int c = 0;
@@ -268,12 +284,16 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
     }
     for (const auto& s : sources) {
       std::vector<report_html::Cell> row{s.label};
+      // A key time outside the source's stored times by more than its largest
+      // spacing has no nearby frame: "-" rather than the last frame's value.
+      double gap = 0.0;
+      for (std::size_t i = 1; i < s.t.size(); ++i) gap = std::max(gap, s.t[i] - s.t[i - 1]);
       for (const auto& kv : key_times) {
         const double tk = kv.second;
         std::size_t best = 0;
         for (std::size_t i = 1; i < s.t.size(); ++i)
           if (std::abs(s.t[i] - tk) < std::abs(s.t[best] - tk)) best = i;
-        if (s.t.empty()) {
+        if (s.t.empty() || std::abs(s.t[best] - tk) > gap) {
           row.push_back(kNaN);
           row.push_back(kNaN);
         } else {

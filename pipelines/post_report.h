@@ -75,11 +75,15 @@ std::vector<report_html::SummaryRow> summary_rows(const KeyFigures& k);
 /// With `kinematics` (a stage-1 file, may be empty) and the key frames
 /// (name, time [s]): a plot of the peak contact pressure per layer (applied
 /// total normal stress and contact fluid pressure) beside stage 1's
-/// elastic-foundation max_pressure, and a table of these at the key frames
-/// (the step / frame nearest each key time).
+/// elastic-foundation max_pressure and, per surface-stage file given in
+/// `surfaces` ((scenario, path), may be empty), the shell stage's largest
+/// contact pressure per frame on the kinematics clock
+/// (surface_output::Reader::max_contact_pressure), and a table of these at
+/// the key frames (the step / frame nearest each key time, with that time).
 report_html::Section biphasic_section(const std::vector<std::pair<std::string, std::string>>& files,
                                       const std::string& kinematics = {},
-                                      const std::vector<std::pair<std::string, double>>& key_times = {});
+                                      const std::vector<std::pair<std::string, double>>& key_times = {},
+                                      const std::vector<std::pair<std::string, std::string>>& surfaces = {});
 
 /// One shockwave run's volume meeting every regeneration criterion.
 struct EfdVolume {

@@ -746,7 +746,8 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     sections.push_back(std::move(sec));
   }
   // Later stages, when their files are given.
-  if (!in.biphasic.empty()) sections.push_back(post_report::biphasic_section(in.biphasic, in.kinematics, key_times));
+  if (!in.biphasic.empty())
+    sections.push_back(post_report::biphasic_section(in.biphasic, in.kinematics, key_times, in.surfaces));
   if (!in.shockwave.empty()) sections.push_back(post_report::shockwave_section(in.shockwave));
   json.value("angle_threshold_deg", opt.comparison.threshold_rad * 180.0 / std::numbers::pi);
   json.array("partial_inputs", summary.partial_inputs);

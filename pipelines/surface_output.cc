@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "common/error.h"
 #include "common/hdf5.h"
@@ -382,6 +383,35 @@ std::optional<Series> Reader::contact_force() const {
   const Eigen::Index n = std::min(s.values.rows(), s.time.size());
   s.values.conservativeResize(n, 3);
   s.time.conservativeResize(n);
+  return s;
+}
+
+std::optional<Series> Reader::max_contact_pressure(std::string& why) const {
+  const H5File& f = *f_;
+  if (!f.exists("/trial_time")) {
+    why = f.path() + " has no /trial_time (not on the kinematics clock)";
+    return std::nullopt;
+  }
+  const Eigen::VectorXd t = f.read_vector("/trial_time");
+  // /time counts the complete frames (docs/surface_output.md).
+  const Eigen::Index n = std::min<Eigen::Index>(t.size(), time().size());
+  Series s{t.head(n), Eigen::MatrixXd::Constant(n, 1, -std::numeric_limits<double>::infinity())};
+  bool any = false;
+  for (const std::string& name : surfaces()) {
+    const std::string ds = surface_group(name) + "/contact_pressure";
+    if (!f.exists(ds)) continue;
+    const Eigen::MatrixXd p = f.read_matrix(ds);
+    if (p.rows() < n)
+      throw common::InputError(f.path(), 0, "dataset " + ds + ": expected at least " + std::to_string(n) +
+                                                " frames (/time), found " + std::to_string(p.rows()));
+    if (p.cols() == 0) continue;
+    s.values.col(0) = s.values.col(0).cwiseMax(p.topRows(n).rowwise().maxCoeff());
+    any = true;
+  }
+  if (!any) {
+    why = "no surface of " + f.path() + " has contact_pressure";
+    return std::nullopt;
+  }
   return s;
 }
 

@@ -195,6 +195,12 @@ class Reader {
   /// The tibiofemoral contact force over the complete frames (frames x 3)
   /// on the /time clock, or nullopt when the run wrote none.
   std::optional<Series> contact_force() const;
+  /// The largest contact pressure over the nodes of every surface per
+  /// complete frame [Pa] (values frames x 1), on the kinematics clock
+  /// (/trial_time), or nullopt with `why` when the file has no
+  /// contact_pressure or no /trial_time (a run without imposed kinematics is
+  /// not on the trial's clock).
+  std::optional<Series> max_contact_pressure(std::string& why) const;
   /// The run's effect ledger, or nullopt for a file without one.
   std::optional<common::EffectLedger> ledger() const;
   /// The accuracy rule per step, or nullopt for a run without contact.
