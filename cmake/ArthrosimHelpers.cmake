@@ -81,6 +81,8 @@ function(arthrosim_link_included target)
       endif()
     endforeach()
   endwhile()
+  # A file that gains an include re-runs the configure step.
+  set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${_seen})
   if(_libs)
     list(REMOVE_DUPLICATES _libs)
     target_link_libraries(${target} PRIVATE ${_libs})
