@@ -10,356 +10,19 @@
 #include <set>
 #include <sstream>
 
+#include "cartilage/terms/director_moments.h"
+#include "cartilage/terms/foundation_damping.h"
+#include "cartilage/terms/foundation_springs.h"
+#include "cartilage/terms/inertia.h"
+#include "cartilage/terms/internal_forces.h"
+#include "cartilage/terms/periphery_fixed.h"
+#include "cartilage/terms/point_loads.h"
+#include "cartilage/terms/pressure.h"
 #include "numerics/sparse_direct_solver.h"
 #include "common/effects.h"
 #include "common/error.h"
 
 namespace arthrosim::cartilage {
-namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-Eigen::Matrix3d skew(const Eigen::Vector3d& a) {
-  Eigen::Matrix3d S;
-  S << 0, -a.z(), a.y(), a.z(), 0, -a.x(), -a.y(), a.x(), 0;
-  return S;
-}
-
-// ---------------------------------------------------------------------------
-// internal_forces: f_int = sum_e dPi_e/dq_e. Elements are evaluated in
-// parallel into per-element buffers, then summed serially in element order,
-// so the result is bit-identical for any number of threads.
-class InternalForcesTerm final : public ShellTerm {
- public:
-  explicit InternalForcesTerm(ShellModel& model)
-      : ShellTerm("internal_forces"), model_(model), fe_(model.num_elements()), Ke_(model.num_elements()) {}
-
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const int ne = model_.num_elements();
-    const bool want_K = K != nullptr;
-    auto t0 = std::chrono::steady_clock::now();
-#pragma omp parallel for schedule(static) if (ne > 64)
-    for (int e = 0; e < ne; ++e) {
-      const Vector24 qe = model_.gather(e, ctx.q);
-      model_.element(e).internal_force(qe, fe_[e], want_K ? &Ke_[e] : nullptr);
-    }
-    auto& stats = model_.mutable_statistics();
-    stats.element_time_s += seconds_since(t0);
-    t0 = std::chrono::steady_clock::now();
-    double* values = want_K ? K->matrix().valuePtr() : nullptr;
-    for (int e = 0; e < ne; ++e) {
-      for (int l = 0; l < 24; ++l) F(model_.global_index(e, l)) += fe_[e](l);
-      if (!want_K) continue;
-      const int* idx = model_.element_value_indices(e);
-      for (int m = 0; m < 24; ++m)
-        for (int l = 0; l < 24; ++l) values[idx[24 * l + m]] += ctx.kq * Ke_[e](l, m);
-    }
-    stats.scatter_time_s += seconds_since(t0);
-  }
-
- private:
-  ShellModel& model_;
-  mutable std::vector<Vector24> fe_;
-  mutable std::vector<Matrix24> Ke_;
-};
-
-// ---------------------------------------------------------------------------
-// Shared geometry of the foundation terms: per node the reference position,
-// unit reference transverse direction and nodal area; the anchor moves with
-// the bone: T(t) = X_WB(t) X_WB(0)^-1.
-struct FoundationGeometry {
-  explicit FoundationGeometry(const ShellModel& model, BoneMotion b) : bone(std::move(b)) {
-    if (!bone.pose || !bone.spatial_velocity)
-      throw common::InputError("foundation: BoneMotion needs both pose and spatial_velocity callbacks");
-    X_WB0_inv = bone.pose(0.0).inverse();
-    const int n = model.num_nodes();
-    r0.resize(n);
-    n0.resize(n);
-    area = model.nodal_areas();
-    for (int i = 0; i < n; ++i) {
-      r0[i] = model.reference_position(i);
-      n0[i] = model.reference_director(i).normalized();
-    }
-  }
-  /// Anchor point, direction, their time derivatives at time t for node i.
-  void at(double t, const Eigen::Isometry3d& X_WB, const Eigen::Matrix<double, 6, 1>& V, int i,
-          Eigen::Vector3d& p, Eigen::Vector3d& n, Eigen::Vector3d& p_dot, Eigen::Vector3d& n_dot) const {
-    const Eigen::Isometry3d T = X_WB * X_WB0_inv;
-    p = T * r0[i];
-    n = T.linear() * n0[i];
-    const Eigen::Vector3d w = V.head<3>();
-    p_dot = V.tail<3>() + w.cross(p - X_WB.translation());
-    n_dot = w.cross(n);
-  }
-  BoneMotion bone;
-  Eigen::Isometry3d X_WB0_inv;
-  std::vector<Eigen::Vector3d> r0, n0;
-  Eigen::VectorXd area;
-};
-
-class FoundationSpringsTerm final : public ShellTerm {
- public:
-  FoundationSpringsTerm(const ShellModel& model, Eigen::VectorXd k, BoneMotion bone, bool compressive_only)
-      : ShellTerm("foundation_springs"), geo_(model, std::move(bone)), k_(std::move(k)),
-        compressive_only_(compressive_only) {
-    if (k_.size() != model.num_nodes())
-      throw common::InputError("foundation_springs: expected " + std::to_string(model.num_nodes()) +
-                               " nodal stiffnesses, found " + std::to_string(k_.size()));
-    for (int i = 0; i < k_.size(); ++i)
-      if (!(k_(i) >= 0) || !std::isfinite(k_(i)))
-        throw common::InputError("foundation_springs: stiffness k must be >= 0 N/m^3, found " +
-                                 std::to_string(k_(i)) + " at node " + std::to_string(i));
-  }
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
-    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
-    for (size_t i = 0; i < geo_.r0.size(); ++i) {
-      Eigen::Vector3d p, n, pd, nd;
-      geo_.at(ctx.t, X, V, static_cast<int>(i), p, n, pd, nd);
-      const double delta = n.dot(p - ctx.q.segment<3>(6 * i));
-      // Compressive-only (the seed's elements). At delta = 0 (the reference
-      // state) the spring counts as engaged: zero force but its stiffness in
-      // the tangent, so the first Newton step from rest sees the foundation.
-      if (compressive_only_ && delta < 0) continue;
-      const double kA = k_(static_cast<Eigen::Index>(i)) * geo_.area(i);
-      F.segment<3>(6 * i) -= kA * delta * n;
-      if (K) K->add_block3(i, 0, i, 0, ctx.kq * kA * n * n.transpose());
-    }
-  }
-
- private:
-  FoundationGeometry geo_;
-  Eigen::VectorXd k_;
-  bool compressive_only_;
-};
-
-// "periphery_fixed" with the normal left to the foundation: each boundary
-// node is tied to its bone-carried anchor p_i(t) in the tangent plane of its
-// reference transverse direction n_i(t) only,
-//   F_i += k_t A_i (I - n_i n_i^T)(r_i - p_i),  dF_i/dr_i = k_t A_i (I - n_i n_i^T)
-// (a penalty tie, symmetric: P depends on t only); its director is free.
-class PeripheryTangentialTerm final : public ShellTerm {
- public:
-  PeripheryTangentialTerm(const ShellModel& model, std::vector<int> nodes, double k_t, BoneMotion bone)
-      : ShellTerm("periphery_fixed"), geo_(model, std::move(bone)), nodes_(std::move(nodes)), k_t_(k_t) {
-    if (!(k_t > 0) || !std::isfinite(k_t))
-      throw common::InputError("periphery_fixed: tangential tie stiffness must be > 0 N/m^3, found " +
-                               std::to_string(k_t));
-  }
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
-    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
-    for (int i : nodes_) {
-      Eigen::Vector3d p, n, pd, nd;
-      geo_.at(ctx.t, X, V, i, p, n, pd, nd);
-      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - n * n.transpose();
-      const double kA = k_t_ * geo_.area(i);
-      F.segment<3>(6 * i) += kA * P * (ctx.q.segment<3>(6 * i) - p);
-      if (K) K->add_block3(i, 0, i, 0, ctx.kq * kA * P);
-    }
-  }
-
- private:
-  FoundationGeometry geo_;
-  std::vector<int> nodes_;
-  double k_t_;
-};
-
-class FoundationDampingTerm final : public ShellTerm {
- public:
-  FoundationDampingTerm(const ShellModel& model, double c, BoneMotion bone, bool compressive_only, double gate)
-      : ShellTerm("foundation_damping"), geo_(model, std::move(bone)), c_(c), compressive_only_(compressive_only),
-        gate_(gate) {
-    if (!(c >= 0) || !std::isfinite(c))
-      throw common::InputError("foundation_damping: coefficient c must be >= 0 N s/m^3, found " + std::to_string(c));
-    if (compressive_only && !(gate > 0))
-      throw common::InputError("foundation_damping: gate width must be > 0 m, found " + std::to_string(gate));
-  }
-  // The d n/dt term couples positions and velocities asymmetrically when the
-  // bone rotates.
-  bool symmetric() const override { return geo_.bone.at_rest; }
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const Eigen::Isometry3d X = geo_.bone.pose(ctx.t);
-    const Eigen::Matrix<double, 6, 1> V = geo_.bone.spatial_velocity(ctx.t);
-    for (size_t i = 0; i < geo_.r0.size(); ++i) {
-      Eigen::Vector3d p, n, pd, nd;
-      geo_.at(ctx.t, X, V, static_cast<int>(i), p, n, pd, nd);
-      const Eigen::Vector3d r = ctx.q.segment<3>(6 * i);
-      // Compressive-only: the damper engages with the compression delta
-      // through the smoothstep gate H(delta/gate) (0 at delta <= 0, 1 from
-      // delta >= gate). A sharp gate would make the force c A delta_dot
-      // jump where delta changes sign -- at every node resting on its
-      // foundation -- and Newton would not converge there.
-      double H = 1, dH = 0;
-      if (compressive_only_) {
-        const double s = n.dot(p - r) / gate_;
-        if (s <= 0) continue;
-        if (s < 1) {
-          H = s * s * (3 - 2 * s);
-          dH = 6 * s * (1 - s) / gate_;
-        }
-      }
-      const Eigen::Vector3d v = ctx.v.segment<3>(6 * i);
-      const double delta_dot = nd.dot(p - r) + n.dot(pd - v);
-      const double cA = c_ * geo_.area(i);
-      F.segment<3>(6 * i) -= cA * delta_dot * H * n;
-      if (K) {
-        // d/dv: c A H n n^T; d/dr: c A (H n nd^T + delta_dot H' n n^T).
-        Eigen::Matrix3d B = (ctx.kv * cA * H + ctx.kq * cA * delta_dot * dH) * n * n.transpose();
-        if (!geo_.bone.at_rest) B += ctx.kq * cA * H * n * nd.transpose();
-        K->add_block3(i, 0, i, 0, B);
-      }
-    }
-  }
-
- private:
-  FoundationGeometry geo_;
-  double c_;
-  bool compressive_only_;
-  double gate_;
-};
-
-// ---------------------------------------------------------------------------
-// Follower pressure on the face zeta = zf: external virtual work
-//   dW = int p n . dr da = int p (a1 x a2) . dr dxi deta,  a_alpha = dr/dxi_alpha
-// at zeta = zf; 2x2 Gauss is exact (integrand bi-quadratic). Tangent of
-// F = -f_ext: dF_s/dq_t = -p phi_s (phi_t,xi (-[a2]x) + phi_t,eta [a1]x).
-class PressureTerm final : public ShellTerm {
- public:
-  PressureTerm(const ShellModel& model, std::string name, double zf, std::function<double(double)> p)
-      : ShellTerm(std::move(name)), model_(model), zf_(zf), p_(std::move(p)),
-        fe_(model.num_elements()), Ke_(model.num_elements()) {
-    if (!(zf >= -1 && zf <= 1))
-      throw common::InputError(this->name() + ": face_zeta must be in [-1, 1], found " + std::to_string(zf));
-    if (!p_) throw common::InputError(this->name() + ": pressure function is empty");
-  }
-  bool symmetric() const override { return false; }
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const double p = p_(ctx.t);
-    if (!std::isfinite(p)) throw common::NumericalError(name() + ": non-finite pressure at t = " + std::to_string(ctx.t));
-    if (p == 0) return;
-    const int ne = model_.num_elements();
-    const bool want_K = K != nullptr;
-    const double g = 1.0 / std::sqrt(3.0);
-#pragma omp parallel for schedule(static) if (ne > 64)
-    for (int e = 0; e < ne; ++e) {
-      const Vector24 qe = model_.gather(e, ctx.q);
-      const Eigen::Map<const Eigen::Matrix<double, 3, 8>> Qt(qe.data());
-      fe_[e].setZero();
-      if (want_K) Ke_[e].setZero();
-      for (int j = 0; j < 2; ++j)
-        for (int i = 0; i < 2; ++i) {
-          Eigen::Matrix<double, 8, 1> phi;
-          Eigen::Matrix<double, 8, 3> dphi;
-          model_.element(e).slot_functions(i ? g : -g, j ? g : -g, zf_, phi, dphi);
-          const Eigen::Vector3d a1 = Qt * dphi.col(0), a2 = Qt * dphi.col(1);
-          const Eigen::Vector3d na = a1.cross(a2);
-          for (int s = 0; s < 8; ++s) fe_[e].segment<3>(3 * s) -= p * phi(s) * na;
-          if (!want_K) continue;
-          const Eigen::Matrix3d S1 = -skew(a2), S2 = skew(a1);
-          for (int t = 0; t < 8; ++t) {
-            const Eigen::Matrix3d dna = dphi(t, 0) * S1 + dphi(t, 1) * S2;
-            for (int s = 0; s < 8; ++s) Ke_[e].block<3, 3>(3 * s, 3 * t) -= p * phi(s) * dna;
-          }
-        }
-    }
-    double* values = want_K ? K->matrix().valuePtr() : nullptr;
-    for (int e = 0; e < ne; ++e) {
-      for (int l = 0; l < 24; ++l) F(model_.global_index(e, l)) += fe_[e](l);
-      if (!want_K) continue;
-      const int* idx = model_.element_value_indices(e);
-      for (int m = 0; m < 24; ++m)
-        for (int l = 0; l < 24; ++l) values[idx[24 * l + m]] += ctx.kq * Ke_[e](l, m);
-    }
-  }
-
- private:
-  const ShellModel& model_;
-  double zf_;
-  std::function<double(double)> p_;
-  mutable std::vector<Vector24> fe_;
-  mutable std::vector<Matrix24> Ke_;
-};
-
-class PointLoadsTerm final : public ShellTerm {
- public:
-  PointLoadsTerm(const ShellModel& model, std::string name, std::vector<std::pair<int, Eigen::Vector3d>> loads,
-                 std::function<double(double)> scale)
-      : ShellTerm(std::move(name)), loads_(std::move(loads)), scale_(std::move(scale)) {
-    for (const auto& [node, f] : loads_)
-      if (node < 0 || node >= model.num_nodes() || !f.allFinite())
-        throw common::InputError(this->name() + ": node index must be in [0, " + std::to_string(model.num_nodes()) +
-                                 ") with a finite force, found node " + std::to_string(node));
-    if (!scale_) throw common::InputError(this->name() + ": scale function is empty");
-  }
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler*) const override {
-    const double s = scale_(ctx.t);
-    for (const auto& [node, f] : loads_) F.segment<3>(6 * node) -= s * f;
-  }
-
- private:
-  std::vector<std::pair<int, Eigen::Vector3d>> loads_;
-  std::function<double(double)> scale_;
-};
-
-// Conservative director couple: potential -M theta(d), theta the angle of d
-// about the axis e; grad theta = (e x d)/|d_perp|^2 and its Hessian
-//   [e]x/|d_perp|^2 - 2 (e x d) d_perp^T/|d_perp|^4   (symmetric).
-class DirectorMomentsTerm final : public ShellTerm {
- public:
-  DirectorMomentsTerm(const ShellModel& model, std::string name, const Eigen::Vector3d& axis,
-                      std::vector<std::pair<int, double>> moments, std::function<double(double)> scale)
-      : ShellTerm(std::move(name)), e_(axis.normalized()), moments_(std::move(moments)), scale_(std::move(scale)) {
-    if (!(axis.norm() > 0) || !axis.allFinite()) throw common::InputError(this->name() + ": axis must be a non-zero vector");
-    for (const auto& [node, m] : moments_)
-      if (node < 0 || node >= model.num_nodes() || !std::isfinite(m))
-        throw common::InputError(this->name() + ": invalid node " + std::to_string(node) + " or moment");
-    if (!scale_) throw common::InputError(this->name() + ": scale function is empty");
-  }
-  void add(const TermContext& ctx, Eigen::VectorXd& F, TangentAssembler* K) const override {
-    const double s = scale_(ctx.t);
-    for (const auto& [node, m] : moments_) {
-      const Eigen::Vector3d d = ctx.q.segment<3>(6 * node + 3);
-      const Eigen::Vector3d dp = d - d.dot(e_) * e_;
-      const double r2 = dp.squaredNorm();
-      if (!(r2 > 0)) throw common::NumericalError(name() + ": director of node " + std::to_string(node) + " is parallel to the moment axis");
-      const Eigen::Vector3d exd = e_.cross(d);
-      const double M = s * m;
-      F.segment<3>(6 * node + 3) -= M * exd / r2;
-      if (K) {
-        const Eigen::Matrix3d H = skew(e_) / r2 - 2.0 * exd * dp.transpose() / (r2 * r2);
-        K->add_block3(node, 3, node, 3, -ctx.kq * M * H);
-      }
-    }
-  }
-
- private:
-  Eigen::Vector3d e_;
-  std::vector<std::pair<int, double>> moments_;
-  std::function<double(double)> scale_;
-};
-
-class InertiaTerm final : public ShellTerm {
- public:
-  explicit InertiaTerm(const ShellModel& model) : ShellTerm("inertia"), model_(model) {}
-  bool inertial() const override { return true; }
-  void add(const TermContext& ctx, Eigen::VectorXd& Ma, TangentAssembler* K) const override {
-    Ma.noalias() += model_.mass_matrix() * ctx.a;
-    if (K && ctx.ka != 0) {
-      const double* m = model_.mass_matrix().valuePtr();
-      double* k = K->matrix().valuePtr();
-      const Eigen::Index nnz = model_.mass_matrix().nonZeros();
-      for (Eigen::Index i = 0; i < nnz; ++i) k[i] += ctx.ka * m[i];
-    }
-  }
-
- private:
-  const ShellModel& model_;
-};
-
-}  // namespace
 
 BoneMotion BoneMotion::fixed() {
   BoneMotion b;
@@ -506,7 +169,7 @@ ShellTerm& ShellModel::register_term(std::unique_ptr<ShellTerm> term, long count
 }
 
 ShellTerm& ShellModel::add_internal_forces() {
-  return register_term(std::make_unique<InternalForcesTerm>(*this), num_elements());
+  return register_term(make_internal_forces_term(*this), num_elements());
 }
 
 ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone, bool compressive_only) {
@@ -515,30 +178,30 @@ ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone, bool co
 
 ShellTerm& ShellModel::add_foundation_springs(const Eigen::VectorXd& k_per_node, BoneMotion bone,
                                               bool compressive_only) {
-  return register_term(std::make_unique<FoundationSpringsTerm>(*this, k_per_node, std::move(bone), compressive_only),
+  return register_term(make_foundation_springs_term(*this, k_per_node, std::move(bone), compressive_only),
                        num_nodes_);
 }
 
 ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only, double gate_m) {
-  return register_term(std::make_unique<FoundationDampingTerm>(*this, c, std::move(bone), compressive_only, gate_m),
+  return register_term(make_foundation_damping_term(*this, c, std::move(bone), compressive_only, gate_m),
                        num_nodes_);
 }
 
 ShellTerm& ShellModel::add_pressure(const std::string& name, double face_zeta, std::function<double(double)> p) {
-  return register_term(std::make_unique<PressureTerm>(*this, name, face_zeta, std::move(p)), num_elements());
+  return register_term(make_pressure_term(*this, name, face_zeta, std::move(p)), num_elements());
 }
 
 ShellTerm& ShellModel::add_point_loads(const std::string& name, std::vector<std::pair<int, Eigen::Vector3d>> loads,
                                        std::function<double(double)> scale) {
   const long n = static_cast<long>(loads.size());
-  return register_term(std::make_unique<PointLoadsTerm>(*this, name, std::move(loads), std::move(scale)), n);
+  return register_term(make_point_loads_term(*this, name, std::move(loads), std::move(scale)), n);
 }
 
 ShellTerm& ShellModel::add_director_moments(const std::string& name, const Eigen::Vector3d& axis,
                                             std::vector<std::pair<int, double>> moments,
                                             std::function<double(double)> scale) {
   const long n = static_cast<long>(moments.size());
-  return register_term(std::make_unique<DirectorMomentsTerm>(*this, name, axis, std::move(moments), std::move(scale)), n);
+  return register_term(make_director_moments_term(*this, name, axis, std::move(moments), std::move(scale)), n);
 }
 
 ShellTerm& ShellModel::add_inertia() {
@@ -548,7 +211,7 @@ ShellTerm& ShellModel::add_inertia() {
   TangentAssembler A(*this, mass_);
   for (int e = 0; e < num_elements(); ++e) A.add_element(e, elements_[e]->mass());
   has_inertia_ = true;
-  return register_term(std::make_unique<InertiaTerm>(*this), num_elements());
+  return register_term(make_inertia_term(*this), num_elements());
 }
 
 void ShellModel::fix_nodes(const std::string& name, const std::vector<int>& nodes, std::array<bool, 6> mask) {
@@ -564,7 +227,7 @@ void ShellModel::fix_nodes(const std::string& name, const std::vector<int>& node
 ShellTerm& ShellModel::add_periphery_tangential(double k_t_N_m3, BoneMotion bone) {
   std::vector<int> nodes = boundary_nodes();
   const long n = static_cast<long>(nodes.size());
-  return register_term(std::make_unique<PeripheryTangentialTerm>(*this, std::move(nodes), k_t_N_m3, std::move(bone)),
+  return register_term(make_periphery_tangential_term(*this, std::move(nodes), k_t_N_m3, std::move(bone)),
                        n);
 }
 

@@ -1,9 +1,11 @@
 #pragma once
 // ShellModel: a mesh of ANCF shell elements (shell_element.h) and the list of
 // terms a scene asks for, in the MFEM spirit: each physical effect is one term
-// object that adds its generalised force and tangent; a term is constructed
-// only by its add_* call, and built_terms() lists what was built (tests assert
-// that nothing else exists).
+// object that adds its generalised force and tangent. Each term class lives in
+// its own file, cartilage/terms/<name>.{h,cc}, with its registration
+// (cartilage/surface_terms.h); register_term adds one, the add_* methods are
+// thin wrappers over the bundled terms' factories, and built_terms() lists
+// what was built (tests assert that nothing else exists).
 //
 // Coordinates: node i owns q[6i .. 6i+2] = r_i (position, m, world) and
 // q[6i+3 .. 6i+5] = d_i (transverse gradient dr/dz, dimensionless).
@@ -149,7 +151,7 @@ class ShellModel : public numerics::TimeIntegrable {
   /// Nodes on the open boundary (edges used by one quad), sorted.
   std::vector<int> boundary_nodes() const;
 
-  // ---- Terms (each constructed only here) --------------------------------
+  // ---- Bundled terms (cartilage/terms/<name>.cc) ----------------------------
   /// Elastic internal forces of all elements (parallel, deterministic).
   ShellTerm& add_internal_forces();
   /// Compressive-only springs from every node to its anchor on the bone along

@@ -36,7 +36,7 @@ void init_hdf5() {
 }
 
 // Innermost message of HDF5's current error stack (then cleared).
-herr_t walk_error(unsigned n, const H5E_error2_t* err, void* data) {
+herr_t walk_error(unsigned /*n*/, const H5E_error2_t* err, void* data) {
   auto* out = static_cast<std::string*>(data);
   if (err->desc != nullptr && err->desc[0] != '\0') *out = err->desc;  // keep the last = innermost
   return 0;

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "common/error.h"
+#include "common/yaml_error.h"
 
 namespace arthrosim::common {
 
@@ -24,19 +25,10 @@ class Reader {
   explicit Reader(std::string path) : path_(std::move(path)) {}
 
   [[noreturn]] void fail(const YAML::Node& at, const std::string& message) const {
-    const YAML::Mark m = at.Mark();
-    throw InputError(path_, m.line + 1, m.column + 1, message);
+    yaml::fail(path_, at.Mark(), message);
   }
 
-  static std::string describe(const YAML::Node& n) {
-    switch (n.Type()) {
-      case YAML::NodeType::Null: return "nothing";
-      case YAML::NodeType::Sequence: return "a list";
-      case YAML::NodeType::Map: return "a block of keys";
-      case YAML::NodeType::Scalar: return "'" + n.Scalar() + "'";
-      default: return "an undefined value";
-    }
-  }
+  static std::string describe(const YAML::Node& n) { return yaml::describe(n); }
 
   // Keys of a map, each checked against `allowed` and for repetition.
   std::vector<std::pair<YAML::Node, YAML::Node>> entries(const YAML::Node& node, const std::string& what,
@@ -125,7 +117,7 @@ MeshManifest parse_mesh_manifest(const std::string& text, const std::string& pat
   try {
     root = YAML::Load(text);
   } catch (const YAML::ParserException& e) {
-    throw InputError(path, e.mark.line + 1, e.mark.column + 1, "not valid YAML: " + e.msg);
+    yaml::fail(path, e.mark, "not valid YAML: " + e.msg);
   }
   MeshManifest m;
   m.path = path;

@@ -8,6 +8,7 @@ namespace arthrosim::common {
 
 namespace {
 std::string group(const std::string& surface) { return "/surfaces/" + surface; }
+constexpr const char* kNames = "/surfaces/names";
 }  // namespace
 
 PreparedModelReader::PreparedModelReader(const std::string& path)
@@ -17,7 +18,7 @@ PreparedModelReader::PreparedModelReader(const std::string& path)
 PreparedModelReader::~PreparedModelReader() = default;
 const std::string& PreparedModelReader::path() const { return f_->path(); }
 
-std::vector<std::string> PreparedModelReader::surface_names() const { return f_->read_strings("/surfaces/names"); }
+std::vector<std::string> PreparedModelReader::surface_names() const { return f_->read_strings(kNames); }
 
 std::string PreparedModelReader::bone(const std::string& surface) const {
   return f_->attribute_string(group(surface), "bone");
@@ -32,9 +33,27 @@ std::string PreparedModelReader::compartment(const std::string& surface) const {
   return f_->has_attribute(g, "compartment") ? f_->attribute_string(g, "compartment") : std::string();
 }
 
+std::vector<std::string> PreparedModelReader::bone_names() const {
+  return f_->is_group("/bones") ? f_->list("/bones") : std::vector<std::string>{};
+}
+
+TriangleMesh PreparedModelReader::bone_mesh(const std::string& bone) const {
+  const std::string g = "/bones/" + bone;
+  if (!f_->is_group(g)) throw InputError(path(), 0, "expected the bone " + g + ", found none");
+  TriangleMesh m;
+  m.V = f_->read_matrix(g + "/vertices", 3);
+  m.F = f_->read_matrix_int(g + "/faces", 3);
+  m.name = bone;
+  return m;
+}
+
+std::string PreparedModelReader::input_unit() const {
+  return f_->has_attribute("/", "input_unit") ? f_->attribute_string("/", "input_unit") : std::string();
+}
+
 PreparedModelReader::QuadSurface PreparedModelReader::quads(const std::string& name) const {
   const H5File& f = *f_;
-  const std::string g = group(name) + "/quads/";
+  const std::string g = PreparedModelWriter::quads_group(name) + "/";
   QuadSurface s;
   s.mesh.name = name;
   s.mesh.V = f.read_matrix(g + "nodes", 3);
@@ -56,7 +75,7 @@ PreparedModelReader::QuadSurface PreparedModelReader::quads(const std::string& n
 }
 
 std::string PreparedModelReader::quad_thickness_dataset(const std::string& surface) {
-  return group(surface) + "/quads/thickness";
+  return PreparedModelWriter::quads_group(surface) + "/thickness";
 }
 
 Eigen::VectorXd PreparedModelReader::quad_thickness(const std::string& surface) const {
@@ -90,5 +109,34 @@ PreparedModelReader::TriangleSurface PreparedModelReader::triangles(const std::s
                      g + "thickness: expected finite values >= 0, found NaN, Inf or a negative value");
   return s;
 }
+
+// ---------------------------------------------------------------------------
+// Writer
+// ---------------------------------------------------------------------------
+std::string PreparedModelWriter::quads_group(const std::string& surface) { return group(surface) + "/quads"; }
+
+void PreparedModelWriter::identity(const std::string& model_folder) {
+  f_.set_attribute("/", "schema", "arthrosim prepared model 1");
+  f_.set_attribute("/", "model_folder", model_folder);
+  f_.set_attribute("/", "length_unit", "m");
+}
+
+void PreparedModelWriter::surface(const std::string& surface, const std::string& bone) {
+  f_.create_group(group(surface));
+  f_.set_attribute(group(surface), "bone", bone);
+}
+
+void PreparedModelWriter::quads(const std::string& surface, const QuadMesh& mesh, const Points3& normals,
+                                const Eigen::VectorXd& thickness, const std::vector<int>& periphery) {
+  const std::string q = quads_group(surface);
+  f_.write(q + "/nodes", mesh.V);
+  f_.write(q + "/quads", mesh.Q);
+  f_.write(q + "/normals", normals);
+  f_.write(q + "/thickness", thickness);
+  f_.write(q + "/periphery",
+           Eigen::VectorXi(Eigen::Map<const Eigen::VectorXi>(periphery.data(), static_cast<Eigen::Index>(periphery.size()))));
+}
+
+void PreparedModelWriter::surface_names(const std::vector<std::string>& names) { f_.write(kNames, names); }
 
 }  // namespace arthrosim::common

@@ -11,6 +11,7 @@
 
 #include "common/edit_distance.h"
 #include "common/error.h"
+#include "common/yaml_error.h"
 
 namespace arthrosim::common {
 namespace {
@@ -20,35 +21,10 @@ using T = OptionType;
 // ---------------------------------------------------------------------------
 // Small helpers
 // ---------------------------------------------------------------------------
-struct Where {
-  std::string file;
-  int line;
-  int column;
-};
-
-Where where(const std::string& file, const YAML::Mark& m) {
-  // yaml-cpp marks are 0-based; editors count from 1.
-  return {file, m.line + 1, m.column + 1};
-}
-
-[[noreturn]] void fail(const Where& w, const std::string& message) {
-  throw InputError(w.file, w.line, w.column, message);
-}
-
-std::string describe(const YAML::Node& node) {
-  switch (node.Type()) {
-    case YAML::NodeType::Null:
-      return "nothing";
-    case YAML::NodeType::Sequence:
-      return "a list";
-    case YAML::NodeType::Map:
-      return "a block of keys";
-    case YAML::NodeType::Scalar:
-      return "'" + node.Scalar() + "'";
-    default:
-      return "an undefined value";
-  }
-}
+using yaml::describe;
+using yaml::fail;
+using yaml::where;
+using yaml::Where;
 
 std::string join(const std::vector<std::string_view>& words) {
   std::string s;
@@ -575,7 +551,7 @@ Scene parse_scene(const std::string& text, const std::filesystem::path& file, co
   try {
     root = YAML::Load(text);
   } catch (const YAML::ParserException& e) {
-    throw InputError(label, e.mark.line + 1, e.mark.column + 1, "not valid YAML: " + e.msg);
+    fail(label, e.mark, "not valid YAML: " + e.msg);
   }
   Parser p(label, fs::absolute(file).parent_path(), schema);
   std::vector<std::string> block_names;

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <map>
+#include <stdexcept>
 
 #include "common/effects.h"
 #include "common/finite.h"
@@ -305,6 +306,34 @@ void KinematicsFileWriter::finish(const ComakRunSummary& s, const common::Effect
   table("contact_forces", cl, w.sto_contact, false);
 }
 
+void write_prescribed_kinematics(const std::string& path, const PrescribedKinematics& k) {
+  common::H5File f(path, common::H5File::Mode::kTruncate);
+  f.set_attribute("/", "format", "arthrosim kinematics file");
+  f.set_attribute("/", "format_version", 1);
+  f.set_attribute("/", "world_frame", k.world_frame);
+  const std::int64_t n = k.time_s.size();
+  f.set_attribute("/", "frames_expected", n);  // a complete, finished run (KinematicsFileReader::require_complete)
+  f.set_attribute("/", "frames", n);
+  f.write("/time", k.time_s);
+  for (const auto& [body, poses] : k.body_poses) {
+    if (static_cast<std::int64_t>(poses.size()) != n)
+      throw std::invalid_argument("write_prescribed_kinematics: " + std::to_string(poses.size()) + " poses of " +
+                                  body + " for " + std::to_string(n) + " frames");
+    std::vector<double> X;
+    X.reserve(static_cast<std::size_t>(16 * n));
+    for (const Eigen::Isometry3d& p : poses)
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) X.push_back(p.matrix()(r, c));
+    f.write_tensor3(KinematicsFileReader::body_poses_dataset(body), {n, 4, 4}, X);
+  }
+  for (const auto& [series, F] : k.contact_forces) {
+    if (F.rows() != n || F.cols() != 3)
+      throw std::invalid_argument("write_prescribed_kinematics: contact force " + series + " is not frames x 3");
+    f.write(KinematicsFileReader::contact_force_dataset(series), F);
+  }
+  f.write("/solver/status", Eigen::VectorXi(Eigen::VectorXi::Zero(n)));
+}
+
 // ---------------------------------------------------------------------------
 // Reader
 // ---------------------------------------------------------------------------
@@ -360,6 +389,20 @@ std::vector<Eigen::Isometry3d> KinematicsFileReader::body_poses(const std::strin
 std::optional<Eigen::MatrixXd> KinematicsFileReader::tibiofemoral_force() const {
   if (!f_->exists(kTibiofemoralForce)) return std::nullopt;
   return f_->read_matrix(kTibiofemoralForce, 3);
+}
+
+std::string KinematicsFileReader::contact_force_dataset(const std::string& series) {
+  if (series == "tibiofemoral") return kTibiofemoralForce;
+  if (series == "medial" || series == "lateral") return std::string(kContactGroup) + "/" + series + "_force";
+  if (series == "patellofemoral") return "/contact/patellofemoral/force";
+  throw std::invalid_argument("kinematics file: no contact-force series '" + series +
+                              "' (tibiofemoral, medial, lateral, patellofemoral)");
+}
+
+std::optional<Eigen::MatrixXd> KinematicsFileReader::contact_force(const std::string& series) const {
+  const std::string ds = contact_force_dataset(series);
+  if (!f_->exists(ds)) return std::nullopt;
+  return f_->read_matrix(ds, 3);
 }
 
 std::vector<bool> KinematicsFileReader::converged(Eigen::Index n) const {

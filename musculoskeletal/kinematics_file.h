@@ -63,6 +63,20 @@ class KinematicsFileWriter {
   std::unique_ptr<Impl> impl_;
 };
 
+/// A kinematics file without a COMAK run (canonical and synthetic cases of
+/// the stages downstream): the frames' time, body poses and contact-force
+/// series, every frame converged.
+struct PrescribedKinematics {
+  std::string world_frame;  ///< root attribute world_frame (what "W" is)
+  Eigen::VectorXd time_s;
+  /// body -> X_WB per frame.
+  std::vector<std::pair<std::string, std::vector<Eigen::Isometry3d>>> body_poses;
+  /// series (KinematicsFileReader::contact_force) -> frames x 3 [N].
+  std::vector<std::pair<std::string, Eigen::MatrixXd>> contact_forces;
+};
+/// Writes `k` to `path` (truncates) in the kinematics file's schema.
+void write_prescribed_kinematics(const std::string& path, const PrescribedKinematics& k);
+
 /// Reads a kinematics file (its consumers: the surface stage's imposed
 /// kinematics, the post stage's force curves, the accuracy study).
 class KinematicsFileReader {
@@ -82,6 +96,13 @@ class KinematicsFileReader {
   /// The tibiofemoral contact force (frames x 3, tibia frame [N]), or
   /// nullopt when the run simulated no contact.
   std::optional<Eigen::MatrixXd> tibiofemoral_force() const;
+  /// A contact-force series (frames x 3 [N]) by name: "tibiofemoral" (the
+  /// total, tibia frame), its compartments "medial" and "lateral", or
+  /// "patellofemoral" (patella frame); nullopt when the file has none.
+  std::optional<Eigen::MatrixXd> contact_force(const std::string& series) const;
+  /// The dataset of a contact-force series (for messages); std::invalid_argument
+  /// for a name not listed at contact_force.
+  static std::string contact_force_dataset(const std::string& series);
   /// Per frame: true when COMAK converged there (/solver/status 0); all true
   /// for a file without status.
   std::vector<bool> converged(Eigen::Index frames) const;

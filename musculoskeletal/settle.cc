@@ -61,7 +61,7 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
     }
     return r;
   };
-  auto converged = [&](const Eigen::VectorXd& q) {
+  auto converged = [&]() {  // at the state `data` was last evaluated at
     double fmax = 0, mmax = 0;
     for (int k = 0; k < m; ++k) {
       const double v = std::abs(data.Q[free[k]]);
@@ -100,7 +100,7 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
   double tau = opt.initial_pseudo_time;
   for (res.iterations = 0; res.iterations < opt.max_iterations; ++res.iterations) {
     res.history.push_back(r.norm());
-    if (converged(res.q)) {
+    if (converged()) {
       res.status = SettleStatus::kConverged;
       break;
     }
@@ -148,13 +148,13 @@ SettleResult settle(const Model& model, ModelData& data, const Eigen::VectorXd& 
     }
     if (!accepted) {
       residual(res.q, false, nullptr);
-      converged(res.q);
+      converged();
       res.status = SettleStatus::kStalled;
       break;
     }
     r = residual(res.q, true, &J);
   }
-  if (res.status != SettleStatus::kConverged) converged(res.q);
+  if (res.status != SettleStatus::kConverged) converged();
   std::ostringstream s;
   s << "settle: "
     << (res.status == SettleStatus::kConverged

@@ -61,7 +61,7 @@ class TimeIntegrable {
   virtual const Eigen::VectorXd& increment_weights() const = 0;
   /// Predicts q at t1 from the converged q0 at t0 (the Newton start of a
   /// step, IntegratorOptions::predictor = kSystem). Default: q1 = q0.
-  virtual void predict(double t0, double t1, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const { q1 = q0; }
+  virtual void predict(double /*t0*/, double /*t1*/, const Eigen::VectorXd& q0, Eigen::VectorXd& q1) const { q1 = q0; }
   /// As predict, also given the state qp accepted at tp < t0 (the step
   /// before): IntegratorOptions::predictor = kSystemExtrapolated. Default:
   /// predict(t0, t1, q0, q1) (the previous state unused).

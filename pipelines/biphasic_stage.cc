@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -17,6 +18,7 @@
 #include "common/hdf5.h"
 #include "common/log.h"
 #include "common/metadata.h"
+#include "common/prepared_model_file.h"
 #include "common/progress.h"
 #include "musculoskeletal/kinematics_file.h"
 #include "pipelines/prepare.h"
@@ -48,23 +50,24 @@ std::string options_text(const BiphasicStageOptions& o) {
 
 // The prepared model's articular quad surface of one layer, in the model
 // (bone) frame.
-JointLayer read_layer(const common::H5File& f, const std::string& name, const biphasic::Material& material) {
-  const std::vector<std::string> names = f.read_strings("/surfaces/names");
+JointLayer read_layer(const common::PreparedModelReader& f, const std::string& name,
+                      const biphasic::Material& material) {
+  const std::vector<std::string> names = f.surface_names();
   if (std::find(names.begin(), names.end(), name) == names.end()) {
     std::string list;
     for (const std::string& n : names) list += (list.empty() ? "" : ", ") + n;
     throw common::InputError(f.path(), 0,
                              "expected a cartilage surface '" + name + "' (prepared surfaces: " + list + "), found none");
   }
-  const std::string g = "/surfaces/" + name + "/quads/";
+  common::PreparedModelReader::QuadSurface q = f.quads(name);
   JointLayer l;
   l.name = name;
-  l.bone = f.attribute_string("/surfaces/" + name, "bone");
+  l.bone = f.bone(name);
   l.surface.name = name;
-  l.surface.V = f.read_matrix(g + "nodes", 3);
-  l.surface.Q = f.read_matrix_int(g + "quads", 4);
-  l.normals = f.read_matrix(g + "normals", 3);
-  l.thickness = f.read_vector(g + "thickness");
+  l.surface.V = q.mesh.V;
+  l.surface.Q = q.mesh.Q;
+  l.normals = q.normals;
+  l.thickness = f.quad_thickness(name);
   l.material = material;
   return l;
 }
@@ -78,35 +81,30 @@ struct KinematicsInput {
 // Frames of the kinematics file: bone poses and the compartment forces.
 KinematicsInput read_kinematics(const std::string& path, const std::set<std::string>& bones,
                                 const std::set<std::string>& compartments, double end_time_s, bool allow_partial) {
+  const musculoskeletal::KinematicsFileReader reader(path);
   // Kind, version and completeness (a killed or stopped COMAK run): refused
   // naming the file and what it holds unless allow_partial (common/file_check.h).
-  const std::string partial_input = musculoskeletal::KinematicsFileReader(path).require_complete(allow_partial);
-  const common::H5File f(path, common::H5File::Mode::kRead);
-  const Eigen::VectorXd time = f.read_vector("/time");
+  const std::string partial_input = reader.require_complete(allow_partial);
+  const Eigen::VectorXd time = reader.time();
   const Eigen::Index n = time.size();
-  std::map<std::string, common::Tensor3d> poses;
+  std::map<std::string, std::vector<Eigen::Isometry3d>> poses;
   for (const std::string& bone : bones) {
-    const std::string ds = "/bodies/" + bone + "/X_W";
-    if (!f.exists(ds)) throw common::InputError(path, 0, "expected the pose series " + ds + ", found none");
-    poses[bone] = f.read_tensor3(ds);
-    if (poses[bone].dims[0] != n || poses[bone].dims[1] != 4 || poses[bone].dims[2] != 4) {
-      throw common::InputError(path, 0, "dataset " + ds + ": expected dims (" + std::to_string(n) + ", 4, 4)");
-    }
+    const std::string ds = musculoskeletal::KinematicsFileReader::body_poses_dataset(bone);
+    if (!reader.file().exists(ds)) throw common::InputError(path, 0, "expected the pose series " + ds + ", found none");
+    poses[bone] = reader.body_poses(bone);  // frames x 4 x 4, checked
   }
-  static const std::map<std::string, std::string> kForce = {
-      {"medial", "/contact/tibiofemoral/medial_force"},
-      {"lateral", "/contact/tibiofemoral/lateral_force"},
-      {"patellofemoral", "/contact/patellofemoral/force"}};
+  using musculoskeletal::KinematicsFileReader;
   std::map<std::string, Eigen::MatrixXd> forces;
   for (const std::string& c : compartments) {
-    const std::string ds = kForce.at(c);
-    if (!f.exists(ds)) {
+    const std::string ds = KinematicsFileReader::contact_force_dataset(c);
+    std::optional<Eigen::MatrixXd> F = reader.contact_force(c);
+    if (!F) {
       throw common::InputError(path, 0,
                                "expected the contact-force series " + ds +
                                    " (written by arthrosim-comak when the model has contact), found none; the "
                                    "penetration method scales each compartment's tractions to this force");
     }
-    forces[c] = f.read_matrix(ds, 3);
+    forces[c] = std::move(*F);
     if (forces[c].rows() != n) {
       throw common::InputError(path, 0, "dataset " + ds + ": expected " + std::to_string(n) + " frames, found " +
                                             std::to_string(forces[c].rows()));
@@ -115,36 +113,35 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
     // model with one tibial contact surface and no split_lateral, or a file
     // from before the split existed): the layers would go unloaded without a
     // word.
-    const char* kTotal = "/contact/tibiofemoral/force";
     auto all_zero = [&](const char* split) {
-      if (!f.exists(split)) return true;
-      const Eigen::MatrixXd m = f.read_matrix(split, 3);
-      return m.size() == 0 || m.cwiseAbs().maxCoeff() == 0.0;
+      const std::optional<Eigen::MatrixXd> m = reader.contact_force(split);
+      return !m || m->size() == 0 || m->cwiseAbs().maxCoeff() == 0.0;
     };
-    if (c != "patellofemoral" && f.exists(kTotal) && all_zero("/contact/tibiofemoral/medial_force") &&
-        all_zero("/contact/tibiofemoral/lateral_force")) {
-      const Eigen::MatrixXd total = f.read_matrix(kTotal, 3);
-      const double peak = total.rows() ? total.rowwise().norm().maxCoeff() : 0.0;
+    const std::optional<Eigen::MatrixXd> total =
+        c != "patellofemoral" ? reader.tibiofemoral_force() : std::optional<Eigen::MatrixXd>();
+    if (total && all_zero("medial") && all_zero("lateral")) {
+      const double peak = total->rows() ? total->rowwise().norm().maxCoeff() : 0.0;
       if (peak > 0.0) {
         char buf[32];
         std::snprintf(buf, sizeof buf, "%.0f", peak);
         throw common::InputError(
             path, 0,
-            ds + " (and the other compartment's) is zero at every frame while " + kTotal + " reaches " + buf +
+            ds + " (and the other compartment's) is zero at every frame while " +
+                KinematicsFileReader::contact_force_dataset("tibiofemoral") + " reaches " + buf +
                 " N: stage 1 did not split the tibiofemoral contact into compartments (a tibial contact surface holding "
-                "both plateaus needs split_lateral in the model, or prepared compartments; see the file's "
-                "/contact/tibiofemoral attribute 'compartments'), and the penetration method scales each compartment "
+                "both plateaus needs split_lateral in the model, or prepared compartments; see the file's " +
+                KinematicsFileReader::kContactGroup +
+                " attribute 'compartments'), and the penetration method scales each compartment "
                 "to its own force (docs/biphasic.md, \"The real subject\")");
       }
     }
   }
-  Eigen::VectorXi status = Eigen::VectorXi::Zero(n);
-  if (f.exists("/solver/status")) status = f.read_vector_int("/solver/status");
+  const std::vector<bool> converged = reader.converged(n);
   KinematicsInput in;
   in.partial_input = partial_input;
   for (Eigen::Index k = 0; k < n; ++k) {
     if (end_time_s >= 0.0 && time[k] > end_time_s + 1e-12) break;
-    if (status[k] != 0) {
+    if (!converged[static_cast<std::size_t>(k)]) {
       ++in.failed;
       common::log_warn("kinematics frame " + std::to_string(k) + " (t = " + std::to_string(time[k]) +
                        " s): stage 1 did not converge there; frame left out (its neighbours are interpolated)");
@@ -152,18 +149,11 @@ KinematicsInput read_kinematics(const std::string& path, const std::set<std::str
     }
     JointFrame fr;
     fr.time_s = time[k];
-    for (auto& [bone, X] : poses) {
-      Eigen::Matrix4d M;
-      for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) M(i, j) = X(k, i, j);
-      Eigen::Isometry3d iso;
-      iso.matrix() = M;
-      fr.X_WB[bone] = iso;
-    }
+    for (auto& [bone, X] : poses) fr.X_WB[bone] = X[static_cast<std::size_t>(k)];
     for (auto& [c, F] : forces) {
       const double m = F.row(k).norm();
       if (!std::isfinite(m)) {
-        throw common::InputError(path, 0, kForce.at(c) + ": expected finite forces, found " + std::to_string(m) +
+        throw common::InputError(path, 0, KinematicsFileReader::contact_force_dataset(c) + ": expected finite forces, found " + std::to_string(m) +
                                               " at frame " + std::to_string(k));
       }
       fr.force_N[c] = m;
@@ -317,7 +307,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   // Inputs.
   std::vector<JointLayer> full;
   {
-    const common::H5File prepared(o.prepared, common::H5File::Mode::kRead);
+    const common::PreparedModelReader prepared(o.prepared);
     for (const std::string& name : o.layers) full.push_back(read_layer(prepared, name, material));
   }
   std::vector<JointPair> pairs;
@@ -542,8 +532,8 @@ namespace {
 
 // A square surface over the X-Z plane, facing +Y (up, flat) or -Y (down, the
 // paraboloid y = (x^2 + z^2) / (2 R); R = 0 is flat).
-void write_square_surface(common::H5File& f, const std::string& name, const std::string& bone, int n, double size,
-                          bool up, double R, double thickness) {
+void write_square_surface(common::PreparedModelWriter& f, const std::string& name, const std::string& bone, int n,
+                          double size, bool up, double R, double thickness) {
   const int nv = (n + 1) * (n + 1);
   Eigen::MatrixXd V(nv, 3), N(nv, 3);
   for (int j = 0; j <= n; ++j)
@@ -563,12 +553,15 @@ void write_square_surface(common::H5File& f, const std::string& name, const std:
       if (up) Q.row(j * n + i) << a, a + n + 1, a + n + 2, a + 1;
       else Q.row(j * n + i) << a, a + 1, a + n + 2, a + n + 1;
     }
-  const std::string g = "/surfaces/" + name + "/quads/";
-  f.write(g + "nodes", V);
-  f.write(g + "quads", Q);
-  f.write(g + "normals", N);
-  f.write(g + "thickness", Eigen::VectorXd::Constant(nv, thickness));
-  f.set_attribute("/surfaces/" + name, "bone", bone);
+  common::QuadMesh mesh;
+  mesh.V = V;
+  mesh.Q = Q;
+  std::vector<int> periphery;  // the square's outline
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i)
+      if (i == 0 || j == 0 || i == n || j == n) periphery.push_back(j * (n + 1) + i);
+  f.surface(name, bone);
+  f.quads(name, mesh, N, Eigen::VectorXd::Constant(nv, thickness), periphery);
 }
 
 }  // namespace
@@ -578,43 +571,29 @@ std::pair<std::string, std::string> write_two_layer_case(const std::string& dir)
   const std::string prepared = (std::filesystem::path(dir) / "two_layers_prepared.h5").string();
   const std::string kinematics = (std::filesystem::path(dir) / "two_layers_kinematics.h5").string();
   {
-    common::H5File f(prepared, common::H5File::Mode::kTruncate);
-    f.set_attribute("/", "schema", "arthrosim prepared model 1");
-    f.set_attribute("/", "length_unit", "m");
-    f.set_attribute("/", "model_folder", "canonical two-layer case (arthrosim-biphasic --canonical)");
-    f.write("/surfaces/names", std::vector<std::string>{"femur", "tibia_medial"});
+    common::H5File h5(prepared, common::H5File::Mode::kTruncate);
+    common::PreparedModelWriter f(h5);
+    f.identity("canonical two-layer case (arthrosim-biphasic --canonical)");
+    f.surface_names({"femur", "tibia_medial"});
     write_square_surface(f, "femur", "femur", 12, 12e-3, false, 30e-3, 1.5e-3);
     write_square_surface(f, "tibia_medial", "tibia", 16, 16e-3, true, 0.0, 2e-3);
   }
   {
-    common::H5File f(kinematics, common::H5File::Mode::kTruncate);
-    f.set_attribute("/", "format", "arthrosim kinematics file");
-    f.set_attribute("/", "format_version", 1);
-    f.set_attribute("/", "world_frame", "femur frame of the canonical case: Y superior");
+    musculoskeletal::PrescribedKinematics k;
+    k.world_frame = "femur frame of the canonical case: Y superior";
     const int n = 101;
-    f.set_attribute("/", "frames_expected", n);  // a complete file (common/file_check.h)
-    f.set_attribute("/", "frames", n);
-    Eigen::VectorXd t(n);
-    std::vector<double> femur, tibia;
+    k.time_s.resize(n);
+    std::vector<Eigen::Isometry3d> femur(n, Eigen::Isometry3d::Identity()), tibia(n, Eigen::Isometry3d::Identity());
     Eigen::MatrixXd medial(n, 3), lateral = Eigen::MatrixXd::Zero(n, 3);
     for (int i = 0; i < n; ++i) {
-      t[i] = 0.01 * i;
-      const double ramp = std::min(t[i] / 0.5, 1.0);
-      Eigen::Matrix4d Xf = Eigen::Matrix4d::Identity(), Xt = Eigen::Matrix4d::Identity();
-      Xf(1, 3) = -0.15e-3 * ramp;
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) {
-          femur.push_back(Xf(r, c));
-          tibia.push_back(Xt(r, c));
-        }
+      k.time_s[i] = 0.01 * i;
+      const double ramp = std::min(k.time_s[i] / 0.5, 1.0);
+      femur[i].translation().y() = -0.15e-3 * ramp;
       medial.row(i) << 0.0, -200.0 * ramp, 0.0;
     }
-    f.write("/time", t);
-    f.write_tensor3("/bodies/femur/X_W", {n, 4, 4}, femur);
-    f.write_tensor3("/bodies/tibia/X_W", {n, 4, 4}, tibia);
-    f.write("/contact/tibiofemoral/medial_force", medial);
-    f.write("/contact/tibiofemoral/lateral_force", lateral);
-    f.write("/solver/status", Eigen::VectorXi(Eigen::VectorXi::Zero(n)));
+    k.body_poses = {{"femur", femur}, {"tibia", tibia}};
+    k.contact_forces = {{"medial", medial}, {"lateral", lateral}};
+    musculoskeletal::write_prescribed_kinematics(kinematics, k);
   }
   return {prepared, kinematics};
 }

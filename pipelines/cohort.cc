@@ -25,6 +25,7 @@
 #include "common/hashing.h"
 #include "common/scene.h"
 #include "common/scene_edit.h"
+#include "common/yaml_error.h"
 #include "musculoskeletal/kinematics_file.h"
 #include "pipelines/json.h"
 #include "pipelines/report.h"
@@ -39,24 +40,14 @@ namespace {
 
 // ---- reading the cohort file (yaml-cpp stays in this file) ------------------
 
-struct Where {
-  int line = 0, column = 0;
-};
-Where where(const YAML::Node& n) {
-  const YAML::Mark m = n.Mark();
-  return {m.line + 1, m.column + 1};
-}
+using common::yaml::where;
+using common::yaml::Where;
 
-std::string kind_of(const YAML::Node& n) {
-  if (n.IsMap()) return "a map";
-  if (n.IsSequence()) return "a list";
-  if (n.IsNull()) return "nothing";
-  return "'" + n.Scalar() + "'";
-}
+// What a node holds, for "expected ..., found <kind_of>" messages.
+std::string kind_of(const YAML::Node& n) { return common::yaml::describe(n); }
 
 [[noreturn]] void fail(const fs::path& file, const YAML::Node& n, const std::string& message) {
-  const Where w = where(n);
-  throw InputError(file.string(), w.line, w.column, message);
+  common::yaml::fail(file.string(), n.Mark(), message);
 }
 
 std::string scalar(const fs::path& file, const YAML::Node& n, const std::string& what) {
@@ -98,7 +89,7 @@ std::vector<Override> read_set(const fs::path& file, const YAML::Node& n, const 
     Override o;
     o.key = kv.first.Scalar();
     o.value = scalar(file, kv.second, "a value for " + o.key);
-    const Where w = where(kv.first);
+    const Where w = where(file.string(), kv.first.Mark());
     o.line = w.line;
     o.column = w.column;
     out.push_back(o);
@@ -123,7 +114,7 @@ Cohort load_cohort(const fs::path& file_in) {
   } catch (const YAML::BadFile&) {
     throw InputError(file.string(), 0, "cannot read the cohort file");
   } catch (const YAML::Exception& e) {
-    throw InputError(file.string(), e.mark.line + 1, e.mark.column + 1, "expected YAML, found: " + e.msg);
+    common::yaml::fail(file.string(), e.mark, "expected YAML, found: " + e.msg);
   }
   if (!root.IsMap()) throw InputError(file.string(), 1, "expected a cohort (a map with 'subjects'), found " + kind_of(root));
   check_keys(file, root, "a cohort file", {"description", "scene", "set", "settings", "subjects"});
@@ -138,7 +129,7 @@ Cohort load_cohort(const fs::path& file_in) {
     for (const auto& kv : g) {
       Axis a;
       a.key = kv.first.Scalar();
-      const Where w = where(kv.first);
+      const Where w = where(file.string(), kv.first.Mark());
       a.line = w.line;
       a.column = w.column;
       if (!kv.second.IsSequence() || kv.second.size() == 0)
@@ -161,7 +152,7 @@ Cohort load_cohort(const fs::path& file_in) {
   for (const auto& kv : subjects) {
     Subject s;
     s.name = kv.first.Scalar();
-    const Where w = where(kv.first);
+    const Where w = where(file.string(), kv.first.Mark());
     s.line = w.line;
     s.column = w.column;
     if (!valid_name(s.name))

@@ -18,6 +18,7 @@
 #include "common/mesh_validation.h"
 #include "common/metadata.h"
 #include "common/output_file.h"
+#include "common/prepared_model_file.h"
 #include "common/remesh.h"
 #include "common/spatial.h"
 #include "common/xdmf.h"
@@ -572,9 +573,8 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
                           const common::RunMetadata& metadata, const std::string& h5_path) {
   common::H5File h5(h5_path, common::H5File::Mode::kTruncate);
   common::write_metadata(h5, metadata);
-  h5.set_attribute("/", "schema", "arthrosim prepared model 1");
-  h5.set_attribute("/", "model_folder", model.folder);
-  h5.set_attribute("/", "length_unit", "m");
+  common::PreparedModelWriter writer(h5);  // what the stages read (common/prepared_model_file.h)
+  writer.identity(model.folder);
   h5.set_attribute("/", "edge_length_m", options.edge_length);
   h5.set_attribute("/", "max_cast_distance_m", options.max_cast_distance);
   h5.set_attribute("/", "input_unit", common::unit_name(options.unit));
@@ -606,8 +606,7 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
   for (const PreparedSurface& s : model.surfaces) {
     names.push_back(s.name);
     const std::string g = "/surfaces/" + s.name;
-    h5.create_group(g);
-    h5.set_attribute(g, "bone", s.bone);
+    writer.surface(s.name, s.bone);
     h5.set_attribute(g, "source_file", s.source_file);
     std::string rep;
     for (const auto& r : s.repairs) rep += r + "\n";
@@ -635,22 +634,16 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
     h5.set_attribute(g, "min_jacobian_ratio",
                      std::min(s.stats.triangle_quality.min_jacobian_ratio, s.stats.quad_quality.min_jacobian_ratio));
     h5.set_attribute(g, "min_admissible_shell_thickness_m", s.stats.quad_quality.min_shell_thickness);
-    const std::string t = g + "/triangles", q = g + "/quads";
+    const std::string t = g + "/triangles", q = common::PreparedModelWriter::quads_group(s.name);
     h5.write(t + "/vertices", s.triangles.V);
     h5.write(t + "/faces", s.triangles.F);
     h5.write(t + "/normals", s.vertex_normals);
     h5.write(t + "/thickness", s.thickness);
     h5.write(t + "/thickness_source", s.thickness_source);
     h5.write(t + "/thickness_measured", s.thickness_measured);
-    h5.write(q + "/nodes", s.quads.V);
-    h5.write(q + "/quads", s.quads.Q);
-    h5.write(q + "/normals", s.node_normals);
-    h5.write(q + "/thickness", s.node_thickness);
+    writer.quads(s.name, s.quads, s.node_normals, s.node_thickness, s.periphery_nodes);
     h5.write(q + "/thickness_source", s.node_thickness_source);
     h5.write(q + "/thickness_measured", s.node_thickness_measured);
-    Eigen::VectorXi periphery = Eigen::Map<const Eigen::VectorXi>(s.periphery_nodes.data(),
-                                                                  static_cast<Eigen::Index>(s.periphery_nodes.size()));
-    h5.write(q + "/periphery", periphery);
     Eigen::VectorXi on_periphery = Eigen::VectorXi::Zero(s.quads.num_nodes());
     for (int i : s.periphery_nodes) on_periphery[i] = 1;
     h5.write(q + "/on_periphery", on_periphery);
@@ -667,7 +660,7 @@ void write_prepared_model(const PreparedModel& model, const PrepareOptions& opti
                                 {"on_periphery", q + "/on_periphery", XdmfCenter::kNode, false},
                                 {"normal", q + "/normals", XdmfCenter::kNode, false}}});
   }
-  h5.write("/surfaces/names", names);
+  writer.surface_names(names);
   h5.flush();
   common::write_xdmf(xdmf_path_for(common::complete_name(h5_path)), h5, series);  // also for <out>.partial
 }

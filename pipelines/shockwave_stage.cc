@@ -11,6 +11,7 @@
 #include "common/error.h"
 #include "common/output_file.h"
 #include "common/hdf5.h"
+#include "common/prepared_model_file.h"
 #include "common/log.h"
 #include "common/mesh_io.h"
 #include "common/progress.h"
@@ -235,35 +236,32 @@ ShockwaveModel build_shockwave_model(const ShockwaveStageOptions& o, const std::
   }
   if (o.prepared.empty()) throw common::InputError(source, 0, "expected a prepared model (--prepared)");
   shockwave::KneeMeshes meshes;
-  const common::H5File h5(o.prepared.string(), common::H5File::Mode::kRead);
-  auto bone = [&](const std::string& name) {
-    common::TriangleMesh m;
-    m.V = h5.read_matrix("/bones/" + name + "/vertices", 3);
-    m.F = h5.read_matrix_int("/bones/" + name + "/faces", 3);
-    m.name = name;
-    return m;
-  };
-  if (!h5.exists("/bones/femur") || !h5.exists("/bones/tibia"))
-    throw common::InputError(o.prepared.string(), 0, "expected the bones /bones/femur and /bones/tibia, found " +
-                                                         std::to_string(h5.list("/bones").size()) + " bones");
-  meshes.femur = bone("femur");
-  meshes.tibia = bone("tibia");
-  for (const std::string& name : h5.read_strings("/surfaces/names")) {
-    const std::string g = "/surfaces/" + name;
-    const std::string b = h5.attribute_string(g, "bone");
+  const common::PreparedModelReader prepared(o.prepared.string());
+  {
+    const std::vector<std::string> bones = prepared.bone_names();
+    if (std::find(bones.begin(), bones.end(), "femur") == bones.end() ||
+        std::find(bones.begin(), bones.end(), "tibia") == bones.end())
+      throw common::InputError(o.prepared.string(), 0, "expected the bones femur and tibia, found " +
+                                                           std::to_string(bones.size()) + " bones");
+  }
+  meshes.femur = prepared.bone_mesh("femur");
+  meshes.tibia = prepared.bone_mesh("tibia");
+  for (const std::string& name : prepared.surface_names()) {
+    const std::string b = prepared.bone(name);
     if (b != "femur" && b != "tibia") continue;  // the patella is left out, as in the seed
     shockwave::CartilageSurface c;
     c.name = name;
     c.bone = b == "femur" ? shockwave::BoneId::kFemur : shockwave::BoneId::kTibia;
-    c.articular.V = h5.read_matrix(g + "/triangles/vertices", 3);
-    c.articular.F = h5.read_matrix_int(g + "/triangles/faces", 3);
-    c.thickness = h5.read_vector(g + "/triangles/thickness");
+    common::PreparedModelReader::TriangleSurface t = prepared.triangles(name);
+    c.articular.V = std::move(t.mesh.V);
+    c.articular.F = std::move(t.mesh.F);
+    c.thickness = std::move(t.thickness);
     meshes.cartilage.push_back(std::move(c));
   }
   // Menisci from the model folder, in the unit the prepare stage read it with.
   if (!o.model.empty()) {
     common::MeshReadOptions ro;
-    if (h5.has_attribute("/", "input_unit")) ro.unit = common::parse_length_unit(h5.attribute_string("/", "input_unit"));
+    if (!prepared.input_unit().empty()) ro.unit = common::parse_length_unit(prepared.input_unit());
     std::vector<fs::path> files;
     std::error_code ec;
     for (const auto& e : fs::directory_iterator(o.model, ec)) files.push_back(e.path());

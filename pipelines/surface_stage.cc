@@ -988,7 +988,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     } else {
       common::log_warn("not resuming from " + checkpoint_path.string() + ": " + why + "; starting over");
       std::filesystem::remove(checkpoint_path);
-      checkpoint = SurfaceCheckpoint{checkpoint.identity};
+      const auto identity = checkpoint.identity;
+      checkpoint = SurfaceCheckpoint();  // every other member as a fresh run has it
+      checkpoint.identity = identity;
     }
   }
   // steady_state_change_mm: each step is taken by advance_to_steady_state

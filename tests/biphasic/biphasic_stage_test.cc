@@ -6,6 +6,7 @@
 // XDMF, determinism, and the refusals and reported skips of bad input.
 #include "pipelines/biphasic_stage.h"
 
+#include <cmath>
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -17,6 +18,7 @@
 #include "biphasic_fixtures.h"
 #include "common/error.h"
 #include "common/hdf5.h"
+#include "common/prepared_model_file.h"
 #include "common/log.h"
 #include "pipelines/runner.h"
 #include "pipelines/stages.h"
@@ -33,7 +35,7 @@ fs::path scratch() {
 }
 
 // A flat square surface in the X-Z plane at height y, facing +Y (up) or -Y.
-void write_surface(common::H5File& f, const std::string& name, const std::string& bone, int n, double size,
+void write_surface(common::PreparedModelWriter& f, const std::string& name, const std::string& bone, int n, double size,
                    double y, bool up, double thickness) {
   common::QuadMesh s = biphasic::testing::grid_surface(n, n, size, size, 0.0);
   common::Points3 V(s.num_nodes(), 3), N(s.num_nodes(), 3);
@@ -46,18 +48,23 @@ void write_surface(common::H5File& f, const std::string& name, const std::string
   Eigen::MatrixXi Q = s.Q;
   if (up)
     for (int q = 0; q < Q.rows(); ++q) Q.row(q) = Eigen::RowVector4i(Q(q, 0), Q(q, 3), Q(q, 2), Q(q, 1));
-  const std::string g = "/surfaces/" + name + "/quads/";
-  f.write(g + "nodes", Eigen::MatrixXd(V));
-  f.write(g + "quads", Q);
-  f.write(g + "normals", Eigen::MatrixXd(N));
-  f.write(g + "thickness", Eigen::VectorXd::Constant(s.num_nodes(), thickness));
-  f.set_attribute("/surfaces/" + name, "bone", bone);
+  std::vector<int> periphery;  // the square's outline
+  for (int v = 0; v < s.num_nodes(); ++v)
+    if (std::abs(std::abs(V(v, 0)) - size / 2) < 1e-12 || std::abs(std::abs(V(v, 2)) - size / 2) < 1e-12)
+      periphery.push_back(v);
+  common::QuadMesh mesh;
+  mesh.V = V;
+  mesh.Q = Q;
+  f.surface(name, bone);
+  f.quads(name, mesh, N, Eigen::VectorXd::Constant(s.num_nodes(), thickness), periphery);
 }
 
 std::string write_prepared(const std::string& file, double femur_thickness = 1.5e-3) {
   const std::string path = (scratch() / file).string();
-  common::H5File f(path, common::H5File::Mode::kTruncate);
-  f.write("/surfaces/names", std::vector<std::string>{"femur", "tibia_medial"});
+  common::H5File h5(path, common::H5File::Mode::kTruncate);
+  common::PreparedModelWriter f(h5);  // a prepared model as the stage reads it (common/prepared_model_file.h)
+  f.identity("biphasic stage test");
+  f.surface_names({"femur", "tibia_medial"});
   write_surface(f, "femur", "femur", 4, 8e-3, 0.0, false, femur_thickness);
   write_surface(f, "tibia_medial", "tibia", 6, 12e-3, 0.0, true, 2e-3);
   return path;

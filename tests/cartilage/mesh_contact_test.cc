@@ -158,7 +158,7 @@ TEST(MeshContact, DepthFadeTangentMatchesFiniteDifferences) {
     const double e = system_fd_error(sys, q, Eigen::VectorXd::Zero(sys.num_dofs()), 0);
     std::printf("max_depth %.2f mm: %d contacts in the fade zone, force %.4f N, tangent relative error %.2e\n",
                 o.max_depth_m * 1e3, in_zone, force[faded], e);
-    if (faded) EXPECT_GT(in_zone, 0);
+    if (faded) { EXPECT_GT(in_zone, 0); }
     EXPECT_LT(e, 1e-5);
   }
   EXPECT_LT(force[1], force[0]);
@@ -489,11 +489,11 @@ TEST(MeshContact, RigidSphereOnFoundationMatchesClosedForm) {
                 st.factorization_s, st.solve_s);
     EXPECT_LT(err, prev_err);
     prev_err = err;
-    if (level == 2) EXPECT_LT(err, 0.02);
+    if (level == 2) { EXPECT_LT(err, 0.02); }
     // The penetration is about the penalty's share of the overlap,
     // d k / (k + k_c), plus half the toe width; node-to-surface forces vary
     // from node to node around p A_i, so allow a factor 2.
-    if (level == 2) EXPECT_LT(rep.counts.max_penetration_m, 2 * (d * k / (k + kc) + 0.5 * o.smoothing_m));
+    if (level == 2) { EXPECT_LT(rep.counts.max_penetration_m, 2 * (d * k / (k + kc) + 0.5 * o.smoothing_m)); }
   }
 }
 
@@ -652,8 +652,8 @@ TEST(MeshContact, FadedVertexWeightsAreTheFadeIntegrals) {
     bool next_to_rim = s.boundary_vertex[i];
     for (int t : s.vertex_triangles[i])
       for (int k = 0; k < 3; ++k) next_to_rim = next_to_rim || s.boundary_vertex[s.F(t, k)];
-    if (!next_to_rim) EXPECT_NEAR(w(i), s.vertex_area(i), 1e-12 * max_tri) << "interior node " << i;
-    if (s.boundary_vertex[i]) EXPECT_LT(w(i), s.vertex_area(i)) << "rim node " << i;
+    if (!next_to_rim) { EXPECT_NEAR(w(i), s.vertex_area(i), 1e-12 * max_tri) << "interior node " << i; }
+    if (s.boundary_vertex[i]) { EXPECT_LT(w(i), s.vertex_area(i)) << "rim node " << i; }
   }
   // Every rim node but the corners has a rim-row triangle with an interior node.
   int supported_rim = 0;

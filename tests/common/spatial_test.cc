@@ -440,8 +440,8 @@ TEST(Spatial, ClosedSurfaceSideMatchesTheSphere) {
   for (double r = 0.0; r < 0.03; r += 0.0007) {
     const Vec3 p(r * 0.6, r * -0.48, r * 0.64);
     const ClosedSurfaceSide::Side s = side.side(p);
-    if (r < 0.019) EXPECT_EQ(s, ClosedSurfaceSide::Side::kInside) << r;
-    if (r > 0.0201) EXPECT_EQ(s, ClosedSurfaceSide::Side::kOutside) << r;
+    if (r < 0.019) { EXPECT_EQ(s, ClosedSurfaceSide::Side::kInside) << r; }
+    if (r > 0.0201) { EXPECT_EQ(s, ClosedSurfaceSide::Side::kOutside) << r; }
   }
   for (int v = 0; v < sphere.num_vertices(); v += 17) {
     EXPECT_TRUE(side.inside(0.9 * sphere.vertex(v)));

@@ -369,8 +369,8 @@ TEST(Comak, KinematicsFileSchemaAndDeterminism) {
     } else if (dims.size() == 3) {
       EXPECT_EQ(f1.read_tensor3(n).data, f2.read_tensor3(n).data) << n;
     } else if (t == common::H5Type::kInt) {
-      if (dims.size() == 1) EXPECT_EQ(f1.read_vector_int(n), f2.read_vector_int(n)) << n;
-      else EXPECT_EQ(f1.read_matrix_int(n), f2.read_matrix_int(n)) << n;
+      if (dims.size() == 1) { EXPECT_EQ(f1.read_vector_int(n), f2.read_vector_int(n)) << n; }
+      else { EXPECT_EQ(f1.read_matrix_int(n), f2.read_matrix_int(n)) << n; }
     } else if (dims.size() == 1) {
       EXPECT_EQ(f1.read_vector(n), f2.read_vector(n)) << n;  // bit-identical
     } else {

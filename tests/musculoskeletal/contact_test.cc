@@ -224,7 +224,7 @@ TEST(ElasticFoundation, CachedSearchEqualsColdSearch) {
     msk::evaluate_contact(pair, msk::Pose::Identity(), X_WB, cold);
     // Bit-identical: same hit triangle and same arithmetic.
     EXPECT_EQ((warm.result.pressure - cold.result.pressure).lpNorm<Eigen::Infinity>(), 0.0);
-    if (step > 0) EXPECT_GT(warm.stats.guess_hits + warm.stats.skipped, 0);
+    if (step > 0) { EXPECT_GT(warm.stats.guess_hits + warm.stats.skipped, 0); }
   }
 }
 

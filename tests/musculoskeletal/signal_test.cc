@@ -67,7 +67,7 @@ TEST(Butterworth, FiltfiltZeroPhaseAndSquaredGain) {
     const Eigen::VectorXd x = sine(n, rate, f, phase);
     const Eigen::VectorXd y = filtfilt_lowpass(x, rate, o).col(0);
     const double g = std::pow(gain(butterworth_lowpass(6.0, rate, 2), f, rate), 2);
-    if (f == 6.0) EXPECT_NEAR(g, 0.5, 1e-12);
+    if (f == 6.0) { EXPECT_NEAR(g, 0.5, 1e-12); }
     double err = 0;
     for (int i = 200; i < n - 200; ++i) err = std::max(err, std::abs(y(i) - g * x(i)));
     EXPECT_LT(err, 1e-6) << "f = " << f;

@@ -293,9 +293,9 @@ TEST_P(BundledKnee, AdultFemaleDimensions) {
     ASSERT_GT(nc, 0);
     ASSERT_GT(nr, 0);
     const double rise = ring / nr - centre / nc;
-    if (side == "medial") EXPECT_GT(rise, 0.4e-3) << "medial plateau not concave";
-    else EXPECT_LT(rise, 0.0) << "lateral plateau not flat-to-convex";
-    if (side == "lateral") EXPECT_GT(rise, -0.5e-3) << "lateral plateau more than slightly convex";
+    if (side == "medial") { EXPECT_GT(rise, 0.4e-3) << "medial plateau not concave"; }
+    else { EXPECT_LT(rise, 0.0) << "lateral plateau not flat-to-convex"; }
+    if (side == "lateral") { EXPECT_GT(rise, -0.5e-3) << "lateral plateau more than slightly convex"; }
   }
 }
 

@@ -210,8 +210,8 @@ TEST(SurfaceStage, OsmoticPressureOnTheListedSurfacesOnly) {
   EXPECT_EQ(ledger.count("osmotic_pressure"), lateral_quads);
   for (const auto& s : r.surfaces) {
     std::printf("%s: max deflection %.4e m\n", s.name.c_str(), s.max_deflection_m);
-    if (s.name == "tibia_medial") EXPECT_LT(std::abs(s.max_deflection_m), 1e-12);
-    if (s.name == "tibia_lateral") EXPECT_GT(std::abs(s.max_deflection_m), 1e-6);
+    if (s.name == "tibia_medial") { EXPECT_LT(std::abs(s.max_deflection_m), 1e-12); }
+    if (s.name == "tibia_lateral") { EXPECT_GT(std::abs(s.max_deflection_m), 1e-6); }
   }
   const std::string bad = write_scene("osmotic_bad", R"(surface:
   scenarios:
@@ -311,7 +311,7 @@ TEST(SurfaceStage, DynamicOsmoticStopsAtTheStaticSteadyState) {
   EXPECT_DOUBLE_EQ(change(change.size() - 1), rd.last_change_m);
   // Every earlier step past the ramp changed by more than the tolerance.
   for (Eigen::Index k = 0; k + 1 < change.size(); ++k)
-    if (ts(k) >= 0.01) EXPECT_GT(change(k), 1e-9) << "step " << k;
+    if (ts(k) >= 0.01) { EXPECT_GT(change(k), 1e-9) << "step " << k; }
   ASSERT_GE(change.size(), 4);
   double rho = 0;
   for (Eigen::Index k = change.size() - 3; k < change.size(); ++k) rho = std::max(rho, change(k) / change(k - 1));

@@ -140,7 +140,7 @@ TEST_P(EffectiveModuli, HookeFormMatchesInputSeedFormDoesNot) {
   // The printed form makes the bulk modulus K - 4G/3 (summing A7 as above);
   // for a nearly incompressible skeleton (fibrous, K >> G) E and nu hardly
   // notice (measured 2-3 %), so the form is decided on the nu = 0.25 material.
-  if (nu < 0.3) EXPECT_GT(std::abs(seed.E / E - 1.0) + std::abs(seed.nu / nu - 1.0), 0.3);
+  if (nu < 0.3) { EXPECT_GT(std::abs(seed.E / E - 1.0) + std::abs(seed.nu / nu - 1.0), 0.3); }
   // Uniaxial stress: equivalent strain (2/3)(1 + nu) eps_zz, from the pairs'
   // strains and, in this homogeneous state, equally from A6's sigma_eq / 3G.
   const double eq = 2.0 / 3.0 * (1.0 + nu);

@@ -218,7 +218,7 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
   EXPECT_TRUE(fs::exists(out / "report/report.html"));
   // Every plot of the report draws in headless Chromium (exit 77: no chromium).
   const Result drawn = run((kSource / "scripts/report_check.sh").string() + " " + (out / "report/report.html").string());
-  if (drawn.status != 77) EXPECT_EQ(drawn.status, 0) << drawn.output;
+  if (drawn.status != 77) { EXPECT_EQ(drawn.status, 0) << drawn.output; }
 
   const auto before = outputs(out);
   const Result second = run(command);
@@ -313,7 +313,7 @@ TEST(StudyWorkflow, SameErrorsAndRecommendationAsTheLocalStudy) {
       ASSERT_EQ(a.metrics.size(), b.metrics.size());
       for (std::size_t m = 0; m < a.metrics.size(); ++m) {
         EXPECT_EQ(a.metrics[m].name, b.metrics[m].name);
-        if (std::isfinite(a.metrics[m].error)) EXPECT_EQ(a.metrics[m].error, b.metrics[m].error);
+        if (std::isfinite(a.metrics[m].error)) { EXPECT_EQ(a.metrics[m].error, b.metrics[m].error); }
       }
     }
   }
