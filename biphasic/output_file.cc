@@ -230,6 +230,29 @@ void write_output_xdmf(const std::string& h5_path, const std::string& xdmf_path)
   common::write_xdmf(xdmf_path, f, series);
 }
 
+SurfaceMaps read_surface_maps(const std::string& path) {
+  const common::H5File f(path, common::H5File::Mode::kRead);
+  SurfaceMaps out;
+  out.time = f.read_vector("/time");
+  for (const std::string& name : f.read_strings("/layers/names")) {
+    const std::string g = layer_group(name);
+    const std::string stress = g + "/surface/total_normal_stress", vertices = g + "/articular_vertices";
+    if (!f.exists(stress) || !f.exists(vertices)) continue;
+    LayerSurfaceMap m;
+    m.name = name;
+    m.total_normal_stress = f.read_matrix(stress);
+    m.articular_vertices = f.read_matrix(vertices, 3);
+    if (m.total_normal_stress.rows() != out.time.size() ||
+        m.total_normal_stress.cols() != m.articular_vertices.rows())
+      throw common::InputError(path, 0, "dataset " + stress + ": expected " + std::to_string(out.time.size()) +
+                               " x " + std::to_string(m.articular_vertices.rows()) + ", found " +
+                               std::to_string(m.total_normal_stress.rows()) + " x " +
+                               std::to_string(m.total_normal_stress.cols()));
+    out.layers.push_back(std::move(m));
+  }
+  return out;
+}
+
 std::vector<LayerSeries> read_layer_series(const std::string& path) {
   const common::H5File f(path, common::H5File::Mode::kRead);
   std::vector<LayerSeries> out;

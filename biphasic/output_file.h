@@ -85,6 +85,21 @@ struct LayerSeries {
 /// something is missing or a region code is not in /regions/names).
 std::vector<LayerSeries> read_layer_series(const std::string& path);
 
+/// One layer's applied total normal stress over its articular vertices.
+struct LayerSurfaceMap {
+  std::string name;
+  Eigen::MatrixXd total_normal_stress;  ///< steps x articular vertices [Pa]
+  Eigen::MatrixXd articular_vertices;   ///< vertices x 3, bone frame [m]
+};
+/// The steps' times and every layer that has surface/total_normal_stress
+/// and articular_vertices (InputError naming the file and dataset when the
+/// shapes disagree with /time and the vertices).
+struct SurfaceMaps {
+  Eigen::VectorXd time;
+  std::vector<LayerSurfaceMap> layers;
+};
+SurfaceMaps read_surface_maps(const std::string& path);
+
 /// Difference of one key output between a run and a reference run.
 struct OutputDifference {
   std::string layer, metric;

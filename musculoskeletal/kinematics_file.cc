@@ -405,6 +405,21 @@ std::optional<Eigen::MatrixXd> KinematicsFileReader::contact_force(const std::st
   return f_->read_matrix(ds, 3);
 }
 
+std::string KinematicsFileReader::tibiofemoral_max_pressure_dataset() {
+  return std::string(kContactGroup) + "/max_pressure";
+}
+
+std::optional<Eigen::VectorXd> KinematicsFileReader::tibiofemoral_max_pressure() const {
+  const std::string ds = tibiofemoral_max_pressure_dataset();
+  if (!f_->exists(ds)) return std::nullopt;
+  const Eigen::VectorXd p = f_->read_vector(ds);
+  const Eigen::Index frames = time().size();
+  if (p.size() != frames)
+    throw common::InputError(path(), 0, "dataset " + ds + ": expected " + std::to_string(frames) +
+                             " values (one per frame of /time), found " + std::to_string(p.size()));
+  return p;
+}
+
 std::vector<bool> KinematicsFileReader::converged(Eigen::Index n) const {
   std::vector<bool> valid(static_cast<std::size_t>(n), true);
   if (!f_->exists("/solver/status")) return valid;

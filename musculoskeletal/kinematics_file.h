@@ -100,6 +100,13 @@ class KinematicsFileReader {
   /// total, tibia frame), its compartments "medial" and "lateral", or
   /// "patellofemoral" (patella frame); nullopt when the file has none.
   std::optional<Eigen::MatrixXd> contact_force(const std::string& series) const;
+  /// Stage 1's largest elastic-foundation contact pressure of the
+  /// tibiofemoral pair per frame [Pa] (/contact/tibiofemoral/max_pressure),
+  /// or nullopt when the file has none; InputError naming the dataset when
+  /// its length differs from time().
+  std::optional<Eigen::VectorXd> tibiofemoral_max_pressure() const;
+  /// The dataset of tibiofemoral_max_pressure (for messages).
+  static std::string tibiofemoral_max_pressure_dataset();
   /// The dataset of a contact-force series (for messages); std::invalid_argument
   /// for a name not listed at contact_force.
   static std::string contact_force_dataset(const std::string& series);

@@ -222,6 +222,11 @@ Writer& Writer::value(const std::string& k, double v) {
   out_ += number(v);
   return *this;
 }
+Writer& Writer::integer(const std::string& k, long long v) {
+  key(k);
+  out_ += std::to_string(v);
+  return *this;
+}
 Writer& Writer::value(const std::string& k, const std::string& v) {
   key(k);
   out_ += json_string(v);

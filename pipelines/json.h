@@ -21,6 +21,8 @@ class Writer {
   Writer& value(const std::string& key, const char* v) { return value(key, std::string(v)); }
   Writer& value(const std::string& key, bool v);
   Writer& value(const std::string& key, int v) { return value(key, static_cast<double>(v)); }
+  /// An exact integer (counts beyond six significant digits).
+  Writer& integer(const std::string& key, long long v);
   Writer& array(const std::string& key, const std::vector<double>& v);
   Writer& array(const std::string& key, const std::vector<std::string>& v);
   const std::string& str() const { return out_; }

@@ -7,7 +7,7 @@
 
 #include "biphasic/output_file.h"
 #include "common/error.h"
-#include "common/hdf5.h"
+#include "musculoskeletal/kinematics_file.h"
 #include "pipelines/shockwave_output.h"
 #include "pipelines/surface_output.h"
 
@@ -216,19 +216,15 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
         missing.push_back("biphasic " + who + ": no surface/fluid_pressure");
     }
   }
-  const std::string ef = "/contact/tibiofemoral/max_pressure";
   if (kinematics.empty()) {
     missing.push_back("stage 1 elastic-foundation pressure: no kinematics file");
   } else {
-    const common::H5File k(kinematics, common::H5File::Mode::kRead);
-    if (k.exists(ef) && k.exists("/time")) {
-      const Eigen::VectorXd t = k.read_vector("/time"), p = k.read_vector(ef);
-      if (t.size() != p.size())
-        throw common::InputError(kinematics, 0, "dataset " + ef + ": expected " + std::to_string(t.size()) +
-                                 " values (one per frame of /time), found " + std::to_string(p.size()));
-      sources.push_back({"stage 1 elastic foundation (tibiofemoral)", to_vector(t), to_vector(p, 1e-6)});
+    const musculoskeletal::KinematicsFileReader k(kinematics);
+    if (const auto p = k.tibiofemoral_max_pressure()) {
+      sources.push_back({"stage 1 elastic foundation (tibiofemoral)", to_vector(k.time()), to_vector(*p, 1e-6)});
     } else {
-      missing.push_back("stage 1 elastic-foundation pressure: " + kinematics + " has no " + ef);
+      missing.push_back("stage 1 elastic-foundation pressure: " + kinematics + " has no " +
+                        musculoskeletal::KinematicsFileReader::tibiofemoral_max_pressure_dataset());
     }
   }
   if (surfaces.empty()) missing.push_back("shell stage contact pressure: no surface-stage file");
@@ -245,7 +241,7 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
   sec.blocks.push_back(report_html::Text{
       "Peak contact pressure: per biphasic layer the largest applied total normal stress and contact fluid "
       "pressure over its articular vertices per step (surface/total_normal_stress, surface/fluid_pressure), beside "
-      "stage 1's largest elastic-foundation pressure over the tibiofemoral contact (kinematics file " + ef +
+      "stage 1's largest elastic-foundation pressure over the tibiofemoral contact (kinematics file " + musculoskeletal::KinematicsFileReader::tibiofemoral_max_pressure_dataset() +
           ") and, per surface-stage scenario, the shell stage's largest contact pressure over its surfaces' nodes per "
           "stored frame on the trial clock (surface_<scenario>.h5 contact_pressure at /trial_time; the seating "
           "ramp's frames come before the trial's first frame). The table gives them at the key frames: each source at its stored "
@@ -308,18 +304,13 @@ report_html::Section biphasic_section(const std::vector<std::pair<std::string, s
     // its articular vertices (bone frame X anterior, Z lateral for a right
     // knee) at the step nearest each key time, one colour range per layer.
     for (const auto& [label, path] : files) {
-      const common::H5File f(path, common::H5File::Mode::kRead);
-      const Eigen::VectorXd t = f.read_vector("/time");
+      const biphasic::SurfaceMaps maps = biphasic::read_surface_maps(path);
+      const Eigen::VectorXd& t = maps.time;
       if (t.size() == 0) continue;
-      for (const std::string& name : f.read_strings("/layers/names")) {
-        const std::string g = "/layers/" + name;
-        if (!f.exists(g + "/surface/total_normal_stress") || !f.exists(g + "/articular_vertices")) continue;
-        const Eigen::MatrixXd sigma = f.read_matrix(g + "/surface/total_normal_stress");
-        const Eigen::MatrixXd v = f.read_matrix(g + "/articular_vertices", 3);
-        if (sigma.rows() != t.size() || sigma.cols() != v.rows())
-          throw common::InputError(path, 0, "dataset " + g + "/surface/total_normal_stress: expected " +
-                                   std::to_string(t.size()) + " x " + std::to_string(v.rows()) + ", found " +
-                                   std::to_string(sigma.rows()) + " x " + std::to_string(sigma.cols()));
+      for (const biphasic::LayerSurfaceMap& layer : maps.layers) {
+        const std::string& name = layer.name;
+        const Eigen::MatrixXd& sigma = layer.total_normal_stress;
+        const Eigen::MatrixXd& v = layer.articular_vertices;
         std::vector<Eigen::Index> steps;
         double hi = 0.0;
         for (const auto& kv : key_times) {

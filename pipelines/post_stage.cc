@@ -163,10 +163,10 @@ struct ForceSeries {
   std::vector<double> x, y;  ///< [s], [N]
   std::string label() const { return stage + " " + name; }
 };
-std::vector<ForceSeries> contact_series(const common::H5File& f, const std::string& group, const std::string& stage) {
+std::vector<ForceSeries> contact_series(const common::H5File& f, const std::string& group, const Eigen::VectorXd& t,
+                                        const std::string& stage) {
   std::vector<ForceSeries> out;
-  if (!f.is_group(group) || !f.exists("/time")) return out;
-  const Eigen::VectorXd t = f.read_vector(f.exists("/trial_time") ? "/trial_time" : "/time");
+  if (!f.is_group(group) || t.size() == 0) return out;
   std::function<void(const std::string&)> walk = [&](const std::string& g) {
     for (const auto& name : f.list(g)) {
       const std::string p = g + "/" + name;
@@ -269,7 +269,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     if (auto p = kin.require_complete(in.allow_partial); !p.empty())  // kind, version, completeness
       summary.partial_inputs.push_back(p);
     const std::string group = musculoskeletal::KinematicsFileReader::kContactGroup;
-    auto s = contact_series(k, group, "stage 1");
+    auto s = contact_series(k, group, kin.frames_complete() > 0 ? kin.time() : Eigen::VectorXd(), "stage 1");
     if (s.empty()) summary.missing.push_back("kinematics file " + in.kinematics + " has no " + group + " series over its frames");
     force.insert(force.end(), s.begin(), s.end());
     if (const auto F = kin.tibiofemoral_force()) {
@@ -288,7 +288,7 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
     const common::H5File& f = out.file();
     if (auto p = common::require_usable_file(f, file, common::StageFile::kSurfaceOutput, in.allow_partial); !p.empty())
       summary.partial_inputs.push_back(p);
-    auto s = contact_series(f, surface_output::kContactGroup, "stage 2 " + scenario);
+    auto s = contact_series(f, surface_output::kContactGroup, out.trial_time(), "stage 2 " + scenario);
     any_stage2 = any_stage2 || !s.empty();
     force.insert(force.end(), s.begin(), s.end());
     auto a = attributes(f, scenario);

@@ -536,32 +536,47 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
   result.summary_json = fs::path(o.out.string() + "_summary.json");
   {
     common::AtomicOutput atomic(result.summary_json);  // <name>.partial, renamed when written
-    std::ofstream js(atomic.temp());
-    js << "{\n  \"automata\": " << result.automata << ",\n  \"bonds\": " << result.bonds
-       << ",\n  \"diameter_mm\": " << number(m.lattice.diameter * 1e3) << ",\n  \"lattice\": \""
-       << shockwave::to_string(m.lattice.kind) << "\",\n  \"time_step_s\": " << number(result.time_step_s)
-       << ",\n  \"runs\": [\n";
-    for (size_t r = 0; r < result.runs.size(); ++r) {
-      const ShockwaveRunResult& rr = result.runs[r];
-      js << "    {\"label\": \"" << rr.label << "\", \"efd_mj_per_mm2\": " << number(rr.efd_j_per_m2 * 1e-3)
-         << ", \"pulse_peak_mpa\": " << number(rr.peak_pressure_pa * 1e-6) << ", \"steps\": " << rr.steps
-         << ", \"wall_s\": " << number(rr.wall_s) << ", \"stiffness_n_per_mm\": " << number(rr.stiffness_n_per_m * 1e-3)
-         << ", \"bar_speed_m_per_s\": " << number(rr.bar_speed) << ", \"bar_drained_speed_m_per_s\": "
-         << number(rr.bar_drained_speed) << ", \"bar_undrained_speed_m_per_s\": " << number(rr.bar_undrained_speed)
-         << ", \"tissues\": {";
+    json::Writer w;
+    w.begin_object();
+    w.integer("automata", static_cast<long long>(result.automata));
+    w.integer("bonds", static_cast<long long>(result.bonds));
+    w.value("diameter_mm", m.lattice.diameter * 1e3);
+    w.value("lattice", shockwave::to_string(m.lattice.kind));
+    w.value("time_step_s", result.time_step_s);
+    w.begin_array("runs");
+    for (const ShockwaveRunResult& rr : result.runs) {
+      w.begin_object();
+      w.value("label", rr.label);
+      w.value("efd_mj_per_mm2", rr.efd_j_per_m2 * 1e-3);
+      w.value("pulse_peak_mpa", rr.peak_pressure_pa * 1e-6);
+      w.integer("steps", static_cast<long long>(rr.steps));
+      w.value("wall_s", rr.wall_s);
+      w.value("stiffness_n_per_mm", rr.stiffness_n_per_m * 1e-3);
+      w.value("bar_speed_m_per_s", rr.bar_speed);
+      w.value("bar_drained_speed_m_per_s", rr.bar_drained_speed);
+      w.value("bar_undrained_speed_m_per_s", rr.bar_undrained_speed);
+      w.begin_object("tissues");
       for (size_t t = 0; t < rr.volumes.size(); ++t) {
         const shockwave::RegenerationVolumes& v = rr.volumes[t];
-        js << (t ? ", " : "") << "\"" << m.tissues[t].name << "\": {\"volume_mm3\": " << number(v.tissue * 1e9)
-           << ", \"compressive_mm3\": " << number(v.compressive * 1e9) << ", \"distortional_mm3\": "
-           << number(v.distortional * 1e9) << ", \"pore_mm3\": " << number(v.pore * 1e9) << ", \"all_mm3\": "
-           << number(v.all * 1e9) << ", \"all_at_once_mm3\": " << number(rr.all_at_once_m3[t] * 1e9)
-           << ", \"max_peak_pressure_mpa\": " << number(rr.max_peaks[t][0] * 1e-6)
-           << ", \"max_peak_distortional_strain\": " << number(rr.max_peaks[t][1])
-           << ", \"max_peak_pore_pressure_mpa\": " << number(rr.max_peaks[t][2] * 1e-6) << "}";
+        w.begin_object(m.tissues[t].name);
+        w.value("volume_mm3", v.tissue * 1e9);
+        w.value("compressive_mm3", v.compressive * 1e9);
+        w.value("distortional_mm3", v.distortional * 1e9);
+        w.value("pore_mm3", v.pore * 1e9);
+        w.value("all_mm3", v.all * 1e9);
+        w.value("all_at_once_mm3", rr.all_at_once_m3[t] * 1e9);
+        w.value("max_peak_pressure_mpa", rr.max_peaks[t][0] * 1e-6);
+        w.value("max_peak_distortional_strain", rr.max_peaks[t][1]);
+        w.value("max_peak_pore_pressure_mpa", rr.max_peaks[t][2] * 1e-6);
+        w.end_object();
       }
-      js << "}}" << (r + 1 < result.runs.size() ? "," : "") << "\n";
+      w.end_object();
+      w.end_object();
     }
-    js << "  ]\n}\n";
+    w.end_array();
+    w.end_object();
+    std::ofstream js(atomic.temp());
+    js << w.str() << "\n";
     js.close();
     if (!js) throw common::InputError(result.summary_json.string(), 0, "write failed");
     atomic.commit();

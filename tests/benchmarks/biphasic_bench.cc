@@ -11,7 +11,7 @@
 // prepared model and a kinematics file named by the environment:
 //
 //   arthrosim run data/scenes/demo.yaml --out out/demo
-//   ARTHROSIM_BIPHASIC_PREPARED=out/demo/prepared.h5 ARTHROSIM_BIPHASIC_KINEMATICS=out/demo/kinematics.h5 \
+//   ARTHROSIM_BIPHASIC_PREPARED=out/demo/prepared.h5 ARTHROSIM_BIPHASIC_KINEMATICS=out/demo/kinematics.h5
 //       build/bench/biphasic_bench --benchmark_filter=GaitCycle
 //
 // and prints per layer the unknowns, factorisation time and time per step,

@@ -6,13 +6,13 @@
 // program save the N-th matrix it factorises (cartilage/linear_solver.cc),
 // and ARTHROSIM_FACTORIZATION_MATRIX=FILE points this benchmark at it:
 //
-//   build/bin/arthrosim run data/scenes/demo.yaml --out /tmp/fb \
+//   build/bin/arthrosim run data/scenes/demo.yaml --out /tmp/fb
 //       --set surface.scenarios.gait.end_time_s=0.1 --dry-run   # writes /tmp/fb/scene_set.yaml
 //   (run the demo once for /tmp/demo/prepared.h5 and kinematics.h5, or use any earlier output)
-//   ARTHROSIM_SAVE_TANGENT=60:/tmp/tangent.mtx build/bin/arthrosim-surface \
-//       --prepared /tmp/demo/prepared.h5 --kinematics /tmp/demo/kinematics.h5 \
+//   ARTHROSIM_SAVE_TANGENT=60:/tmp/tangent.mtx build/bin/arthrosim-surface
+//       --prepared /tmp/demo/prepared.h5 --kinematics /tmp/demo/kinematics.h5
 //       --scene /tmp/fb/scene_set.yaml --scenario gait --out /tmp/fb/short.h5
-//   ARTHROSIM_FACTORIZATION_MATRIX=/tmp/tangent.mtx build/bench/factorization_bench \
+//   ARTHROSIM_FACTORIZATION_MATRIX=/tmp/tangent.mtx build/bench/factorization_bench
 //       --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 //
 // Variants:

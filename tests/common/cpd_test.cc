@@ -217,7 +217,6 @@ TEST(CpdOutliers, ThirtyPercentRigidAndNonrigid) {
   o.prealign = CpdPrealign::kRigid;  // the outliers shift X's normalisation: rigid first
   o.w = 0.5;
   const CpdResult rn = cpd_register(Xo, Y, o);
-  const double warp_rms = (Xw - Y).norm() / std::sqrt(Y.rows());
   const double err_rms = (rn.transformed - Xw).norm() / std::sqrt(Y.rows());
   EXPECT_LT(err_rms, 1e-4) << err_rms;
 }

@@ -19,7 +19,7 @@ namespace {
 /// tridiag(-1, 3, -1); b from a chosen solution x*, so x* is the root.
 class CubicChain final : public NewtonSystem {
  public:
-  CubicChain(int n, double c) : n_(n), c_(c), constrained_(n, 0), w_(Eigen::VectorXd::Ones(n)) {
+  CubicChain(int n, double c) : constrained_(n, 0), n_(n), c_(c), w_(Eigen::VectorXd::Ones(n)) {
     std::vector<Eigen::Triplet<double>> t;
     for (int i = 0; i < n; ++i) {
       t.emplace_back(i, i, 3.0);

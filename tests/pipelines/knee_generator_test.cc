@@ -238,7 +238,7 @@ TEST_P(BundledKnee, CartilageThicknessRangeAndOffsetFromBone) {
 
 TEST_P(BundledKnee, CartilageInLightContactAtExtension) {
   const TriangleMesh fem = read("femur_cartilage");
-  for (const std::string& other : {"tibia_medial_cartilage", "tibia_lateral_cartilage", "patella_cartilage"}) {
+  for (const char* other : {"tibia_medial_cartilage", "tibia_lateral_cartilage", "patella_cartilage"}) {
     const TriangleMesh m = read(other);
     // Designed overlap 0.25 mm at the first contact point; the discretisation
     // (chordal error <= 0.08 mm per surface) moves it by less than 0.2 mm.

@@ -407,11 +407,6 @@ void write_obj_in(const TriangleMesh& m, const std::string& path, common::Length
   common::write_obj(m, path, wo);
 }
 
-std::string read_text(const std::string& path) {
-  std::ifstream in(path);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
 std::string expect_input_error(const std::function<void()>& f) {
   try {
     f();

@@ -792,8 +792,9 @@ TEST(SafetyInputs, EditingEachReferencedFileRerunsItsStep) {
     EXPECT_EQ(dry[e.stage].first, StageStatus::kWouldRun);
     EXPECT_NE(dry[e.stage].second.find("input changed: " + std::string(e.label)), std::string::npos)
         << dry[e.stage].second;
-    if (std::string(e.stage) == "comak")
+    if (std::string(e.stage) == "comak") {
       EXPECT_EQ(dry["prepare"].first, StageStatus::kWouldSkip) << dry["prepare"].second;
+    }
     auto rerun = outcome(false);  // restamp
     EXPECT_EQ(rerun[e.stage].first, StageStatus::kRan);
     auto after = outcome(true);

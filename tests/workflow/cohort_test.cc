@@ -241,10 +241,12 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
     // again; prepare, the osmotic state (no kinematics) and subject b do not.
     const bool a = name.rfind("runs/a/", 0) == 0;
     const std::string file = fs::path(name).filename().string();
-    if (a && (file == "kinematics.h5" || file == "report.html" || file == "summary.json"))
+    if (a && (file == "kinematics.h5" || file == "report.html" || file == "summary.json")) {
       EXPECT_NE(time, before.at(name)) << name << " was not rerun";
-    if (!a || file.rfind("prepared.", 0) == 0 || file.rfind("surface_osmotic.", 0) == 0)
+    }
+    if (!a || file.rfind("prepared.", 0) == 0 || file.rfind("surface_osmotic.", 0) == 0) {
       EXPECT_EQ(time, before.at(name)) << name << " was rerun";
+    }
   }
   // 2 comak, 2 post, the report and the target rule `all`.
   EXPECT_NE(third.output.find("6 of 6 steps (100%) done"), std::string::npos) << third.output;
@@ -259,10 +261,12 @@ TEST(CohortWorkflow, RunsOnceThenNothingThenOnlyWhatAnEditedTrialChanges) {
   EXPECT_NE(fourth.output.find("6 of 6 steps (100%) done"), std::string::npos) << fourth.output;
   for (const auto& [name, time] : outputs(out)) {
     const std::string f = fs::path(name).filename().string();
-    if (f == "summary.json" || f == "report.html")
+    if (f == "summary.json" || f == "report.html") {
       EXPECT_NE(time, after.at(name)) << name << " was not rerun";
-    if (f == "kinematics.h5" || f == "prepared.h5" || f == "surface_osmotic.h5")
+    }
+    if (f == "kinematics.h5" || f == "prepared.h5" || f == "surface_osmotic.h5") {
       EXPECT_EQ(time, after.at(name)) << name << " was rerun";
+    }
   }
 }
 
