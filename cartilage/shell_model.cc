@@ -527,19 +527,6 @@ void ShellModel::solve_mass(const Eigen::VectorXd& rhs, Eigen::VectorXd& a) {
   a = mass_solver_->solve(b);
 }
 
-common::Points3 quad_mesh_vertex_normals(const common::QuadMesh& mesh) {
-  common::Points3 N = common::Points3::Zero(mesh.num_nodes(), 3);
-  for (int e = 0; e < mesh.num_quads(); ++e) {
-    const Eigen::Vector3d d1 = mesh.V.row(mesh.Q(e, 2)) - mesh.V.row(mesh.Q(e, 0));
-    const Eigen::Vector3d d2 = mesh.V.row(mesh.Q(e, 3)) - mesh.V.row(mesh.Q(e, 1));
-    const Eigen::Vector3d a = 0.5 * d1.cross(d2);
-    for (int k = 0; k < 4; ++k) N.row(mesh.Q(e, k)) += a.transpose();
-  }
-  for (int i = 0; i < N.rows(); ++i) {
-    const double l = N.row(i).norm();
-    if (l > 0) N.row(i) /= l;
-  }
-  return N;
-}
+common::Points3 quad_mesh_vertex_normals(const common::QuadMesh& mesh) { return common::quad_vertex_normals(mesh); }
 
 }  // namespace arthrosim::cartilage

@@ -64,6 +64,21 @@ Points3 triangle_centroids(const TriangleMesh& mesh) {
   return C;
 }
 
+Points3 quad_vertex_normals(const QuadMesh& mesh) {
+  Points3 N = Points3::Zero(mesh.num_nodes(), 3);
+  for (int e = 0; e < mesh.num_quads(); ++e) {
+    const Eigen::Vector3d d1 = mesh.V.row(mesh.Q(e, 2)) - mesh.V.row(mesh.Q(e, 0));
+    const Eigen::Vector3d d2 = mesh.V.row(mesh.Q(e, 3)) - mesh.V.row(mesh.Q(e, 1));
+    const Eigen::Vector3d a = 0.5 * d1.cross(d2);
+    for (int k = 0; k < 4; ++k) N.row(mesh.Q(e, k)) += a.transpose();
+  }
+  for (int i = 0; i < N.rows(); ++i) {
+    const double l = N.row(i).norm();
+    if (l > 0) N.row(i) /= l;
+  }
+  return N;
+}
+
 Points3 vertex_normals(const TriangleMesh& mesh) {
   // Sum of (b-a)x(c-a) over incident triangles = sum of 2 * area * unit normal,
   // i.e. the area-weighted average direction; normalised at the end.

@@ -48,6 +48,9 @@ Eigen::VectorXd triangle_areas(const TriangleMesh& mesh);
 Points3 triangle_centroids(const TriangleMesh& mesh);
 /// Area-weighted unit vertex normals (rows).
 Points3 vertex_normals(const TriangleMesh& mesh);
+/// Unit normals of the nodes, area-weighted over their quads (zero for a
+/// node of no quad): the orientation the quads' node order gives.
+Points3 quad_vertex_normals(const QuadMesh& mesh);
 /// Total area [m^2].
 double surface_area(const TriangleMesh& mesh);
 

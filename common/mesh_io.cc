@@ -1020,24 +1020,6 @@ TriangleMesh read_ply(const std::string& path, const MeshReadOptions& options) {
   return parse_ply(read_whole_file(path), path, options);
 }
 
-namespace {
-/// Unit normals of the nodes, area-weighted over their quads (zero for a
-/// node of no quad): the orientation the quads' node order gives.
-Points3 area_weighted_quad_normals(const QuadMesh& mesh) {
-  Points3 N = Points3::Zero(mesh.num_nodes(), 3);
-  for (int e = 0; e < mesh.num_quads(); ++e) {
-    const Eigen::Vector3d d1 = mesh.V.row(mesh.Q(e, 2)) - mesh.V.row(mesh.Q(e, 0));
-    const Eigen::Vector3d d2 = mesh.V.row(mesh.Q(e, 3)) - mesh.V.row(mesh.Q(e, 1));
-    const Eigen::Vector3d a = 0.5 * d1.cross(d2);
-    for (int k = 0; k < 4; ++k) N.row(mesh.Q(e, k)) += a.transpose();
-  }
-  for (int i = 0; i < N.rows(); ++i) {
-    const double l = N.row(i).norm();
-    if (l > 0) N.row(i) /= l;
-  }
-  return N;
-}
-}  // namespace
 
 QuadMesh read_quad_obj(const std::string& path, const MeshReadOptions& options, Points3* normals,
                        FaceGroups* groups) {
@@ -1157,7 +1139,7 @@ QuadMesh read_quad_obj(const std::string& path, const MeshReadOptions& options, 
       throw InputError(path + ": error: " + std::to_string(faces_with_normals) + " of " +
                                std::to_string(Q.size()) +
                                " faces give vertex normals: give them on every face (they are the directors) or none");
-    const Points3 faces = area_weighted_quad_normals(m);
+    const Points3 faces = quad_vertex_normals(m);
     Points3 N(m.num_nodes(), 3);
     for (int i = 0; i < m.num_nodes(); ++i) {
       const int nn = node_normal[static_cast<size_t>(i)];

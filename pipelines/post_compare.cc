@@ -8,7 +8,7 @@
 
 #include "common/error.h"
 #include "common/hdf5.h"
-#include "common/orientation.h"
+#include "pipelines/orientation.h"
 
 namespace arthrosim::pipelines {
 
@@ -36,7 +36,7 @@ NodeDirections average_node_directions(const SurfaceField& field) {
         dirs[t].row(i) << 1, 0, 0;
         e1(i, t) = 0.0;
       }
-  const auto avg = common::average_axial_field(e1, dirs);
+  const auto avg = average_axial_field(e1, dirs);
   for (Eigen::Index i = 0; i < N; ++i) {
     out.defined[i] = avg[i].defined;
     out.magnitude(i) = avg[i].mean_magnitude;
@@ -166,19 +166,19 @@ Registration register_map(const Eigen::MatrixX2d& map_outline, const Eigen::Matr
   Registration reg;
   reg.map_outline = resample_closed(map_outline, o.outline_points);
   reg.model_outline = resample_closed(model_outline, o.outline_points);
-  common::CpdOptions a;
-  a.method = common::CpdMethod::kAffine;
+  CpdOptions a;
+  a.method = CpdMethod::kAffine;
   a.w = o.w;
-  a.prealign = common::CpdPrealign::kMoments;
-  reg.affine = common::cpd_register(reg.model_outline, reg.map_outline, a);
+  a.prealign = CpdPrealign::kMoments;
+  reg.affine = cpd_register(reg.model_outline, reg.map_outline, a);
   Eigen::MatrixXd moved = reg.affine.transformed;
   if (o.nonrigid) {
-    common::CpdOptions n;
-    n.method = common::CpdMethod::kNonrigid;
+    CpdOptions n;
+    n.method = CpdMethod::kNonrigid;
     n.w = o.w;
     n.beta = o.beta;
     n.lambda = o.lambda;
-    reg.nonrigid = common::cpd_register(reg.model_outline, moved, n);
+    reg.nonrigid = cpd_register(reg.model_outline, moved, n);
     reg.has_nonrigid = true;
     moved = reg.nonrigid.transformed;
   }
@@ -236,12 +236,12 @@ Comparison compare_with_map(const SplitLineMap& map, const Registration& reg, co
     Eigen::VectorXd wv(w.size());
     Eigen::MatrixXd dm(w.size(), 2);
     for (size_t k = 0; k < w.size(); ++k) wv(k) = w[k], dm.row(k) = d[k].transpose();
-    const common::AxialAverage a = common::average_axial(wv, dm);
+    const AxialAverage a = average_axial(wv, dm);
     if (!a.defined) continue;
     c.covered[s] = true;
     c.model_angle(s) = wrap_axial(std::atan2(a.direction(1), a.direction(0)));
     c.coherence(s) = a.coherence;
-    c.error_deg(s) = common::acute_line_angle_2d(c.model_angle(s), c.map_angle(s)) * 180.0 / std::numbers::pi;
+    c.error_deg(s) = acute_line_angle_2d(c.model_angle(s), c.map_angle(s)) * 180.0 / std::numbers::pi;
   }
   std::map<std::string, std::vector<Eigen::Index>> groups;
   for (Eigen::Index s = 0; s < S; ++s) {

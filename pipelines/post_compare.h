@@ -5,7 +5,7 @@
 // registered onto that view by Coherent Point Drift (Myronenko & Song 2010).
 //
 // Pipeline (docs/post.md):
-//  1. average:  per node, T = sum_t |e1_t| d_t d_t^T / sum_t |e1_t| (common/orientation.h)
+//  1. average:  per node, T = sum_t |e1_t| d_t d_t^T / sum_t |e1_t| (pipelines/orientation.h)
 //  2. view:     x_2D = P x with P = [r; u] (2 x 3), u = up made orthogonal to the view
 //               direction v, r = v x u (so a view along -z with up +y has r = +x); the
 //               outline is the projected boundary loop enclosing the largest area
@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "common/cpd.h"
+#include "pipelines/cpd.h"
 #include "common/mesh.h"
 #include "common/options.h"
 #include "pipelines/splitline.h"
@@ -77,7 +77,7 @@ struct RegistrationOptions {
 };
 
 struct Registration {
-  common::CpdResult affine, nonrigid;
+  CpdResult affine, nonrigid;
   bool has_nonrigid = false;
   Eigen::MatrixX2d map_outline, model_outline;  ///< the resampled outlines
   Eigen::MatrixX2d warped_outline;              ///< T(map outline)

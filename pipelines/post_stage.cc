@@ -703,10 +703,10 @@ PostSummary run_post(const PostInputs& in, const PostOptions& opt, const std::st
           ks.angle_mean_deg = r.mean_deg, ks.angle_samples = r.covered, ks.angle_figure = sid + "-error";
       ks.angle_threshold_deg = opt.comparison.threshold_rad * 180.0 / std::numbers::pi;
       json.begin_object("registration")
-          .value("affine_status", common::to_string(reg.affine.status))
+          .value("affine_status", to_string(reg.affine.status))
           .value("affine_iterations", reg.affine.iterations)
           .value("nonrigid", reg.has_nonrigid)
-          .value("nonrigid_status", reg.has_nonrigid ? common::to_string(reg.nonrigid.status) : std::string("not run"))
+          .value("nonrigid_status", reg.has_nonrigid ? to_string(reg.nonrigid.status) : std::string("not run"))
           .value("nonrigid_iterations", reg.nonrigid.iterations)
           .value("outline_mean_distance_mm", reg.outline_mean_distance * 1e3)
           .value("outline_max_distance_mm", reg.outline_max_distance * 1e3)

@@ -10,13 +10,13 @@
 #include <numbers>
 #include <random>
 
-#include "common/cpd.h"
+#include "pipelines/cpd.h"
 
 namespace {
 
-using arthrosim::common::CpdMethod;
-using arthrosim::common::CpdOptions;
-using arthrosim::common::CpdResult;
+using arthrosim::pipelines::CpdMethod;
+using arthrosim::pipelines::CpdOptions;
+using arthrosim::pipelines::CpdResult;
 
 // n points on a synthetic split-line map of ~40 x 25 units: the lobed outline
 // r(a) = 1 + 0.3 cos 2a + 0.15 sin 3a (30 % of the points) and 12 wavy interior "split lines"
@@ -74,14 +74,14 @@ void BM_CpdNonrigid2d(benchmark::State& state) {
   o.tolerance = 1e-6;
   CpdResult r;
   for (auto _ : state) {
-    r = arthrosim::common::cpd_register(X, Y, o);
+    r = arthrosim::pipelines::cpd_register(X, Y, o);
     benchmark::DoNotOptimize(r.transformed.data());
   }
   state.counters["iterations"] = r.iterations;
   state.counters["rank"] = r.kernel_rank;
   state.counters["sigma2"] = r.sigma2;
   state.counters["truncated"] = r.truncated_estep ? 1 : 0;
-  state.counters["converged"] = r.status == arthrosim::common::CpdStatus::kMaxIterations ? 0 : 1;
+  state.counters["converged"] = r.status == arthrosim::pipelines::CpdStatus::kMaxIterations ? 0 : 1;
   state.counters["peak_rss_MB"] = peak_rss_mb();
   // Registration quality: RMS distance of T(y) to the true warped position warp(y), map units
   // (the map is ~40 x 25; the warp moves points by ~1.3 RMS).

@@ -16,7 +16,7 @@
 
 #include "common/error.h"
 #include "common/hdf5.h"
-#include "common/orientation.h"
+#include "pipelines/orientation.h"
 #include "pipelines/post_compare.h"
 #include "pipelines/splitline.h"
 #include "tests/pipelines/post_test_helpers.h"
@@ -91,7 +91,7 @@ TEST(PostSynthetic, DirectionAveragingRecoversFieldDespiteSignFlips) {
   double worst = 0;
   for (Eigen::Index i = 0; i < field.mesh.V.rows(); ++i) {
     const double th = theta_mm(field.mesh.V(i, 0) * 1e3, field.mesh.V(i, 1) * 1e3);
-    worst = std::max(worst, common::acute_line_angle(nd.direction.row(i).transpose(),
+    worst = std::max(worst, acute_line_angle(nd.direction.row(i).transpose(),
                                                      Eigen::Vector3d(std::cos(th), std::sin(th), 0)));
     ASSERT_NEAR(nd.coherence(i), 1.0, 1e-12);
   }

@@ -1,4 +1,4 @@
-// Stability cases for Coherent Point Drift (common/cpd.h): degenerate and adversarial inputs
+// Stability cases for Coherent Point Drift (pipelines/cpd.h): degenerate and adversarial inputs
 // must give either a correct registration or a clear status/error, never a crash or NaN.
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -8,10 +8,10 @@
 #include <numbers>
 #include <random>
 
-#include "common/cpd.h"
+#include "pipelines/cpd.h"
 #include "common/error.h"
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 namespace {
 
 Eigen::MatrixXd random_points(int n, int D, uint64_t seed, double lo = -1.0, double hi = 1.0) {
@@ -59,7 +59,7 @@ TEST(CpdStability, DuplicatePoints) {
 // ~1e-4, also with tolerance 1e-10): on a line, soft assignments at the dense end pull the
 // set together and the spacing gives no transverse information to resolve it. The test pins
 // that behaviour: exact rotation, scale within 5 %, finite output; affine (singular weighted
-// covariance) must give finite output or a NumericalError, never NaN.
+// covariance) must give finite output or a common::NumericalError, never NaN.
 TEST(CpdStability, CollinearPoints) {
   Eigen::MatrixXd Y(60, 2);
   for (int i = 0; i < 60; ++i) Y.row(i) << 0.05 * i * i / 60.0 + i, 0.0;  // uneven spacing on the x axis
@@ -75,7 +75,7 @@ TEST(CpdStability, CollinearPoints) {
     const CpdResult a = cpd_register(X, Y, o);
     EXPECT_TRUE(a.transformed.allFinite());
     EXPECT_TRUE(a.affine.allFinite());
-  } catch (const NumericalError& e) {
+  } catch (const common::NumericalError& e) {
     SUCCEED() << "reported: " << e.what();
   }
 }
@@ -181,10 +181,10 @@ TEST(CpdStability, TinyAndFarApartSets) {
   try {
     const CpdResult f = cpd_register(X, Y.array() + 1e3, o);
     EXPECT_TRUE(f.transformed.allFinite());
-  } catch (const NumericalError& e) {
+  } catch (const common::NumericalError& e) {
     EXPECT_NE(std::string(e.what()).find("no correspondences"), std::string::npos);
   }
 }
 
 }  // namespace
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines

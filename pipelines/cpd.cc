@@ -1,5 +1,5 @@
-// Coherent Point Drift (Myronenko & Song 2010). Equations: see common/cpd.h and docs/cpd.md.
-#include "common/cpd.h"
+// Coherent Point Drift (Myronenko & Song 2010). Equations: see pipelines/cpd.h and docs/cpd.md.
+#include "pipelines/cpd.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
@@ -19,7 +19,7 @@
 
 #include <omp.h>
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 
 std::string to_string(CpdStatus status) {
   switch (status) {
@@ -37,7 +37,7 @@ std::string to_string(CpdStatus status) {
 Eigen::MatrixXd CpdTransform::apply(const Eigen::MatrixXd& Z) const {
   const Eigen::Index D = A.rows();
   if (Z.cols() != D)
-    throw InputError("CpdTransform::apply: expected points with " + std::to_string(D) + " columns, found " +
+    throw common::InputError("CpdTransform::apply: expected points with " + std::to_string(D) + " columns, found " +
                      std::to_string(Z.cols()));
   Eigen::MatrixXd U = (Z * A.transpose()).rowwise() + b.transpose();
   const Eigen::Index K = centres.rows();
@@ -61,7 +61,7 @@ Eigen::MatrixXd CpdTransform::apply(const Eigen::MatrixXd& Z) const {
 Eigen::MatrixXd CpdTransform::jacobian(const Eigen::VectorXd& y) const {
   const Eigen::Index D = A.rows();
   if (y.size() != D)
-    throw InputError("CpdTransform::jacobian: expected a point of size " + std::to_string(D) + ", found " +
+    throw common::InputError("CpdTransform::jacobian: expected a point of size " + std::to_string(D) + ", found " +
                      std::to_string(y.size()));
   const Eigen::VectorXd u = A * y + b;
   Eigen::MatrixXd J = Eigen::MatrixXd::Identity(D, D);
@@ -456,7 +456,7 @@ void check_finite(double v, const char* what, int iteration) {
   if (!std::isfinite(v)) {
     std::ostringstream s;
     s << "cpd_register: " << what << " is not finite (" << v << ") at EM iteration " << iteration;
-    throw NumericalError(s.str());
+    throw common::NumericalError(s.str());
   }
 }
 
@@ -537,12 +537,12 @@ EmOutcome run_em(const MatrixXd& X, MatrixXd& TY, const CpdOptions& opt, MStep&&
       return o;
     }
     if (!(e.P1.sum() > 0.0)) {
-      throw NumericalError("cpd_register: no correspondences (sum of P = 0) at EM iteration " + std::to_string(it) +
+      throw common::NumericalError("cpd_register: no correspondences (sum of P = 0) at EM iteration " + std::to_string(it) +
                            ": the sets are too far apart for sigma2 = " + std::to_string(sigma2));
     }
     sigma2 = mstep(e, TY, sigma2);
     check_finite(sigma2, "sigma2", it);
-    if (!TY.allFinite()) throw NumericalError("cpd_register: transformed points not finite at EM iteration " +
+    if (!TY.allFinite()) throw common::NumericalError("cpd_register: transformed points not finite at EM iteration " +
                                               std::to_string(it));
     nll_old = nll;
     if (sigma2 < opt.sigma2_floor) {
@@ -711,7 +711,7 @@ MatrixXd gaussian_kernel(const MatrixXd& A, const MatrixXd& B, double beta) {
 }
 
 void validate(const MatrixXd& X, const MatrixXd& Y, const CpdOptions& o) {
-  auto fail = [](const std::string& what) { throw InputError("cpd_register: " + what); };
+  auto fail = [](const std::string& what) { throw common::InputError("cpd_register: " + what); };
   if (X.cols() != 2 && X.cols() != 3) fail("expected fixed points with 2 or 3 columns, found " + std::to_string(X.cols()));
   if (Y.cols() != X.cols())
     fail("expected moving points with " + std::to_string(X.cols()) + " columns (as the fixed set), found " +
@@ -745,7 +745,7 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
   Normalization nx = compute_normalization(X_in, opt.normalize);
   Normalization ny = compute_normalization(Y_in, opt.normalize);
   if (opt.normalize && (!(nx.scale > 0.0) || !(ny.scale > 0.0)))
-    throw InputError("cpd_register: a point set has zero spread (all points coincide); cannot normalise (RMS radius "
+    throw common::InputError("cpd_register: a point set has zero spread (all points coincide); cannot normalise (RMS radius "
                      "fixed " + std::to_string(nx.scale) + ", moving " + std::to_string(ny.scale) + ")");
   // Fixed-scale rigid: both sets share X's scale so the fitted scale is exactly 1.
   if (opt.normalize && opt.method == CpdMethod::kRigid && !opt.estimate_scale) ny.scale = nx.scale;
@@ -885,8 +885,8 @@ CpdResult cpd_register(const MatrixXd& X_in, const MatrixXd& Y_in, const CpdOpti
   res.sigma2_data = res.sigma2 * nx.scale * nx.scale;
   res.transformed = res.transform.apply(Y_in);
   if (!res.transformed.allFinite())
-    throw NumericalError("cpd_register: the final transformed points are not finite");
+    throw common::NumericalError("cpd_register: the final transformed points are not finite");
   return res;
 }
 
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines

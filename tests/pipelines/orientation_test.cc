@@ -1,5 +1,5 @@
-// Tests of axial direction statistics and principal strains (common/orientation.h).
-#include "common/orientation.h"
+// Tests of axial direction statistics and principal strains (pipelines/orientation.h).
+#include "pipelines/orientation.h"
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -10,7 +10,7 @@
 
 #include "common/error.h"
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
@@ -61,10 +61,10 @@ TEST(PrincipalStrains, DegenerateIsFlaggedAndDeterministic) {
 }
 
 TEST(PrincipalStrains, BadInputThrows) {
-  EXPECT_THROW(principal_strains(Eigen::MatrixXd::Zero(2, 3)), InputError);
+  EXPECT_THROW(principal_strains(Eigen::MatrixXd::Zero(2, 3)), common::InputError);
   Eigen::Matrix2d E = Eigen::Matrix2d::Zero();
   E(0, 0) = std::nan("");
-  EXPECT_THROW(principal_strains(E), InputError);
+  EXPECT_THROW(principal_strains(E), common::InputError);
 }
 
 // A constant field with random sign flips and random magnitudes must average to exactly the
@@ -130,9 +130,9 @@ TEST(AxialAverage, ZeroMagnitudeIsUndefinedAndBadInputThrows) {
   const AxialAverage a = average_axial(Eigen::VectorXd::Zero(3), Eigen::MatrixXd::Ones(3, 2));
   EXPECT_FALSE(a.defined);
   EXPECT_EQ(a.coherence, 0.0);
-  EXPECT_THROW(average_axial(Eigen::VectorXd::Ones(3), Eigen::MatrixXd::Ones(2, 2)), InputError);
-  EXPECT_THROW(average_axial(Eigen::VectorXd::Ones(2), Eigen::MatrixXd::Zero(2, 2)), InputError);
-  EXPECT_THROW(average_axial(Eigen::VectorXd::Ones(2), Eigen::MatrixXd::Ones(2, 4)), InputError);
+  EXPECT_THROW(average_axial(Eigen::VectorXd::Ones(3), Eigen::MatrixXd::Ones(2, 2)), common::InputError);
+  EXPECT_THROW(average_axial(Eigen::VectorXd::Ones(2), Eigen::MatrixXd::Zero(2, 2)), common::InputError);
+  EXPECT_THROW(average_axial(Eigen::VectorXd::Ones(2), Eigen::MatrixXd::Ones(2, 4)), common::InputError);
 }
 
 TEST(LineAngle, AcuteAngles) {
@@ -144,8 +144,8 @@ TEST(LineAngle, AcuteAngles) {
   EXPECT_NEAR(acute_line_angle_2d(0.0, 100 * kPi / 180), 80 * kPi / 180, 1e-13);
   EXPECT_NEAR(acute_line_angle_2d(-0.5, 0.5 + 2 * kPi), 1.0, 1e-13);
   EXPECT_NEAR(acute_line_angle_2d(0.0, kPi / 2), kPi / 2, 1e-15);
-  EXPECT_THROW(acute_line_angle(Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0)), InputError);
+  EXPECT_THROW(acute_line_angle(Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0)), common::InputError);
 }
 
 }  // namespace
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines

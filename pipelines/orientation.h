@@ -23,7 +23,7 @@
 
 #include <vector>
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 
 /// Eigen-decomposition of a symmetric 2x2 or 3x3 strain tensor.
 struct PrincipalStrains {
@@ -75,4 +75,4 @@ double acute_line_angle(const Eigen::VectorXd& a, const Eigen::VectorXd& b);
 /// the acute angle between the lines, in [0, pi/2].
 double acute_line_angle_2d(double theta_a_rad, double theta_b_rad);
 
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines

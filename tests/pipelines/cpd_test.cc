@@ -1,5 +1,5 @@
-// Tests of Coherent Point Drift (common/cpd.h) against known transforms.
-#include "common/cpd.h"
+// Tests of Coherent Point Drift (pipelines/cpd.h) against known transforms.
+#include "pipelines/cpd.h"
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -12,7 +12,7 @@
 
 #include "common/error.h"
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 namespace {
 
 Eigen::MatrixXd random_points(int n, int D, uint64_t seed, double lo = -1.0, double hi = 1.0) {
@@ -311,21 +311,21 @@ TEST(CpdStatusReport, MaxIterationsIsReported) {
 
 TEST(CpdInput, BadInputThrows) {
   const Eigen::MatrixXd Y = random_points(10, 2, 1);
-  EXPECT_THROW(cpd_register(Eigen::MatrixXd(0, 2), Y), InputError);
-  EXPECT_THROW(cpd_register(random_points(10, 3, 2), Y), InputError);
-  EXPECT_THROW(cpd_register(random_points(10, 4, 2), random_points(10, 4, 3)), InputError);
+  EXPECT_THROW(cpd_register(Eigen::MatrixXd(0, 2), Y), common::InputError);
+  EXPECT_THROW(cpd_register(random_points(10, 3, 2), Y), common::InputError);
+  EXPECT_THROW(cpd_register(random_points(10, 4, 2), random_points(10, 4, 3)), common::InputError);
   Eigen::MatrixXd bad = Y;
   bad(4, 1) = std::nan("");
-  EXPECT_THROW(cpd_register(bad, Y), InputError);
+  EXPECT_THROW(cpd_register(bad, Y), common::InputError);
   CpdOptions o;
   o.w = 1.0;
-  EXPECT_THROW(cpd_register(Y, Y, o), InputError);
+  EXPECT_THROW(cpd_register(Y, Y, o), common::InputError);
   o = {};
   o.beta = 0.0;
-  EXPECT_THROW(cpd_register(Y, Y, o), InputError);
-  EXPECT_THROW(cpd_register(Eigen::MatrixXd::Ones(5, 2), Y), InputError);  // zero spread
-  EXPECT_THROW(CpdResult{}.transform.apply(Y), InputError);
+  EXPECT_THROW(cpd_register(Y, Y, o), common::InputError);
+  EXPECT_THROW(cpd_register(Eigen::MatrixXd::Ones(5, 2), Y), common::InputError);  // zero spread
+  EXPECT_THROW(CpdResult{}.transform.apply(Y), common::InputError);
 }
 
 }  // namespace
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines

@@ -1,4 +1,4 @@
-#include "common/orientation.h"
+#include "pipelines/orientation.h"
 
 #include <Eigen/Eigenvalues>
 
@@ -11,7 +11,7 @@
 
 #include "common/error.h"
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 namespace {
 
 void canonical_sign(Eigen::Ref<Eigen::VectorXd> v) {
@@ -53,8 +53,8 @@ void sym_eig_desc(const Eigen::MatrixXd& A, Eigen::VectorXd& values, Eigen::Matr
 
 PrincipalStrains principal_strains(const Eigen::MatrixXd& E, double degeneracy_tolerance) {
   if (E.rows() != E.cols() || (E.rows() != 2 && E.rows() != 3))
-    throw InputError("principal_strains: expected a 2x2 or 3x3 strain tensor, found " + shape(E));
-  if (!E.allFinite()) throw InputError("principal_strains: strain tensor has NaN/Inf entries");
+    throw common::InputError("principal_strains: expected a 2x2 or 3x3 strain tensor, found " + shape(E));
+  if (!E.allFinite()) throw common::InputError("principal_strains: strain tensor has NaN/Inf entries");
   Eigen::MatrixXd S = E.triangularView<Eigen::Lower>();
   S.triangularView<Eigen::StrictlyUpper>() = S.transpose().triangularView<Eigen::StrictlyUpper>();
   PrincipalStrains out;
@@ -67,11 +67,11 @@ PrincipalStrains principal_strains(const Eigen::MatrixXd& E, double degeneracy_t
 AxialAverage average_axial(const Eigen::VectorXd& e1, const Eigen::MatrixXd& d) {
   const Eigen::Index n = e1.size(), D = d.cols();
   if (D != 2 && D != 3)
-    throw InputError("average_axial: expected directions with 2 or 3 columns, found " + shape(d));
+    throw common::InputError("average_axial: expected directions with 2 or 3 columns, found " + shape(d));
   if (d.rows() != n)
-    throw InputError("average_axial: expected " + std::to_string(n) + " direction rows (one per e1 value), found " +
+    throw common::InputError("average_axial: expected " + std::to_string(n) + " direction rows (one per e1 value), found " +
                      std::to_string(d.rows()));
-  if (!e1.allFinite() || !d.allFinite()) throw InputError("average_axial: NaN/Inf in e1 or directions");
+  if (!e1.allFinite() || !d.allFinite()) throw common::InputError("average_axial: NaN/Inf in e1 or directions");
   AxialAverage out;
   out.direction = Eigen::VectorXd::Zero(D);
   if (n == 0) return out;
@@ -80,7 +80,7 @@ AxialAverage average_axial(const Eigen::VectorXd& e1, const Eigen::MatrixXd& d) 
   for (Eigen::Index t = 0; t < n; ++t) {
     const double len = d.row(t).norm();
     if (!(len > 0.0))
-      throw InputError("average_axial: direction of frame " + std::to_string(t) + " has zero length");
+      throw common::InputError("average_axial: direction of frame " + std::to_string(t) + " has zero length");
     const Eigen::VectorXd u = d.row(t).transpose() / len;
     const double w = std::abs(e1(t));
     T.noalias() += w * u * u.transpose();
@@ -108,12 +108,12 @@ std::vector<AxialAverage> average_axial_field(const Eigen::MatrixXd& e1,
                                               const std::vector<Eigen::MatrixXd>& directions) {
   const Eigen::Index N = e1.rows(), F = e1.cols();
   if (static_cast<Eigen::Index>(directions.size()) != F)
-    throw InputError("average_axial_field: expected " + std::to_string(F) +
+    throw common::InputError("average_axial_field: expected " + std::to_string(F) +
                      " direction frames (columns of e1), found " + std::to_string(directions.size()));
   Eigen::Index D = F > 0 ? directions[0].cols() : 2;
   for (Eigen::Index t = 0; t < F; ++t) {
     if (directions[t].rows() != N || directions[t].cols() != D)
-      throw InputError("average_axial_field: frame " + std::to_string(t) + ": expected " + std::to_string(N) +
+      throw common::InputError("average_axial_field: frame " + std::to_string(t) + ": expected " + std::to_string(N) +
                        " x " + std::to_string(D) + " directions, found " + shape(directions[t]));
   }
   std::vector<AxialAverage> out(static_cast<size_t>(N));
@@ -127,10 +127,10 @@ std::vector<AxialAverage> average_axial_field(const Eigen::MatrixXd& e1,
 
 double acute_line_angle(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   if (a.size() != b.size() || (a.size() != 2 && a.size() != 3))
-    throw InputError("acute_line_angle: expected two vectors of size 2 or 3, found sizes " +
+    throw common::InputError("acute_line_angle: expected two vectors of size 2 or 3, found sizes " +
                      std::to_string(a.size()) + " and " + std::to_string(b.size()));
   if (!(a.norm() > 0.0) || !(b.norm() > 0.0) || !a.allFinite() || !b.allFinite())
-    throw InputError("acute_line_angle: expected finite non-zero vectors");
+    throw common::InputError("acute_line_angle: expected finite non-zero vectors");
   double cross;
   if (a.size() == 2) {
     cross = std::abs(a(0) * b(1) - a(1) * b(0));
@@ -142,11 +142,11 @@ double acute_line_angle(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
 
 double acute_line_angle_2d(double theta_a_rad, double theta_b_rad) {
   if (!std::isfinite(theta_a_rad) || !std::isfinite(theta_b_rad))
-    throw InputError("acute_line_angle_2d: expected finite angles");
+    throw common::InputError("acute_line_angle_2d: expected finite angles");
   // Lines have period pi: reduce the difference to [0, pi), then fold to [0, pi/2].
   double delta = std::fmod(theta_a_rad - theta_b_rad, std::numbers::pi);
   if (delta < 0.0) delta += std::numbers::pi;
   return std::min(delta, std::numbers::pi - delta);
 }
 
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines

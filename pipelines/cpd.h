@@ -39,7 +39,7 @@
 
 #include <string>
 
-namespace arthrosim::common {
+namespace arthrosim::pipelines {
 
 enum class CpdMethod { kRigid, kAffine, kNonrigid };
 
@@ -185,4 +185,4 @@ struct CpdResult {
 /// if the iteration produces a non-finite value (naming the iteration).
 CpdResult cpd_register(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, const CpdOptions& options = {});
 
-}  // namespace arthrosim::common
+}  // namespace arthrosim::pipelines
