@@ -3,12 +3,16 @@
 // tree.
 #pragma once
 
+#include <sys/wait.h>
+
+#include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <sstream>
 #include <string>
+#include <utility>
 
 namespace arthrosim::test_support {
 
@@ -36,6 +40,17 @@ inline std::filesystem::path fresh_scratch_dir(const std::string& name) {
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
+}
+
+/// Runs a shell command; returns (its exit status, -1 when it did not exit
+/// normally; stdout + stderr).
+inline std::pair<int, std::string> run_shell(const std::string& command) {
+  std::string out;
+  FILE* p = ::popen((command + " 2>&1").c_str(), "r");
+  char buf[4096];
+  while (p && std::fgets(buf, sizeof buf, p)) out += buf;
+  const int status = p ? ::pclose(p) : -1;
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
 
 }  // namespace arthrosim::test_support

@@ -26,6 +26,7 @@
 #include <string>
 #include <thread>
 
+#include "tests/test_support.h"
 #include "common/checkpoint.h"
 #include "common/hdf5.h"
 #include "common/output_file.h"
@@ -38,22 +39,10 @@ const fs::path kDir = fs::path(ARTHROSIM_BINARY_DIR) / "test_scratch" / "resume_
 const fs::path kBin = fs::path(ARTHROSIM_BINARY_DIR) / "bin";
 const fs::path kSource = fs::path(ARTHROSIM_SOURCE_DIR);
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+std::string slurp(const fs::path& p) { return arthrosim::test_support::read_text(p); }
 
 // Runs a shell command; returns (exit status or 128 + signal, stdout + stderr).
-std::pair<int, std::string> run(const std::string& command) {
-  std::string out;
-  FILE* p = ::popen((command + " 2>&1").c_str(), "r");
-  char buf[4096];
-  while (p && std::fgets(buf, sizeof buf, p)) out += buf;
-  const int status = p ? ::pclose(p) : -1;
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+std::pair<int, std::string> run(const std::string& command) { return arthrosim::test_support::run_shell(command); }
 
 fs::path scratch(const std::string& name) {
   const fs::path d = kDir / name;

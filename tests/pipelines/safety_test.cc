@@ -25,6 +25,7 @@
 #include <sstream>
 #include <string>
 
+#include "tests/test_support.h"
 #include "common/effects.h"
 #include "common/error.h"
 #include "common/hashing.h"
@@ -64,22 +65,10 @@ std::string error_of(F f) {
   return "";
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+std::string slurp(const fs::path& p) { return arthrosim::test_support::read_text(p); }
 
 // Runs a shell command; returns (exit status, stdout + stderr).
-std::pair<int, std::string> run(const std::string& command) {
-  std::string out;
-  FILE* p = ::popen((command + " 2>&1").c_str(), "r");
-  char buf[4096];
-  while (p && std::fgets(buf, sizeof buf, p)) out += buf;
-  const int status = p ? ::pclose(p) : -1;
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+std::pair<int, std::string> run(const std::string& command) { return arthrosim::test_support::run_shell(command); }
 
 fs::path scratch(const std::string& name) {
   const fs::path d = kDir / name;
