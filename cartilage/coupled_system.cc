@@ -280,6 +280,11 @@ void CoupledShellSystem::evaluate(const numerics::EvalRequest& req, Eigen::Vecto
                                      ", t = " + std::to_string(req.t) + " s");
 }
 
+std::array<Eigen::VectorXd, 2> CoupledShellSystem::updated_contact_multipliers(int k, const Eigen::VectorXd& q) const {
+  const Pair& p = contacts_.at(k);
+  return p.contact->updated_multipliers(positions(p.a, q), positions(p.b, q));
+}
+
 ContactPairReport CoupledShellSystem::contact_report(int k, const Eigen::VectorXd& q, const Eigen::VectorXd* v) const {
   const Pair& p = contacts_.at(k);
   ContactPairReport r;

@@ -78,6 +78,12 @@ class CoupledShellSystem : public numerics::TimeIntegrable {
                    double pattern_margin_m = 0.5e-3);
   int num_contacts() const { return static_cast<int>(contacts_.size()); }
   const MeshContact& contact(int k) const { return *contacts_[k].contact; }
+  /// Augmented Lagrangian multipliers of pair k (MeshContact::set_multipliers).
+  void set_contact_multipliers(int k, const std::array<Eigen::VectorXd, 2>& lambda) {
+    contacts_.at(k).contact->set_multipliers(lambda);
+  }
+  /// Their Uzawa update at q (MeshContact::updated_multipliers).
+  std::array<Eigen::VectorXd, 2> updated_contact_multipliers(int k, const Eigen::VectorXd& q) const;
   void attach_ledger(common::EffectLedger* ledger) { ledger_ = ledger; }
 
   /// Contact state of pair k at (q, v) (v may be nullptr: at rest).

@@ -41,6 +41,13 @@ void ContactOptions::declare(common::OptionVisitor& v) {
            "nodes per contact_rim_vertices); faded = the integral of the rim fade times its shape function over its "
            "triangles, so each surface samples itself with the fade the other surface's vertices see, and rim nodes "
            "carry a reduced weight (fade_inside only, not with contact_rim_vertices; docs/contact.md, \"Rims\")");
+  v.integer("contact_augmentations", augmentations, {0, 50},
+            "augmented Lagrangian (Uzawa): at most this many multiplier updates per step, each followed by the step "
+            "solved again, while the max penetration exceeds contact_augment_tolerance x the max deflection; 0: pure "
+            "penalty (docs/contact.md, \"Augmented Lagrangian\")");
+  v.number("contact_augment_tolerance", augment_tolerance, Unit::kNone, {1e-6, 1},
+           "contact_augmentations: augmenting stops once the step's max penetration is at most this fraction of its "
+           "max deflection (the seed's accuracy rule is 0.1)");
 }
 namespace {
 
@@ -477,8 +484,13 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
                                           opts_.min_opposition, vertex_weight_[sv],
                                           opts_.rim == RimTreatment::kRimContacts, &cnt.candidate_vertex_face,
                                           broad_phase_[pass].get())) {
-      if (!(h.signed_distance < 0)) continue;  // in front: no contact
+      // Augmented: a vertex with multiplier lambda > 0 is in contact while
+      // g < lambda / k + delta / 2 (its pressure p(g - offset) > 0).
+      const double lam = lambda_[sv].size() ? lambda_[sv](h.vertex) : 0.0;
+      const double offset = lam > 0 ? lam / opts_.stiffness_N_m3 + 0.5 * opts_.smoothing_m : 0.0;
+      if (!(h.signed_distance < offset)) continue;  // in front: no contact
       ContactPoint c;
+      c.offset = offset;
       const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
       const int f = h.closest.feature;
       if (f == 0) {
@@ -582,13 +594,15 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     // continuous at g = 0, so the tangent does not jump when a contact
     // switches on (no Newton cycling at the contact boundary).
     const double delta = opts_.smoothing_m;
+    // Augmented law: the same function of the shifted gap g - offset.
+    const double gs = c.gap - c.offset;
     double p = 0, dp = 0;  // p(g) and -dp/dg
-    if (c.gap <= -delta) {
-      p = kc * (-c.gap - 0.5 * delta);
+    if (gs <= -delta) {
+      p = kc * (-gs - 0.5 * delta);
       dp = kc;
-    } else {
-      p = 0.5 * kc * c.gap * c.gap / delta;
-      dp = -kc * c.gap / delta;
+    } else if (gs < 0) {
+      p = 0.5 * kc * gs * gs / delta;
+      dp = -kc * gs / delta;
     }
     // Depth fade: over the last quarter of max_depth the elastic pressure
     // goes smoothly to zero, p s(d) with s the smoothstep from 1 at
@@ -627,6 +641,28 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
   }
   if (counts) *counts = cnt;
   return active;
+}
+
+void MeshContact::set_multipliers(const std::array<Eigen::VectorXd, 2>& lambda) {
+  for (int side = 0; side < 2; ++side) {
+    const int n = surface(side).num_nodes;
+    if (lambda[side].size() != 0 && lambda[side].size() != n)
+      throw common::InputError("mesh contact " + name_ + ": " + std::to_string(lambda[side].size()) +
+                               " multipliers for surface " + (side ? "b" : "a") + " of " + std::to_string(n) +
+                               " nodes");
+    if (lambda[side].size() && !(lambda[side].array() >= 0).all())
+      throw common::InputError("mesh contact " + name_ + ": multipliers must be >= 0 Pa");
+  }
+  lambda_ = lambda;
+}
+
+std::array<Eigen::VectorXd, 2> MeshContact::updated_multipliers(const common::Points3& xa,
+                                                                const common::Points3& xb) const {
+  std::array<Eigen::VectorXd, 2> out = {Eigen::VectorXd::Zero(a_.num_nodes), Eigen::VectorXd::Zero(b_.num_nodes)};
+  // At rest (no velocities): the elastic pressure, damping excluded.
+  for (const ContactPoint& c : detect(xa, xb, nullptr, nullptr, false))
+    if (c.kind != ContactKind::kEdgeEdge) out[c.side[0]](c.node[0]) = c.pressure;
+  return out;
 }
 
 std::vector<std::pair<int, int>> MeshContact::coupling_candidates(const common::Points3& xa,

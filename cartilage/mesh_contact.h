@@ -162,11 +162,20 @@ struct ContactOptions {
   /// has crossed no triangle and is not a contact.
   double rim_max_depth_m = 0.5 * common::units::mm;
   RimTreatment rim = RimTreatment::kFadeInside;
+  /// Augmented Lagrangian (Uzawa, docs/contact.md "Augmented Lagrangian"):
+  /// at most this many augmentations per step (multiplier updates, each
+  /// followed by the step solved again); 0: pure penalty. The stage
+  /// augments while the step's max penetration exceeds augment_tolerance
+  /// times its max deflection.
+  int augmentations = 0;
+  /// Target of the augmentations: max penetration / max deflection, in (0, 1].
+  double augment_tolerance = 0.05;
 
   /// Scene keys (common/options.h): contact_stiffness_n_per_mm3,
   /// contact_damping_n_s_per_mm3, contact_max_depth_mm, contact_smoothing_mm,
   /// contact_edge_edge, contact_rim, contact_rim_max_depth_mm,
-  /// contact_rim_vertices, contact_vertex_weights.
+  /// contact_rim_vertices, contact_vertex_weights, contact_augmentations,
+  /// contact_augment_tolerance.
   void declare(common::OptionVisitor& v);
 };
 
@@ -186,6 +195,10 @@ struct ContactPoint {
   double area = 0;       ///< weight A [m^2]
   double pressure = 0;   ///< lambda > 0 [Pa]
   double stiffness = 0;  ///< -d lambda/dg [Pa/m] (the penalty law's slope)
+  /// Gap offset of the augmented law [m]: lambda_v / k + delta / 2 for a
+  /// vertex contact whose vertex carries a multiplier lambda_v > 0, else 0;
+  /// the pressure is p(g - offset).
+  double offset = 0;
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();  ///< n (out of the face / second edge's surface)
   Eigen::Vector3d point = Eigen::Vector3d::Zero();   ///< contact point on the face / second edge [m]
   Eigen::Matrix<double, 12, 1> G = Eigen::Matrix<double, 12, 1>::Zero();   ///< dg/dx
@@ -237,6 +250,19 @@ class MeshContact {
   std::vector<std::pair<int, int>> coupling_candidates(const common::Points3& xa, const common::Points3& xb,
                                                        double margin) const;
 
+  /// Augmented Lagrangian multipliers: per side (0: a, 1: b), a pressure per
+  /// node as the penetrating vertex of a vertex contact [Pa] (>= 0; empty:
+  /// all zero). With lambda_v > 0 the vertex's contact pressure is
+  /// p(g - lambda_v / k - delta / 2), = lambda_v - k g on the linear branch,
+  /// so a converged augmentation (lambda_v = the pressure) means g = 0.
+  /// Edge-edge contacts carry no multiplier.
+  void set_multipliers(const std::array<Eigen::VectorXd, 2>& lambda);
+  const std::array<Eigen::VectorXd, 2>& multipliers() const { return lambda_; }
+  /// The Uzawa update at the positions xa, xb: each vertex's new multiplier
+  /// is the elastic pressure of its vertex contact there (0 without one),
+  /// lambda <- max(0, lambda + k (-g)) on the linear branch.
+  std::array<Eigen::VectorXd, 2> updated_multipliers(const common::Points3& xa, const common::Points3& xb) const;
+
  private:
   std::string name_;
   ContactSurface a_, b_;
@@ -244,6 +270,7 @@ class MeshContact {
   /// Per surface: a node's weight as the penetrating vertex [m^2] (0: not a
   /// penetrating vertex), from the options (rim_vertices, faded_vertex_weights).
   std::array<Eigen::VectorXd, 2> vertex_weight_;
+  std::array<Eigen::VectorXd, 2> lambda_;  ///< augmented Lagrangian multipliers [Pa] (empty: none)
   /// Broad phase of the two vertex-face passes (vertices of a against the
   /// faces of b, then b against a), each reusing its candidate pairs while
   /// the surfaces move less than a fifth of max_depth_m
