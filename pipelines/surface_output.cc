@@ -38,7 +38,7 @@ struct Writer::Impl {
   struct SolverSeries {
     H5File::Appender time, dt, newton_iterations, residual_N, residual_tolerance_N, rejections, wall_s,
         max_deflection_m;
-    std::optional<H5File::Appender> change_m;
+    std::optional<H5File::Appender> change_m, augmentations;
     std::optional<H5File::Appender> max_penetration_m, penetration_ratio, active_contacts, max_rim_depth_m,
         max_unfaded_penetration_m, unfaded_penetration_ratio;
   };
@@ -131,9 +131,10 @@ void Writer::flush() {
                          out.appender_int("/solver/rejections", {}, so),
                          out.appender("/solver/wall_s", {}, so),
                          out.appender("/solver/max_deflection_m", {}, so),
-                         {}, {}, {}, {}, {}, {}, {}};
+                         {}, {}, {}, {}, {}, {}, {}, {}};
     // steady_state_change_mm: the largest weighted coordinate change per step.
     if (m.layout.change) s.change_m.emplace(out.appender("/solver/change_m", {}, so));
+    if (m.layout.augmentations) s.augmentations.emplace(out.appender_int("/solver/contact_augmentations", {}, so));
     if (m.layout.contact) {
       s.max_penetration_m.emplace(out.appender("/solver/max_penetration_m", {}, so));
       s.penetration_ratio.emplace(out.appender("/solver/penetration_ratio", {}, so));
@@ -200,6 +201,7 @@ void Writer::append_step(const StepRecord& r) {
   s.wall_s.append(r.wall_s);
   s.max_deflection_m.append(r.max_deflection_m);
   if (s.change_m) s.change_m->append(r.change_m);
+  if (s.augmentations) s.augmentations->append(r.augmentations);
   if (s.max_penetration_m) {
     s.max_penetration_m->append(r.max_penetration_m);
     s.penetration_ratio->append(r.penetration_ratio);
@@ -261,7 +263,7 @@ void Writer::complete() {
                                 &s.rejections, &s.wall_s, &s.max_deflection_m})
       a->close();
     for (std::optional<H5File::Appender>* a :
-         {&s.change_m, &s.max_penetration_m, &s.penetration_ratio, &s.active_contacts, &s.max_rim_depth_m,
+         {&s.change_m, &s.augmentations, &s.max_penetration_m, &s.penetration_ratio, &s.active_contacts, &s.max_rim_depth_m,
           &s.max_unfaded_penetration_m, &s.unfaded_penetration_ratio})
       if (*a) (*a)->close();
   }

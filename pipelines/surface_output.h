@@ -42,6 +42,7 @@ struct Layout {
   bool contact = false;           ///< contact pressure, contact force, penetration series
   bool trial_time = false;        ///< /trial_time (imposed kinematics)
   bool change = false;            ///< /solver/change_m (steady_state_change_mm)
+  bool augmentations = false;     ///< /solver/contact_augmentations (contact_augmentations > 0)
   std::vector<std::string> contact_pairs;
   /// Root attribute partial_input: the PARTIAL INPUT line of a run on an
   /// incomplete kinematics file (--allow-partial; common/file_check.h).
@@ -89,6 +90,7 @@ struct StepRecord {
   double max_penetration_m = 0, penetration_ratio = 0;
   int active_contacts = 0;
   double max_rim_depth_m = 0, max_unfaded_penetration_m = 0, unfaded_penetration_ratio = 0;
+  int augmentations = 0;  ///< Layout::augmentations: multiplier updates taken in this step
 };
 
 /// A surface's summary attributes (at the end of a run).

@@ -473,6 +473,10 @@ SurfaceScenarioConfig surface_from_scene(const common::Scene& scene, const std::
     throw common::InputError(file + ": error: scenario '" + sc->name +
                              "': contact_rim_vertices applies to contact_vertex_weights: tributary only (faded "
                              "weights give rim nodes their own, reduced weight)");
+  if (c.contact && opt.contact.augmentations > 0 && opt.steady_state_change_m > 0)
+    throw common::InputError(file, o.value("contact_augmentations").line,
+                             "scenario '" + sc->name + "': contact_augmentations cannot be combined with "
+                             "steady_state_change_mm (the augmented step is solved again from its start)");
   if (opt.integrator.reuse_factorization && c.contact)
     throw common::InputError(file, o.value("newton_reuse_factorization").line,
                              "scenario '" + sc->name + "': newton_reuse_factorization cannot be combined with "
@@ -741,6 +745,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   layout.contact = contact;
   layout.trial_time = moving;
   layout.change = stop_change > 0;
+  const int max_augmentations = contact ? opt.contact.augmentations : 0;
+  layout.augmentations = max_augmentations > 0;
   layout.contact_pairs = c.contact_pair_names;
   layout.partial_input = b.partial_input;
   std::vector<const char*> argv;
@@ -953,8 +959,12 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       options.argv, c.canonical_options,
       {{options.scene, "--scene"}, {options.prepared, "--prepared"}, {options.kinematics, "--kinematics"},
        {opt.mesh, "mesh"}});
-  // A kept factorisation (newton_reuse_factorization) cannot be carried over.
-  const bool checkpoints = !iopt.reuse_factorization && !steady;
+  // A kept factorisation (newton_reuse_factorization) cannot be carried over;
+  // nor, yet, the augmented Lagrangian multipliers (contact_augmentations).
+  const bool checkpoints = !iopt.reuse_factorization && !steady && max_augmentations == 0;
+  if (max_augmentations > 0)
+    common::log_warn("surface " + c.name + ": no checkpoints with contact_augmentations (the multipliers are not "
+                     "stored yet); an interrupted run starts over");
   common::CheckpointClock checkpoint_clock(opt.checkpoint_interval_s);
   int checkpoints_written = 0;
   if (checkpoints && std::filesystem::exists(checkpoint_path)) {
@@ -999,6 +1009,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   // not accepted before the pressure ramp (or seating) has ended: at the
   // start of a smoothstep ramp the load barely changes.
   bool stopped_steady = false;
+  long total_augmentations = 0, total_augmentation_iterations = 0;  // contact_augmentations
   double last_change = std::numeric_limits<double>::quiet_NaN();
   long last_iterations = 0, last_rejections = 0;
   SurfaceStageResult res;
@@ -1019,11 +1030,37 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         const double t_next = std::min(t + step, t_out);
         const double w0 = now_s();
         bool at_steady = false;
+        int step_augmentations = 0;
+        long augmentation_iterations = 0;
         if (stop_change > 0) {
           at_steady = integrator.advance_to_steady_state(stop_change, t_next, &last_change) &&
                       t_next >= b.par.osmotic_ramp_s;
-        } else {
+        } else if (max_augmentations == 0) {
           integrator.advance_to(t_next);
+        } else {
+          // Augmented Lagrangian (Uzawa, docs/contact.md): solve the step;
+          // while its max penetration exceeds contact_augment_tolerance x its
+          // max deflection, set each vertex's multiplier to its contact
+          // pressure and solve the step again from its start. The multipliers
+          // stay for the next step (warm start).
+          const numerics::HhtState start = integrator.state();
+          const long iterations0 = integrator.statistics().newton_iterations;
+          integrator.advance_to(t_next);
+          for (;;) {
+            const Eigen::VectorXd& qa = integrator.q();
+            double pen = 0;
+            for (const cartilage::ContactPairReport& rep : contact_reports(qa))
+              pen = std::max(pen, rep.counts.max_penetration_m);
+            const double def = max_abs_deflection(qa, t_next);
+            if (!(pen > opt.contact.augment_tolerance * def) || step_augmentations == max_augmentations) break;
+            for (int k = 0; k < system.num_contacts(); ++k)
+              system.set_contact_multipliers(k, system.updated_contact_multipliers(k, qa));
+            // restore() rewinds the counters too: keep this attempt's work.
+            augmentation_iterations += integrator.statistics().newton_iterations - iterations0;
+            integrator.restore(start);
+            integrator.advance_to(t_next);
+            ++step_augmentations;
+          }
         }
         const double wall = now_s() - w0;
         const numerics::IntegratorStatistics& s = integrator.statistics();
@@ -1043,7 +1080,10 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         surface_output::StepRecord sr;
         sr.time = t_next;
         sr.dt = rec.dt;
-        sr.newton_iterations = static_cast<int>(s.newton_iterations - last_iterations);
+        sr.newton_iterations = static_cast<int>(s.newton_iterations - last_iterations + augmentation_iterations);
+        sr.augmentations = step_augmentations;
+        total_augmentations += step_augmentations;
+        total_augmentation_iterations += augmentation_iterations;
         sr.residual_N = rl;
         sr.residual_tolerance_N = res.residual_tolerance_N;
         sr.rejections = static_cast<int>(s.rejected_steps - last_rejections);
@@ -1189,7 +1229,13 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   const numerics::IntegratorStatistics& s = integrator.statistics();
   const cartilage::CoupledSystemStatistics& cs = system.statistics();
   out.set_solver_attribute("steps", static_cast<std::int64_t>(s.steps));
-  out.set_solver_attribute("newton_iterations", static_cast<std::int64_t>(s.newton_iterations));
+  out.set_solver_attribute("newton_iterations",
+                           static_cast<std::int64_t>(s.newton_iterations + total_augmentation_iterations));
+  if (max_augmentations > 0) {
+    out.set_solver_attribute("contact_augmentations", static_cast<std::int64_t>(total_augmentations));
+    out.set_solver_attribute("augmentation_newton_iterations",
+                             static_cast<std::int64_t>(total_augmentation_iterations));
+  }
   out.set_solver_attribute("rejected_steps", static_cast<std::int64_t>(s.rejected_steps));
   out.set_solver_attribute("factorizations", static_cast<std::int64_t>(s.factorizations));
   out.set_solver_attribute("symbolic_analyses", static_cast<std::int64_t>(s.symbolic_analyses));
@@ -1229,7 +1275,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     out.set_solver_attribute("max_penetration_m", res.max_penetration_m);
   }
   res.steps = s.steps;
-  res.newton_iterations = s.newton_iterations;
+  res.newton_iterations = s.newton_iterations + total_augmentation_iterations;
   res.rejected_steps = s.rejected_steps;
   res.factorizations = s.factorizations;
   res.assembly_s = s.assembly_s;
