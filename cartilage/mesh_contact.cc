@@ -91,13 +91,15 @@ T gap_kernel(ContactKind kind, const V3<T>* x, double sign, V3<T>& n, T* w, T* p
     const V3<T> c = x[1] + u * (x[2] - x[1]);
     const V3<T> r = c - x[0];
     const T l = sqrt(r.squaredNorm());
-    n = r / l;
+    // sign = -1: the vertex is in front (an augmented contact at a
+    // positive gap): n = (x0 - c)/|x0 - c| and g = +|x0 - c|.
+    n = (sign / l) * r;
     w[0] = T(1.0);
     w[1] = -(T(1.0) - u);
     w[2] = -u;
     w[3] = T(0.0);
     if (p1) *p1 = u;
-    return -l;
+    return -sign * l;
   }
   const V3<T> ea = x[1] - x[0], eb = x[3] - x[2], r = x[0] - x[2];
   const V3<T> m = ea.cross(eb);
@@ -491,6 +493,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       if (!(h.signed_distance < offset)) continue;  // in front: no contact
       ContactPoint c;
       c.offset = offset;
+      c.gap = h.signed_distance;  // its sign orients edge and corner contacts below
       const int tri[3] = {Sf.F(h.triangle, 0), Sf.F(h.triangle, 1), Sf.F(h.triangle, 2)};
       const int f = h.closest.feature;
       if (f == 0) {
@@ -570,6 +573,8 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     for (int j = 0; j < 4; ++j) x[j] = row(*X[c.side[j]], c.node[j]);
     double sign = 1.0;
     if (c.kind == ContactKind::kEdgeEdge) sign = c.normal.dot((x[1] - x[0]).cross(x[3] - x[2])) >= 0 ? 1.0 : -1.0;
+    else if (c.kind != ContactKind::kVertexFace && c.gap > 0)
+      sign = -1.0;  // augmented contact in front of an edge or corner: g = +|x0 - c|
     double rho[3] = {1, 1, 1};
     if (c.fade_edge == 0) {
       const ContactSurface& Sf = *S[c.side[1]];

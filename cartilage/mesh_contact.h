@@ -291,7 +291,8 @@ Eigen::VectorXd faded_vertex_weights(const ContactSurface& s);
 
 /// The gap function and its exact gradient for four points (for tests):
 /// vertex-face (x0 = vertex, x1..x3 = triangle) or edge-edge (x0, x1 = first
-/// edge, x2, x3 = second edge; `sign` orients n). Returns g; G = dg/dx.
+/// edge, x2, x3 = second edge; `sign` orients n; for vertex-edge and vertex-vertex, sign = -1
+/// is a vertex in front of the feature, g = +|x0 - c|). Returns g; G = dg/dx.
 double contact_gap(ContactKind kind, const std::array<Eigen::Vector3d, 4>& x, double sign,
                    Eigen::Matrix<double, 12, 1>* G, Eigen::Matrix<double, 12, 12>* H);
 

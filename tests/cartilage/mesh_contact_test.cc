@@ -55,13 +55,18 @@ TEST(MeshContact, GapGradientAndHessianMatchFiniteDifferences) {
                                              Eigen::Vector3d(0.6e-3, -0.05e-3, 0.0),
                                              Eigen::Vector3d(0.05e-3, -0.7e-3, 0.11e-3),
                                              Eigen::Vector3d(-0.1e-3, 0.8e-3, 0.09e-3)};
-  const char* names[4] = {"vertex-face", "edge-edge", "vertex-edge", "vertex-vertex"};
-  for (int kind = 0; kind < 4; ++kind) {
-    const ContactKind k = static_cast<ContactKind>(kind);
+  const char* names[6] = {"vertex-face", "edge-edge", "vertex-edge", "vertex-vertex", "vertex-edge in front",
+                          "vertex-vertex in front"};
+  // The last two: sign = -1, a vertex in front of the feature (augmented
+  // contacts at positive gaps), g = +|x0 - c| = minus the behind value.
+  for (int kind = 0; kind < 6; ++kind) {
+    const ContactKind k = static_cast<ContactKind>(kind < 4 ? kind : kind - 2);
+    const double sign = kind < 4 ? 1.0 : -1.0;
     const auto& x = kind == 1 ? ee : vf;
     Vec12 G;
     Eigen::Matrix<double, 12, 12> H;
-    const double g = contact_gap(k, x, 1.0, &G, &H);
+    const double g = contact_gap(k, x, sign, &G, &H);
+    if (kind >= 4) { EXPECT_EQ(g, -contact_gap(k, x, 1.0, nullptr, nullptr)); }
     EXPECT_TRUE(std::isfinite(g));
     const double h = 1e-7;
     double errG = 0, errH = 0;
@@ -70,8 +75,8 @@ TEST(MeshContact, GapGradientAndHessianMatchFiniteDifferences) {
       xp[j / 3](j % 3) += h;
       xm[j / 3](j % 3) -= h;
       Vec12 Gp, Gm;
-      const double gp = contact_gap(k, xp, 1.0, &Gp, nullptr);
-      const double gm = contact_gap(k, xm, 1.0, &Gm, nullptr);
+      const double gp = contact_gap(k, xp, sign, &Gp, nullptr);
+      const double gm = contact_gap(k, xm, sign, &Gm, nullptr);
       errG = std::max(errG, std::abs((gp - gm) / (2 * h) - G(j)));
       errH = std::max(errH, ((Gp - Gm) / (2 * h) - H.col(j)).cwiseAbs().maxCoeff());
     }
