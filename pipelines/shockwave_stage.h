@@ -60,6 +60,7 @@ struct ShockwaveStageOptions {
   double applicator_size_m = 20 * common::units::mm;
   double applicator_thickness_m = 1 * common::units::mm;
   std::vector<double> efd_j_per_m2{0.33 * common::units::mj_per_mm2};
+  std::string efd_reference = "water";  ///< water|applicator (docs/shockwave.md, "The pulse")
   double efd_impedance = 1.5e6;  ///< [Pa s/m]
   double pulse_rise_time_s = 1.5 * common::units::us;
   double pulse_fall_time_s = 1.5 * common::units::us;
