@@ -370,7 +370,7 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
         pulse = std::make_unique<shockwave::PressurePulse>(shape, efd, o.efd_impedance);
         load = [p = pulse.get()](double t) { return (*p)(t); };
       }
-      rr.peak_pressure_pa = pulse->peak();
+      rr.peak_pressure_pa = load ? pulse->peak() : 0.0;  // driven: measured over the run
     } else {
       // The femur's cut face (top lattice layer) moves down by the displacement
       // with a smooth velocity ramp, the tibia's (bottom layer) is fixed; then
@@ -423,10 +423,13 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
         << sim.fastest_p_wave_tissue() << ", " << number(sim.fastest_p_wave()) << " m/s) "
         << number(m.lattice.diameter / sim.fastest_p_wave() * 1e9) << " ns), " << steps << " steps";
       if (sim.filtration()) s << ", filtration stages (fast bonds) " << sim.filtration()->substeps();
-      if (pulse)
-        s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa, velocity " << number(pulse->velocity_peak())
-          << " m/s (" << o.efd_reference << ", rho c " << number(pulse->impedance()) << " Pa s/m; T_p "
-          << number(pulse->time_to_90_percent() * 1e6) << " us)";
+      if (pulse && load)
+        s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa on the plate's outer face (efd_reference water, rho c "
+          << number(pulse->impedance()) << " Pa s/m; T_p " << number(pulse->time_to_90_percent() * 1e6) << " us)";
+      else if (pulse)
+        s << ", plate velocity peak " << number(pulse->velocity_peak()) << " m/s on its outer face (efd_reference "
+          << "applicator, rho c " << number(pulse->impedance()) << " Pa s/m; T_p " << number(pulse->time_to_90_percent() * 1e6)
+          << " us)";
       common::log_info(s.str());
     }
     if (dry_run) {
@@ -465,8 +468,22 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       for (int k : top) f += sim.constraint_forces()[k].y();
       return f;  // the pairs push the platen up: compressive force > 0
     };
+    // The velocity-driven plate (efd_reference applicator): the pressure the
+    // driven face exerts on the body, -(pairs' force on the face along n) /
+    // face area; its peak over every step is the run's pulse peak.
+    const bool driven = pulse && !load;
+    double face_area = 0.0;
+    if (driven)
+      for (const common::Vec3& a : m.loaded.area) face_area += a.norm();
+    auto face_pressure = [&]() {
+      double f = 0.0;
+      for (const common::Vec3& c : sim.constraint_forces()) f += c.dot(m.loaded.normal);
+      return -f / face_area;
+    };
+    if (driven) rr.peak_pressure_pa = 0.0;
     for (std::int64_t s = 0; s < steps; ++s) {
       sim.step();
+      if (driven) rr.peak_pressure_pa = std::max(rr.peak_pressure_pa, face_pressure());
       if (sm.bar) {
         double a = 0, b = 0;
         for (int i : st1) a += sim.pressure()[i];
@@ -477,7 +494,8 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       if (s % every == 0 || s + 1 == steps) {
         double disp = 0.0;
         if (compression && !top.empty()) disp = -sim.displacement(run_model.constraints[top[0]].automaton).y();
-        writer.append_frame(sim, load ? load(sim.time()) : 0.0, crit, compression ? top_force() : 0.0, disp);
+        writer.append_frame(sim, load ? load(sim.time()) : (driven ? face_pressure() : 0.0), crit,
+                            compression ? top_force() : 0.0, disp);
         ++rr.frames;
       }
       if ((s & 15) == 0) bar.update(s + 1);
