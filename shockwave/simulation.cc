@@ -161,7 +161,7 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
   }
   build_rows();
   {
-    // Loaded automata and constraints by row (forces_and_integrate).
+    // Loaded automata and constraints by row (step_rows).
     std::vector<std::int32_t> row_of(n_);
     for (size_t r = 0; r < rows_.size(); ++r)
       for (int i = rows_[r].start; i < rows_[r].start + rows_[r].len; ++i) row_of[i] = static_cast<std::int32_t>(r);
@@ -401,7 +401,7 @@ void Simulation::build_rows() {
   }
   max_row_ = 0;
   for (const Row& r : rows_) max_row_ = std::max(max_row_, r.len);
-  // The lag of forces_and_integrate and its ring of accumulators.
+  // The lag of step_rows and its ring of accumulators.
   {
     std::vector<std::int32_t> row_of(n);
     for (size_t r = 0; r < rows_.size(); ++r)
@@ -457,97 +457,27 @@ void Simulation::build_rows() {
 }
 
 // ---------------------------------------------------------------------------
-// A. Stress predictor.
-template <bool kPeriodic, bool kFluid, bool kLinear>
-SW_CLONES void Simulation::predictor() {
-  const int n = n_, K = K_;
-  const double dt = dt_;
-  const double* __restrict px = pos_[cur_][0].data();
-  const double* __restrict py = pos_[cur_][1].data();
-  const double* __restrict pz = pos_[cur_][2].data();
-  const double* __restrict vx = vel_[cur_][0].data();
-  const double* __restrict vy = vel_[cur_][1].data();
-  const double* __restrict vz = vel_[cur_][2].data();
-  const std::int32_t* __restrict nb = model_.neighbours.data();
-  const double* __restrict w = wa_.data();
-  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
-  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
-  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
-  const int nrows = static_cast<int>(rows_.size());
-#pragma omp parallel if (n >= kParallelMin)
-  {
-    std::vector<double> sum_buf(static_cast<size_t>(max_row_));
-    double* __restrict sum = sum_buf.data();
-#pragma omp for schedule(static)
-    for (int row = 0; row < nrows; ++row) {
-      const int a0 = rows_[row].start, len = rows_[row].len, a1 = a0 + len;
-      for (int k = 0; k < len; ++k) sum[k] = 0.0;
-      for (int s = 0; s < K; ++s) {
-        const Run run = runs_[static_cast<size_t>(row) * K + s];
-        const int off = run.off;
-        const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
-#pragma omp simd
-        for (int i = run.a; i < run.b; ++i) {
-          const int j = i + off;
-          sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
-                                                 vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ux, uy, uz);
-        }
-        const size_t rs = static_cast<size_t>(row) * K + s;
-        for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
-          const int i = extra_[e];
-          const int j = nb[static_cast<size_t>(s) * n + i];
-          double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
-          if constexpr (kPeriodic) {
-            dx = wrap(dx, Lx, iLx);
-            dy = wrap(dy, Ly, iLy);
-            dz = wrap(dz, Lz, iLz);
-          }
-          sum[i - a0] += predictor_side<kLinear>(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j],
-                                                 dt, ux, uy, uz);
-        }
-      }
-      for (int i = a0; i < a1; ++i) {
-        const int ti = model_.tissue[i];
-        const double dtheta = f_[i] * sv * sum[i - a0];
-        theta_[i] += dtheta;
-        double dp = 0.0;
-        if constexpr (kFluid) {
-          if (poro_[ti]) {
-            if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
-            const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
-            dp = p - pore_[i];
-            pore_[i] = p;
-          }
-        }
-        // Predicted mean stress increment (equation of state), then A7/A9's b.
-        const double fa_dp = f_[i] * a_[ti] * dp;
-        const double dsm = K_bulk_[ti] * dtheta - fa_dp;
-        b_[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
-      }
-    }
-  }
-}
-
-// ---------------------------------------------------------------------------
-// B. Pair forces (A3, A7-A9), averaged stress (A4-A6), kick (A1) and drift in
-// one sweep over the rows, so that each automaton's data is loaded once per
-// step. Row r:
+// One step in one sweep over the rows, so that each automaton's data is
+// loaded once per step. Row r:
+//  A (predictor_row): the stress predictor, b and the pore pressure;
 //  B1 (pair_row): the pairs its automata own (their forward directions): new
 //     pair state, in place, and the owner's share of force, moment, the trace
-//     of A4 and the strain, into the row's accumulators;
+//     of A4 and the strain, into the row's accumulators (A3, A7-A9);
 //  B2 (integrate_row): the other half of every pair (from the new pair state
-//     of its owner), the load, A5-A6, kick and drift.
-// B2 of row r needs the pair state of every owner of a backward pair, which
-// lies at most lag_ rows away, so a thread's sweep runs B1 of row k and then
-// B2 of row k - lag_; the accumulators of the rows in between live in a
+//     of its owner), the load, A5-A6, kick (A1) and drift.
+// Every bond joins rows at most lag_ apart: B1 of row r needs b of rows
+// r +- lag_, B2 of row r the pair state of owners in rows r +- lag_. A
+// thread's sweep therefore runs A of row k, B1 of row k - lag_ and B2 of row
+// k - 2 lag_; the accumulators of the rows between B1 and B2 live in a
 // per-thread ring of lag_ + 1 rows (it stays in cache). With several threads
-// each takes a contiguous block of rows; the first and last lag_ rows of a
-// block, whose owners may lie in a neighbour's block, keep their
-// accumulators until every B1 is done (after a barrier). Every automaton
-// gets the same operations in the same order (B1 in direction order, then
-// B2 in direction order), whatever the thread count.
+// each takes a contiguous block of rows: A of its first and last lag_ rows
+// runs before a barrier (the neighbouring blocks' B1 reads their b), B2 of
+// those rows after a second one (their owners may lie in a neighbouring
+// block), with their accumulators kept meanwhile. Every automaton gets the
+// same operations in the same order (B1 in direction order, then B2 in
+// direction order), whatever the thread count.
 template <bool kPeriodic, bool kFluid, bool kLinear>
-SW_CLONES void Simulation::forces_and_integrate() {
+SW_CLONES void Simulation::step_rows() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
   const int c = cur_, o = 1 - cur_;
@@ -577,7 +507,7 @@ SW_CLONES void Simulation::forces_and_integrate() {
   double* __restrict tzp = tz_.data();
   const std::int32_t* __restrict nb = model_.neighbours.data();
   const double* __restrict w = wa_.data();
-  const double* __restrict b = b_.data();
+  const double* b = b_.data();  // written by A (predictor_row), read by B1
   const double S = model_.lattice.contact_area;
   const double R = model_.lattice.radius;
   const double invV = 1.0 / model_.lattice.cell_volume;
@@ -598,6 +528,56 @@ SW_CLONES void Simulation::forces_and_integrate() {
   double* __restrict Ppk = peak_pressure_.data();
   double* __restrict Epk = peak_distortional_.data();
   const double d0 = model_.lattice.diameter;
+
+  // A of one row (sum: scratch of max_row_ doubles).
+  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
+  double* bw = b_.data();
+  auto predictor_row = [&](int row, double* __restrict sum) __attribute__((always_inline)) {
+    const int a0 = rows_[row].start, len = rows_[row].len, a1 = a0 + len;
+    for (int k = 0; k < len; ++k) sum[k] = 0.0;
+    for (int s = 0; s < K; ++s) {
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const double ex = model_.lattice.unit[s].x(), ey = model_.lattice.unit[s].y(), ez = model_.lattice.unit[s].z();
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;
+        sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
+                                               vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ex, ey, ez);
+      }
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
+        const int j = nb[static_cast<size_t>(s) * n + i];
+        double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        sum[i - a0] += predictor_side<kLinear>(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j],
+                                               dt, ex, ey, ez);
+      }
+    }
+    for (int i = a0; i < a1; ++i) {
+      const int ti = model_.tissue[i];
+      const double dtheta = f_[i] * sv * sum[i - a0];
+      theta_[i] += dtheta;
+      double dp = 0.0;
+      if constexpr (kFluid) {
+        if (poro_[ti]) {
+          if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
+          const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
+          dp = p - pore_[i];
+          pore_[i] = p;
+        }
+      }
+      // Predicted mean stress increment (equation of state), then A7/A9's b.
+      const double fa_dp = f_[i] * a_[ti] * dp;
+      const double dsm = K_bulk_[ti] * dtheta - fa_dp;
+      bw[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
+    }
+  };
 
   // B1 of one row; accumulator a of automaton i at acc[a * stride + i - a0].
   auto pair_row = [&](int row, double* __restrict acc, size_t stride) __attribute__((always_inline)) {
@@ -880,13 +860,21 @@ SW_CLONES void Simulation::forces_and_integrate() {
       stride = rstride;
       return ring + ring_off_[row];
     };
-    for (int k = R0; k < R1 + lag; ++k) {
+    // A of the rows whose b the neighbouring blocks' B1 reads.
+    std::vector<double> sum_buf(static_cast<size_t>(max_row_));
+    double* sum = sum_buf.data();
+    for (int k = R0; k < lo; ++k) predictor_row(k, sum);
+    for (int k = hi; k < R1; ++k) predictor_row(k, sum);
+#pragma omp barrier
+    for (int k = R0; k < R1 + 2 * lag; ++k) {
       size_t stride = 0;
-      if (k < R1) {
-        double* acc = acc_of(k, stride);
-        pair_row(k, acc, stride);
+      if (k >= lo && k < hi) predictor_row(k, sum);
+      const int r = k - lag;
+      if (r >= R0 && r < R1) {
+        double* acc = acc_of(r, stride);
+        pair_row(r, acc, stride);
       }
-      const int g = k - lag;
+      const int g = k - 2 * lag;
       if (g >= lo && g < hi) {
         double* acc = acc_of(g, stride);
         integrate_row(g, acc, stride);
@@ -917,8 +905,7 @@ void Simulation::step() {
   const bool linear = options_.geometry == Geometry::kLinear;
 #define SW_STEP(P, F, L)        \
   {                             \
-    predictor<P, F, L>();       \
-    forces_and_integrate<P, F, L>(); \
+    step_rows<P, F, L>();       \
   }
   if (periodic_) {
     if (fluid) { if (linear) SW_STEP(true, true, true) else SW_STEP(true, true, false) }

@@ -223,9 +223,7 @@ class Simulation {
   };
   void build_rows();
   template <bool kPeriodic, bool kFluid, bool kLinear>
-  void predictor();
-  template <bool kPeriodic, bool kFluid, bool kLinear>
-  void forces_and_integrate();
+  void step_rows();
   double potential_energy() const;
 
   const Model& model_;
@@ -253,9 +251,9 @@ class Simulation {
   std::vector<std::int32_t> extra_;        ///< automata of the general path, by row and direction
   std::vector<std::int32_t> extra_start_;  ///< [row * K + direction] -> first index into extra_
   int max_row_ = 0;
-  /// Largest row distance of a bond: a row's pairs are all owned within lag_ rows.
+  /// Largest row distance of a bond (step_rows).
   int lag_ = 0;
-  /// Accumulators of forces_and_integrate (F (3), M (3), trace of the A4 sum
+  /// Accumulators of step_rows (F (3), M (3), trace of the A4 sum
   /// (1), strain sum (6)) per thread: a ring of ring_cap_ automata (row r at
   /// ring_off_[r]) and the rows that wait for the other threads (scratch, not
   /// state: rewritten every step).
