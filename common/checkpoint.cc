@@ -70,7 +70,7 @@ bool read_checkpoint(const fs::path& path, const std::string& format, std::int64
   try {
     const H5File f(path.string(), H5File::Mode::kRead);
     if (!f.has_attribute("/", "format") || f.attribute_string("/", "format") != format) {
-      why = "not a " + format;
+      why = "not an " + format;
       return false;
     }
     if (f.attribute_int("/", "format_version") != format_version) {
