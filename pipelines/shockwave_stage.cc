@@ -136,8 +136,11 @@ void ShockwaveStageOptions::declare(common::OptionVisitor& v) {
   v.number("applicator_thickness_mm", applicator_thickness_m, Unit::kMillimetre, {0.1, 10}, "copper plate thickness");
   v.number_list("efd_mj_per_mm2", efd_j_per_m2, Unit::kMillijoulePerSquareMillimetre, {1, 20},
                 "energy flux densities (seed eq. 2), one run each (the seed's 0.12, 0.33, 0.8)");
+  v.text("efd_reference", efd_reference, "water|applicator",
+         "reading of seed eq. 2: water (v the wave's particle velocity in efd_impedance, its pressure on the plate) or "
+         "applicator (v the plate's velocity, rho c the plate's p-wave impedance, the plate's outer face driven by v)");
   v.number("efd_impedance", efd_impedance, Unit::kNone, {1e5, 1e8},
-           "acoustic impedance rho c [Pa s/m] the EFD is quoted in (water, 1.5e6)");
+           "efd_reference water: acoustic impedance rho c [Pa s/m] the EFD is quoted in (water, 1.5e6)");
   v.number("pulse_rise_time_us", pulse_rise_time_s, Unit::kMicrosecond, {0.01, 1000}, "rise of the pressure pulse, 0 to peak");
   v.number("pulse_fall_time_us", pulse_fall_time_s, Unit::kMicrosecond, {0.01, 1000}, "fall at the end of the positive phase");
   v.number("pulse_positive_duration_us", pulse_positive_duration_s, Unit::kMicrosecond, {0.02, 10000}, "positive phase");
@@ -354,9 +357,20 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       shape.positive_duration = o.pulse_positive_duration_s;
       shape.tail_duration = o.pulse_tail_duration_s;
       shape.tail_fraction = o.pulse_tail_fraction;
-      pulse = std::make_unique<shockwave::PressurePulse>(shape, efd, o.efd_impedance);
-      rr.peak_pressure_pa = pulse->peak();
-      load = [p = pulse.get()](double t) { return (*p)(t); };
+      if (o.efd_reference == "applicator") {
+        // The plate's material from the tissue table (the model's plate has
+        // its density scaled to the lattice layers, knee_model.cc; the bar
+        // has no plate and its face moves as the plate's would).
+        const shockwave::Tissue cu = (o.tissue_table.empty() ? shockwave::default_knee_tissues()
+                                                             : read_tissue_table(o.tissue_table))[shockwave::kApplicator];
+        const double z = shockwave::p_wave_impedance(cu.density, cu.bulk_modulus, cu.shear_modulus);
+        pulse = std::make_unique<shockwave::PressurePulse>(shape, efd, z);
+        shockwave::drive_loaded_face(run_model, *pulse);
+      } else {
+        pulse = std::make_unique<shockwave::PressurePulse>(shape, efd, o.efd_impedance);
+        load = [p = pulse.get()](double t) { return (*p)(t); };
+      }
+      rr.peak_pressure_pa = load ? pulse->peak() : 0.0;  // driven: measured over the run
     } else {
       // The femur's cut face (top lattice layer) moves down by the displacement
       // with a smooth velocity ramp, the tibia's (bottom layer) is fixed; then
@@ -409,7 +423,13 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
         << sim.fastest_p_wave_tissue() << ", " << number(sim.fastest_p_wave()) << " m/s) "
         << number(m.lattice.diameter / sim.fastest_p_wave() * 1e9) << " ns), " << steps << " steps";
       if (sim.filtration()) s << ", filtration stages (fast bonds) " << sim.filtration()->substeps();
-      if (pulse) s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa (T_p " << number(pulse->time_to_90_percent() * 1e6) << " us)";
+      if (pulse && load)
+        s << ", pulse peak " << number(pulse->peak() * 1e-6) << " MPa on the plate's outer face (efd_reference water, rho c "
+          << number(pulse->impedance()) << " Pa s/m; T_p " << number(pulse->time_to_90_percent() * 1e6) << " us)";
+      else if (pulse)
+        s << ", plate velocity peak " << number(pulse->velocity_peak()) << " m/s on its outer face (efd_reference "
+          << "applicator, rho c " << number(pulse->impedance()) << " Pa s/m; T_p " << number(pulse->time_to_90_percent() * 1e6)
+          << " us)";
       common::log_info(s.str());
     }
     if (dry_run) {
@@ -448,8 +468,22 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       for (int k : top) f += sim.constraint_forces()[k].y();
       return f;  // the pairs push the platen up: compressive force > 0
     };
+    // The velocity-driven plate (efd_reference applicator): the pressure the
+    // driven face exerts on the body, -(pairs' force on the face along n) /
+    // face area; its peak over every step is the run's pulse peak.
+    const bool driven = pulse && !load;
+    double face_area = 0.0;
+    if (driven)
+      for (const common::Vec3& a : m.loaded.area) face_area += a.norm();
+    auto face_pressure = [&]() {
+      double f = 0.0;
+      for (const common::Vec3& c : sim.constraint_forces()) f += c.dot(m.loaded.normal);
+      return -f / face_area;
+    };
+    if (driven) rr.peak_pressure_pa = 0.0;
     for (std::int64_t s = 0; s < steps; ++s) {
       sim.step();
+      if (driven) rr.peak_pressure_pa = std::max(rr.peak_pressure_pa, face_pressure());
       if (sm.bar) {
         double a = 0, b = 0;
         for (int i : st1) a += sim.pressure()[i];
@@ -460,7 +494,8 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       if (s % every == 0 || s + 1 == steps) {
         double disp = 0.0;
         if (compression && !top.empty()) disp = -sim.displacement(run_model.constraints[top[0]].automaton).y();
-        writer.append_frame(sim, load ? load(sim.time()) : 0.0, crit, compression ? top_force() : 0.0, disp);
+        writer.append_frame(sim, load ? load(sim.time()) : (driven ? face_pressure() : 0.0), crit,
+                            compression ? top_force() : 0.0, disp);
         ++rr.frames;
       }
       if ((s & 15) == 0) bar.update(s + 1);
@@ -503,7 +538,8 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
         {"pulse_t_p_s", pulse ? pulse->time_to_90_percent() : 0.0},
         {"efd_positive_integral_j_per_m2", pulse ? pulse->efd_positive_integral() : 0.0},
         {"efd_total_integral_j_per_m2", pulse ? pulse->efd_total_integral() : 0.0},
-        {"efd_impedance", o.efd_impedance},
+        {"efd_impedance", pulse ? pulse->impedance() : o.efd_impedance},
+        {"pulse_velocity_peak_m_per_s", pulse ? pulse->velocity_peak() : 0.0},
         {"energy_residual", rr.energy_residual},
         {"compression_force_n", rr.force_n},
         {"compression_displacement_m", rr.displacement_m},

@@ -60,6 +60,7 @@ struct ShockwaveStageOptions {
   double applicator_size_m = 20 * common::units::mm;
   double applicator_thickness_m = 1 * common::units::mm;
   std::vector<double> efd_j_per_m2{0.33 * common::units::mj_per_mm2};
+  std::string efd_reference = "applicator";  ///< water|applicator (docs/shockwave.md, "The pulse")
   double efd_impedance = 1.5e6;  ///< [Pa s/m]
   double pulse_rise_time_s = 1.5 * common::units::us;
   double pulse_fall_time_s = 1.5 * common::units::us;
@@ -112,7 +113,7 @@ struct ShockwaveRunResult {
   std::string label;            ///< "efd0.33" or "compression"
   std::filesystem::path file;   ///< its HDF5 file
   double efd_j_per_m2 = 0.0;    ///< 0 for compression
-  double peak_pressure_pa = 0.0;  ///< of the applied pulse
+  double peak_pressure_pa = 0.0;  ///< of the applied pulse (applicator reading: of the driven face on the body)
   std::int64_t steps = 0;
   int frames = 0;
   double wall_s = 0.0;

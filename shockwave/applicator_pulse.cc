@@ -12,6 +12,14 @@ constexpr double kPi = 3.14159265358979323846;
 std::string us(double t) { return std::to_string(t * 1e6) + " us"; }
 }  // namespace
 
+double p_wave_impedance(double density, double bulk_modulus, double shear_modulus) {
+  const double m = bulk_modulus + 4.0 * shear_modulus / 3.0;
+  if (!(density > 0.0 && m > 0.0))
+    throw common::InputError("applicator pulse", 0, "expected a density and p-wave modulus > 0, found " +
+                                                        std::to_string(density) + " kg/m^3, " + std::to_string(m) + " Pa");
+  return std::sqrt(density * m);
+}
+
 PressurePulse::PressurePulse(const PulseShape& s, double efd, double impedance)
     : shape_(s), efd_(efd), impedance_(impedance) {
   const std::string src = "applicator pulse";
@@ -69,5 +77,24 @@ double PressurePulse::efd_positive_integral() const {
   return integral_p2(0.0, shape_.positive_duration) / impedance_;
 }
 double PressurePulse::efd_total_integral() const { return integral_p2(0.0, duration()) / impedance_; }
+
+void drive_loaded_face(Model& model, const PressurePulse& pulse) {
+  const std::string src = "applicator pulse";
+  const PressureSurface& face = model.loaded;
+  if (face.automata.empty()) throw common::InputError(src, 0, "expected a loaded surface to drive, found none");
+  int axis = -1;
+  for (int k = 0; k < 3; ++k)
+    if (std::abs(std::abs(face.normal[k]) - 1.0) < 1e-12) axis = k;
+  if (axis < 0)
+    throw common::InputError(src, 0, "expected the loaded surface's normal along a lattice axis, found (" +
+                                         std::to_string(face.normal.x()) + ", " + std::to_string(face.normal.y()) + ", " +
+                                         std::to_string(face.normal.z()) + ")");
+  if (model.constraint_scale)
+    throw common::InputError(src, 0, "expected no other prescribed velocities, found a velocity scale already set");
+  common::Vec3 v = common::Vec3::Zero();
+  v[axis] = pulse.velocity_peak() * face.normal[axis];
+  for (int a : face.automata) model.constraints.push_back({a, static_cast<std::uint8_t>(1u << axis), v});
+  model.constraint_scale = [pulse](double t) { return pulse.normalized(t); };
+}
 
 }  // namespace arthrosim::shockwave

@@ -27,9 +27,25 @@
 // its definition (1/(rho c)) int p^2 dt over the positive phase and over the
 // whole pulse (references.md, "Shockwave").
 //
+// Two readings of eq. 2 drive the plate (option `efd_reference`):
+//  - water: v is the particle velocity of the wave in water (impedance
+//    `efd_impedance`); its pressure p(t) = rho c v(t) acts on the plate's
+//    outer face (PressurePulse as the load of Simulation).
+//  - applicator: v is the velocity of the plate ("calculated from the
+//    parameters of the plates", seed section 1), rho c the plate's p-wave
+//    impedance sqrt(rho (K + 4G/3)) (copper: 3.91e7 Pa s/m); the plate's outer
+//    face moves with v(t) = v_peak s(t) along the surface normal
+//    (drive_loaded_face), v_peak = sqrt(2 PII / (rho c T_p)).
+//
 // Units: SI (s, Pa, J/m^2; 1 mJ/mm^2 = 1000 J/m^2).
 
+#include "shockwave/model.h"
+
 namespace arthrosim::shockwave {
+
+/// p-wave impedance rho c_p = sqrt(rho (K + 4G/3)) of an elastic solid
+/// [Pa s/m] (density [kg/m^3], moduli [Pa]).
+double p_wave_impedance(double density, double bulk_modulus, double shear_modulus);
 
 struct PulseShape {
   double rise_time = 1.5e-6;          ///< t_r [s], > 0
@@ -52,6 +68,8 @@ class PressurePulse {
   double normalized(double t) const;
 
   double peak() const { return peak_; }               ///< p_peak [Pa]
+  /// Velocity amplitude v of eq. 2, p_peak / (rho c) [m/s].
+  double velocity_peak() const { return peak_ / impedance_; }
   double time_to_90_percent() const { return t_p_; }  ///< T_p [s]
   double duration() const { return shape_.positive_duration + shape_.tail_duration; }
   double efd() const { return efd_; }                 ///< seed's PII [J/m^2]
@@ -69,5 +87,12 @@ class PressurePulse {
   double t_p_ = 0.0;
   double peak_ = 0.0;
 };
+
+/// The applicator reading: prescribe on every automaton of model.loaded the
+/// velocity v(t) = pulse.velocity_peak() * pulse.normalized(t) along the
+/// surface normal (into the body; the other axes stay free) by appending
+/// velocity constraints and setting model.constraint_scale. InputError if the
+/// surface is empty, already constrained or its normal is not a lattice axis.
+void drive_loaded_face(Model& model, const PressurePulse& pulse);
 
 }  // namespace arthrosim::shockwave

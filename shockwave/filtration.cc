@@ -113,6 +113,7 @@ FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model
     fast_row_.push_back(static_cast<std::int64_t>(fast_col_.size()));
     fast_m_.push_back(m.constants[ti].biot_modulus);
     fast_a_.push_back(m.constants[ti].a);
+    fast_tissue_.push_back(static_cast<std::uint8_t>(ti));
   }
   // Stages of the fast bonds (RKL2, filtration.h): stable for dt lambda_max
   // <= (s^2 + s - 2)/2, lambda_max of A = M/V L (L the fast bonds' weighted graph
@@ -147,13 +148,15 @@ FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model
     while (0.5 * (static_cast<double>(substeps_) * (substeps_ + 1) - 2.0) < need) ++substeps_;
   }
   p_.assign(n, 0.0);
-  fast_theta_.assign(fast_list_.size(), 0.0);
+  fast_ath_.assign(fast_list_.size(), 0.0);
+  // One conductance for every fast bond (the knee: cancellous bone only):
+  // the stages then read no conductance index.
+  fast_uniform_ = !fast_c_.empty() && std::all_of(fast_c_.begin(), fast_c_.end(), [&](std::uint8_t q) { return q == fast_c_[0]; });
   for (auto& y : fast_y_) y.assign(fast_list_.size(), 0.0);
   fast_y0_.assign(fast_list_.size(), 0.0);
   fast_l0_.assign(fast_list_.size(), 0.0);
   fast_pstart_.assign(fast_list_.size(), 0.0);
   for (auto& p : fast_p_) p.assign(fast_list_.size() + 1, 0.0);  // last: a drained neighbour (P = 0)
-  slow_delta_.assign(fluid_.size(), 0.0);
   dissip_.assign(n, 0.0);
 }
 
@@ -166,39 +169,41 @@ void FiltrationTerm::pressures(const std::vector<int>& list, const double* theta
   }
 }
 
-void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipation) {
+void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipation, const double* pore) {
   const Model& m = model_;
   const double V = m.lattice.cell_volume;
   const bool track = dissipation != nullptr;
   if (track) std::fill(dissip_.begin(), dissip_.end(), 0.0);
   // Flux sum over one automaton's bonds of one class, Jacobi (all fluxes
   // from the same pressures); "no transfer where rho <= rho_0": a pair with
-  // both pressures <= 0 exchanges nothing.
+  // both pressures <= 0 exchanges nothing. `cond` null: every bond has the
+  // fast bonds' one conductance.
   const double* ctab = ctab_.data();
+  const double cuniform = fast_uniform_ ? ctab_[fast_c_[0]] : 0.0;
   auto flux = [&](const std::int64_t* row, const std::int32_t* col, const std::uint8_t* cond, std::int64_t k,
                   const double* p, double pi, double h, double* dis) {
     double sum = 0.0, e = 0.0;
     for (std::int64_t q = row[k]; q < row[k + 1]; ++q) {
       const double pj = p[col[q]];
       const double dp = (pi > 0.0 || pj > 0.0) ? pj - pi : 0.0;
-      const double C = ctab[cond[q]];
+      const double C = cond ? ctab[cond[q]] : cuniform;
       sum += C * dp;
       e += C * dp * dp;
     }
     if (dis) *dis += 0.5 * h * e;  // each pair is seen from both sides
     return sum;
   };
-  // Slow bonds: one step of dt.
-  pressures(fluid_, theta, zeta);
+  // Slow bonds: one step of dt (the fluxes from the pressures of the old
+  // zeta, so zeta can be updated in the same loop).
+  if (!pore) pressures(fluid_, theta, zeta);
+  const double* p = pore ? pore : p_.data();
   const std::int64_t nf = static_cast<std::int64_t>(fluid_.size());
 #pragma omp parallel for schedule(static) if (nf >= kParallelMin)
   for (std::int64_t k = 0; k < nf; ++k) {
     const int i = fluid_[k];
-    slow_delta_[k] = dt_ / V * flux(slow_row_.data(), slow_col_.data(), slow_c_.data(), k, p_.data(), p_[i], dt_,
-                                    track ? &dissip_[i] : nullptr);
+    zeta[i] += dt_ / V * flux(slow_row_.data(), slow_col_.data(), slow_c_.data(), k, p, p[i], dt_,
+                              track ? &dissip_[i] : nullptr);
   }
-#pragma omp parallel for schedule(static) if (nf >= kParallelMin)
-  for (std::int64_t k = 0; k < nf; ++k) zeta[fluid_[k]] += slow_delta_[k];
   // Fast bonds: one RKL2 step of s stages on a compact copy of the fast set
   // (filtration.h; one parallel region). Y_0 and L(Y_0) are kept; Y_j (j >= 1)
   // in fast_y_[j % 3], its pressure in fast_p_[j % 2] (Y_0's in fast_p_[0]).
@@ -213,17 +218,21 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
     double* pstart = fast_pstart_.data();
     double* y[3] = {fast_y_[0].data(), fast_y_[1].data(), fast_y_[2].data()};
     double* pp[2] = {fast_p_[0].data(), fast_p_[1].data()};
-    const double* fm = fast_m_.data();
+    // M per tissue, a theta per fast automaton (the same products as
+    // fast_m_[k] * (y - fast_a_[k] theta)).
+    const double* mt = biot_modulus_.data();
+    const std::uint8_t* ft = fast_tissue_.data();
     const double* fa = fast_a_.data();
-    const double* th = fast_theta_.data();
+    double* ath = fast_ath_.data();
+    const std::uint8_t* fcond = fast_uniform_ ? nullptr : fast_c_.data();
 #pragma omp parallel if (nfast >= kParallelMin)
     {
 #pragma omp for schedule(static)
       for (std::int64_t k = 0; k < nfast; ++k) {
         const int i = fast_list_[k];
         y0[k] = zeta[i];
-        fast_theta_[k] = theta[i];
-        pp[0][k] = fm[k] * (y0[k] - fa[k] * fast_theta_[k]);
+        ath[k] = fa[k] * theta[i];
+        pp[0][k] = mt[ft[k]] * (y0[k] - ath[k]);
         pstart[k] = pp[0][k];
       }
       // Stage 1: Y_1 = Y_0 + b_1 w_1 dt L(Y_0).
@@ -234,11 +243,11 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
         double* pn = pp[1];
 #pragma omp for schedule(static)
         for (std::int64_t k = 0; k < nfast; ++k) {
-          const double f = flux(fast_row_.data(), fast_col_.data(), fast_c_.data(), k, p0, p0[k], 0.0, nullptr);
+          const double f = flux(fast_row_.data(), fast_col_.data(), fcond, k, p0, p0[k], 0.0, nullptr);
           ly0[k] = f;
           const double v = y0[k] + mut * f;
           yn[k] = v;
-          pn[k] = fm[k] * (v - fa[k] * th[k]);
+          pn[k] = mt[ft[k]] * (v - ath[k]);
         }
       }
       // Y_j = mu_j Y_{j-1} + nu_j Y_{j-2} + (1 - mu_j - nu_j) Y_0
@@ -255,10 +264,10 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
         double* pn = pp[j % 2];
 #pragma omp for schedule(static)
         for (std::int64_t k = 0; k < nfast; ++k) {
-          const double f = flux(fast_row_.data(), fast_col_.data(), fast_c_.data(), k, p1, p1[k], 0.0, nullptr);
+          const double f = flux(fast_row_.data(), fast_col_.data(), fcond, k, p1, p1[k], 0.0, nullptr);
           const double v = mu * y1[k] + nu * y2[k] + rest * y0[k] + mut * f + gat * ly0[k];
           yn[k] = v;
-          pn[k] = fm[k] * (v - fa[k] * th[k]);
+          pn[k] = mt[ft[k]] * (v - ath[k]);
         }
       }
       const double* ys = y[stages % 3];

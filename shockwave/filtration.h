@@ -59,8 +59,11 @@ class FiltrationTerm {
 
   /// Advances zeta over one mechanical step with theta held fixed.
   /// `dissipation`, if not null, is increased by the energy the flow
-  /// dissipates, dt * sum over pairs of C (P_i - P_j)^2 [J].
-  void advance(const double* theta, double* zeta, double* dissipation);
+  /// dissipates, dt * sum over pairs of C (P_i - P_j)^2 [J]. `pore`, if not
+  /// null, holds every automaton's pore pressure for this zeta and theta
+  /// (pressure(); 0 where not poroelastic or drained), which the step then
+  /// does not recompute.
+  void advance(const double* theta, double* zeta, double* dissipation, const double* pore = nullptr);
 
   /// Pore pressure of automaton i for the given zeta, theta (0 if not poroelastic).
   double pressure(int i, double zeta, double theta) const {
@@ -100,11 +103,12 @@ class FiltrationTerm {
   std::vector<std::int32_t> slow_col_, fast_col_;
   std::vector<std::uint8_t> slow_c_, fast_c_;  ///< index into ctab_
   std::vector<double> ctab_;
-  std::vector<double> fast_m_, fast_a_, fast_theta_;  ///< per fast automaton
+  std::vector<double> fast_m_, fast_a_, fast_ath_;  ///< per fast automaton (fast_ath_: a theta of the step)
+  std::vector<std::uint8_t> fast_tissue_;           ///< per fast automaton
+  bool fast_uniform_ = false;                       ///< every fast bond has the conductance ctab_[fast_c_[0]]
   std::vector<double> fast_y0_, fast_l0_, fast_pstart_;  ///< RKL2: Y_0, L(Y_0), P(Y_0)
   std::vector<double> fast_y_[3], fast_p_[2];          ///< stages (Y_j in [j % 3]), their pressures
   std::vector<double> p_;                ///< pore pressure scratch, per automaton
-  std::vector<double> slow_delta_;       ///< zeta increments, per poroelastic automaton
   std::vector<double> dissip_;           ///< per automaton (energy diagnostics)
 };
 

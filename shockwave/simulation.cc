@@ -5,6 +5,8 @@
 #include <limits>
 #include <sstream>
 
+#include <omp.h>
+
 #include "common/error.h"
 #include "common/finite.h"
 #include "shockwave/reduce.h"
@@ -129,7 +131,6 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
     inv_mass_a_[i] = inv_mass_[t];
     inv_inertia_a_[i] = inv_inertia_[t];
   }
-  for (auto& a : acc_) a.assign(n_, 0.0);
   strain_scale_.resize(n_);
   for (int i = 0; i < n_; ++i)
     strain_scale_[i] = model.neighbour_count[i] > 0 ? 3.0 / model.neighbour_count[i] : 0.0;
@@ -159,6 +160,24 @@ Simulation::Simulation(const Model& model, const SimulationOptions& options, std
     loaded_peaks_.assign(2 * model.loaded.automata.size(), 0.0);
   }
   build_rows();
+  {
+    // Loaded automata and constraints by row (step_rows).
+    std::vector<std::int32_t> row_of(n_);
+    for (size_t r = 0; r < rows_.size(); ++r)
+      for (int i = rows_[r].start; i < rows_[r].start + rows_[r].len; ++i) row_of[i] = static_cast<std::int32_t>(r);
+    auto by_row = [&](const std::vector<int>& automata, std::vector<std::int32_t>& start, std::vector<std::int32_t>& list) {
+      start.assign(rows_.size() + 1, 0);
+      for (int a : automata) ++start[row_of[a] + 1];
+      for (size_t r = 0; r < rows_.size(); ++r) start[r + 1] += start[r];
+      list.assign(automata.size(), 0);
+      std::vector<std::int32_t> fill(start.begin(), start.end() - 1);
+      for (size_t k = 0; k < automata.size(); ++k) list[fill[row_of[automata[k]]]++] = static_cast<std::int32_t>(k);
+    };
+    by_row(load_ ? model.loaded.automata : std::vector<int>{}, row_loaded_start_, row_loaded_);
+    std::vector<int> constrained;
+    for (const VelocityConstraint& con : model.constraints) constrained.push_back(con.automaton);
+    by_row(constrained, row_constraint_start_, row_constraint_);
+  }
   drained_.assign(n_, 0);
   for (int a : model.drained) {
     if (a < 0 || a >= n_) throw common::InputError(src, 0, "drained boundary on a non-existent automaton " + std::to_string(a));
@@ -382,6 +401,26 @@ void Simulation::build_rows() {
   }
   max_row_ = 0;
   for (const Row& r : rows_) max_row_ = std::max(max_row_, r.len);
+  // The lag of step_rows and its ring of accumulators.
+  {
+    std::vector<std::int32_t> row_of(n);
+    for (size_t r = 0; r < rows_.size(); ++r)
+      for (int i = rows_[r].start; i < rows_[r].start + rows_[r].len; ++i) row_of[i] = static_cast<std::int32_t>(r);
+    lag_ = 0;
+    for (int s = 0; s < K; ++s)
+      for (int i = 0; i < n; ++i) {
+        const int j = model_.neighbour(s, i);
+        if (j >= 0) lag_ = std::max(lag_, std::abs(row_of[i] - row_of[j]));
+      }
+    const int nrows = static_cast<int>(rows_.size());
+    ring_cap_ = 1;
+    for (int r = 0; r < nrows; ++r) {
+      const int end = r + lag_ + 1 < nrows ? rows_[r + lag_ + 1].start : n;
+      ring_cap_ = std::max(ring_cap_, end - rows_[r].start);
+    }
+    ring_off_.resize(rows_.size());
+    for (int r = 0; r < nrows; ++r) ring_off_[r] = rows_[r].start % ring_cap_;
+  }
   runs_.assign(rows_.size() * K, Run{0, 0, 0});
   for (size_t r = 0; r < rows_.size(); ++r) {
     if (periodic_) break;  // minimum images: the general path only
@@ -418,200 +457,27 @@ void Simulation::build_rows() {
 }
 
 // ---------------------------------------------------------------------------
-// A. Stress predictor.
+// One step in one sweep over the rows, so that each automaton's data is
+// loaded once per step. Row r:
+//  A (predictor_row): the stress predictor, b and the pore pressure;
+//  B1 (pair_row): the pairs its automata own (their forward directions): new
+//     pair state, in place, and the owner's share of force, moment, the trace
+//     of A4 and the strain, into the row's accumulators (A3, A7-A9);
+//  B2 (integrate_row): the other half of every pair (from the new pair state
+//     of its owner), the load, A5-A6, kick (A1) and drift.
+// Every bond joins rows at most lag_ apart: B1 of row r needs b of rows
+// r +- lag_, B2 of row r the pair state of owners in rows r +- lag_. A
+// thread's sweep therefore runs A of row k, B1 of row k - lag_ and B2 of row
+// k - 2 lag_; the accumulators of the rows between B1 and B2 live in a
+// per-thread ring of lag_ + 1 rows (it stays in cache). With several threads
+// each takes a contiguous block of rows: A of its first and last lag_ rows
+// runs before a barrier (the neighbouring blocks' B1 reads their b), B2 of
+// those rows after a second one (their owners may lie in a neighbouring
+// block), with their accumulators kept meanwhile. Every automaton gets the
+// same operations in the same order (B1 in direction order, then B2 in
+// direction order), whatever the thread count.
 template <bool kPeriodic, bool kFluid, bool kLinear>
-SW_CLONES void Simulation::predictor() {
-  const int n = n_, K = K_;
-  const double dt = dt_;
-  const double* __restrict px = pos_[cur_][0].data();
-  const double* __restrict py = pos_[cur_][1].data();
-  const double* __restrict pz = pos_[cur_][2].data();
-  const double* __restrict vx = vel_[cur_][0].data();
-  const double* __restrict vy = vel_[cur_][1].data();
-  const double* __restrict vz = vel_[cur_][2].data();
-  const std::int32_t* __restrict nb = model_.neighbours.data();
-  const double* __restrict w = wa_.data();
-  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
-  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
-  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
-  const int nrows = static_cast<int>(rows_.size());
-#pragma omp parallel if (n >= kParallelMin)
-  {
-    std::vector<double> sum_buf(static_cast<size_t>(max_row_));
-    double* __restrict sum = sum_buf.data();
-#pragma omp for schedule(static)
-    for (int row = 0; row < nrows; ++row) {
-      const int a0 = rows_[row].start, len = rows_[row].len, a1 = a0 + len;
-      for (int k = 0; k < len; ++k) sum[k] = 0.0;
-      for (int s = 0; s < K; ++s) {
-        const Run run = runs_[static_cast<size_t>(row) * K + s];
-        const int off = run.off;
-        const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
-#pragma omp simd
-        for (int i = run.a; i < run.b; ++i) {
-          const int j = i + off;
-          sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
-                                                 vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ux, uy, uz);
-        }
-        const size_t rs = static_cast<size_t>(row) * K + s;
-        for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
-          const int i = extra_[e];
-          const int j = nb[static_cast<size_t>(s) * n + i];
-          double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
-          if constexpr (kPeriodic) {
-            dx = wrap(dx, Lx, iLx);
-            dy = wrap(dy, Ly, iLy);
-            dz = wrap(dz, Lz, iLz);
-          }
-          sum[i - a0] += predictor_side<kLinear>(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j],
-                                                 dt, ux, uy, uz);
-        }
-      }
-      for (int i = a0; i < a1; ++i) {
-        const int ti = model_.tissue[i];
-        const double dtheta = f_[i] * sv * sum[i - a0];
-        theta_[i] += dtheta;
-        double dp = 0.0;
-        if constexpr (kFluid) {
-          if (poro_[ti]) {
-            if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
-            const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
-            dp = p - pore_[i];
-            pore_[i] = p;
-          }
-        }
-        // Predicted mean stress increment (equation of state), then A7/A9's b.
-        const double fa_dp = f_[i] * a_[ti] * dp;
-        const double dsm = K_bulk_[ti] * dtheta - fa_dp;
-        b_[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
-      }
-    }
-  }
-}
-
-// ---------------------------------------------------------------------------
-// B1. Pair forces (A3, A7-A9) of the pairs each automaton owns (its forward
-// directions): new pair state, and the owner's share of force, moment and
-// averaged stress (into acc_).
-template <bool kPeriodic, bool kLinear>
-SW_CLONES void Simulation::pair_forces() {
-  const int n = n_, K = K_, H = K_ / 2;
-  const double dt = dt_;
-  const int c = cur_;
-  const double* __restrict px = pos_[c][0].data();
-  const double* __restrict py = pos_[c][1].data();
-  const double* __restrict pz = pos_[c][2].data();
-  const double* __restrict vx = vel_[c][0].data();
-  const double* __restrict vy = vel_[c][1].data();
-  const double* __restrict vz = vel_[c][2].data();
-  const double* __restrict wx = omg_[c][0].data();
-  const double* __restrict wy = omg_[c][1].data();
-  const double* __restrict wz = omg_[c][2].data();
-  // Pair state, updated in place (each pair read and written once, by its owner).
-  double* __restrict snp = sn_.data();
-  double* __restrict txp = tx_.data();
-  double* __restrict typ = ty_.data();
-  double* __restrict tzp = tz_.data();
-  const std::int32_t* __restrict nb = model_.neighbours.data();
-  const double* __restrict w = wa_.data();
-  const double* __restrict b = b_.data();
-  const double S = model_.lattice.contact_area;
-  const double Lx = period_.x(), Ly = period_.y(), Lz = period_.z();
-  const double iLx = Lx > 0 ? 1.0 / Lx : 0.0, iLy = Ly > 0 ? 1.0 / Ly : 0.0, iLz = Lz > 0 ? 1.0 / Lz : 0.0;
-  double* __restrict A0 = acc_[0].data();
-  double* __restrict A1 = acc_[1].data();
-  double* __restrict A2 = acc_[2].data();
-  double* __restrict A3 = acc_[3].data();
-  double* __restrict A4 = acc_[4].data();
-  double* __restrict A5 = acc_[5].data();
-  double* __restrict A6 = acc_[6].data();
-  double* __restrict E0 = acc_[7].data();
-  double* __restrict E1 = acc_[8].data();
-  double* __restrict E2 = acc_[9].data();
-  double* __restrict E3 = acc_[10].data();
-  double* __restrict E4 = acc_[11].data();
-  double* __restrict E5 = acc_[12].data();
-  const double inv_d = 1.0 / model_.lattice.diameter;
-  const double d0 = model_.lattice.diameter;
-  auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
-                  __attribute__((always_inline)) {
-    const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
-    PairIn in;
-    in.dvx = vx[j] - vx[i];
-    in.dvy = vy[j] - vy[i];
-    in.dvz = vz[j] - vz[i];
-    in.osx = wx[i] + wx[j];
-    in.osy = wy[i] + wy[j];
-    in.osz = wz[i] + wz[j];
-    in.wo = w[i];
-    in.wt = w[j];
-    in.bo = b[i];
-    in.bt = b[j];
-    in.sn = snp[bi];
-    in.tx = txp[bi];
-    in.ty = typ[bi];
-    in.tz = tzp[bi];
-    const PairOut out = pair_update<kLinear>(in, g, dx, dy, dz, S, dt, inv_d);
-    snp[bi] = out.sn;
-    txp[bi] = out.tx;
-    typ[bi] = out.ty;
-    tzp[bi] = out.tz;
-    A0[i] += out.fx;
-    A1[i] += out.fy;
-    A2[i] += out.fz;
-    A3[i] += out.mx;
-    A4[i] += out.my;
-    A5[i] += out.mz;
-    A6[i] += out.tr;
-    // The automaton's own share of the pair's strain (A8's split by compliance).
-    const double share = 2.0 * w[i] / (w[i] + w[j]);
-    E0[i] += share * out.e11;
-    E1[i] += share * out.e22;
-    E2[i] += share * out.e33;
-    E3[i] += share * out.e12;
-    E4[i] += share * out.e23;
-    E5[i] += share * out.e13;
-  };
-  const int nrows = static_cast<int>(rows_.size());
-#pragma omp parallel for schedule(static) if (n >= kParallelMin)
-  for (int row = 0; row < nrows; ++row) {
-    const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
-    for (int i = a0; i < a1; ++i) {
-      A0[i] = A1[i] = A2[i] = A3[i] = A4[i] = A5[i] = 0.0;
-      A6[i] = 0.0;
-      E0[i] = E1[i] = E2[i] = E3[i] = E4[i] = E5[i] = 0.0;
-    }
-    for (int s = 0; s < H; ++s) {
-      const Run run = runs_[static_cast<size_t>(row) * K + s];
-      const int off = run.off;
-      const size_t base = static_cast<size_t>(s) * n;
-      const double ux = model_.lattice.unit[s].x(), uy = model_.lattice.unit[s].y(), uz = model_.lattice.unit[s].z();
-#pragma omp simd
-      for (int i = run.a; i < run.b; ++i) {
-        const int j = i + off;
-        side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i], ux, uy, uz);
-      }
-      const size_t rs = static_cast<size_t>(row) * K + s;
-      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
-        const int i = extra_[e];
-        const int j = nb[base + i];
-        double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
-        if constexpr (kPeriodic) {
-          dx = wrap(dx, Lx, iLx);
-          dy = wrap(dy, Ly, iLy);
-          dz = wrap(dz, Lz, iLz);
-        }
-        side(i, j, base + i, dx, dy, dz, ux, uy, uz);
-      }
-    }
-  }
-}
-
-// ---------------------------------------------------------------------------
-// B2. The other half of every pair (from the new pair state of its owner),
-// the load, averaged stress (A4-A6), kick (A1) and drift.
-template <bool kPeriodic, bool kFluid, bool kLinear>
-SW_CLONES void Simulation::integrate() {
+SW_CLONES void Simulation::step_rows() {
   const int n = n_, K = K_, H = K_ / 2;
   const double dt = dt_;
   const int c = cur_, o = 1 - cur_;
@@ -633,11 +499,15 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict ox = omg_[o][0].data();
   double* __restrict oy = omg_[o][1].data();
   double* __restrict oz = omg_[o][2].data();
-  const double* __restrict sn1 = sn_.data();
-  const double* __restrict tx1 = tx_.data();
-  const double* __restrict ty1 = ty_.data();
-  const double* __restrict tz1 = tz_.data();
+  // Pair state, updated in place (each pair read and written once, by its
+  // owner, in B1; read again by the other automaton in B2).
+  double* __restrict snp = sn_.data();
+  double* __restrict txp = tx_.data();
+  double* __restrict typ = ty_.data();
+  double* __restrict tzp = tz_.data();
   const std::int32_t* __restrict nb = model_.neighbours.data();
+  const double* __restrict w = wa_.data();
+  const double* b = b_.data();  // written by A (predictor_row), read by B1
   const double S = model_.lattice.contact_area;
   const double R = model_.lattice.radius;
   const double invV = 1.0 / model_.lattice.cell_volume;
@@ -646,22 +516,9 @@ SW_CLONES void Simulation::integrate() {
   const double t = static_cast<double>(steps_) * dt;
   const double p_load = load_ ? load_(t) : 0.0;
   const double p_prev = load_ ? load_(t - dt) : 0.0;
+  const double cscale = !model_.constraints.empty() && model_.constraint_scale ? model_.constraint_scale(t + 0.5 * dt) : 1.0;
   const double damp = 1.0 - options_.damping * dt;
   const bool track = track_energy_;
-  double* __restrict A0 = acc_[0].data();
-  double* __restrict A1 = acc_[1].data();
-  double* __restrict A2 = acc_[2].data();
-  double* __restrict A3 = acc_[3].data();
-  double* __restrict A4 = acc_[4].data();
-  double* __restrict A5 = acc_[5].data();
-  double* __restrict A6 = acc_[6].data();
-  double* __restrict E0 = acc_[7].data();
-  double* __restrict E1 = acc_[8].data();
-  double* __restrict E2 = acc_[9].data();
-  double* __restrict E3 = acc_[10].data();
-  double* __restrict E4 = acc_[11].data();
-  double* __restrict E5 = acc_[12].data();
-  const double* __restrict w = wa_.data();
   const double* __restrict escale = strain_scale_.data();
   const double inv_d = 1.0 / model_.lattice.diameter;
   const double* __restrict im_a = inv_mass_a_.data();
@@ -671,43 +528,193 @@ SW_CLONES void Simulation::integrate() {
   double* __restrict Ppk = peak_pressure_.data();
   double* __restrict Epk = peak_distortional_.data();
   const double d0 = model_.lattice.diameter;
-  auto other = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
-                   __attribute__((always_inline)) {
-    const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
-    PairOut out;
-    pair_loads(out, g, sn1[bi], tx1[bi], ty1[bi], tz1[bi], S, w[j] + w[i], inv_d);
-    A0[i] -= out.fx;
-    A1[i] -= out.fy;
-    A2[i] -= out.fz;
-    A3[i] += out.mx;
-    A4[i] += out.my;
-    A5[i] += out.mz;
-    A6[i] += out.tr;
-    // The automaton's own share of the pair's strain (A8's split by compliance).
-    const double share = 2.0 * w[i] / (w[i] + w[j]);
-    E0[i] += share * out.e11;
-    E1[i] += share * out.e22;
-    E2[i] += share * out.e33;
-    E3[i] += share * out.e12;
-    E4[i] += share * out.e23;
-    E5[i] += share * out.e13;
+
+  // A of one row (sum: scratch of max_row_ doubles).
+  const double sv = model_.lattice.contact_area / model_.lattice.cell_volume;
+  double* bw = b_.data();
+  auto predictor_row = [&](int row, double* __restrict sum) __attribute__((always_inline)) {
+    const int a0 = rows_[row].start, len = rows_[row].len, a1 = a0 + len;
+    for (int k = 0; k < len; ++k) sum[k] = 0.0;
+    for (int s = 0; s < K; ++s) {
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const double ex = model_.lattice.unit[s].x(), ey = model_.lattice.unit[s].y(), ez = model_.lattice.unit[s].z();
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;
+        sum[i - a0] += predictor_side<kLinear>(px[j] - px[i], py[j] - py[i], pz[j] - pz[i], vx[j] - vx[i],
+                                               vy[j] - vy[i], vz[j] - vz[i], w[i], w[j], dt, ex, ey, ez);
+      }
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
+        const int j = nb[static_cast<size_t>(s) * n + i];
+        double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        sum[i - a0] += predictor_side<kLinear>(dx, dy, dz, vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i], w[i], w[j],
+                                               dt, ex, ey, ez);
+      }
+    }
+    for (int i = a0; i < a1; ++i) {
+      const int ti = model_.tissue[i];
+      const double dtheta = f_[i] * sv * sum[i - a0];
+      theta_[i] += dtheta;
+      double dp = 0.0;
+      if constexpr (kFluid) {
+        if (poro_[ti]) {
+          if (drained_[i]) zeta_[i] = a_[ti] * theta_[i];  // reservoir at P = 0
+          const double p = M_[ti] * (zeta_[i] - a_[ti] * theta_[i]);  // A10 (Biot)
+          dp = p - pore_[i];
+          pore_[i] = p;
+        }
+      }
+      // Predicted mean stress increment (equation of state), then A7/A9's b.
+      const double fa_dp = f_[i] * a_[ti] * dp;
+      const double dsm = K_bulk_[ti] * dtheta - fa_dp;
+      bw[i] = D_[ti] * dsm - pore_coef_[ti] * fa_dp;
+    }
   };
-  const int nrows = static_cast<int>(rows_.size());
-#pragma omp parallel for schedule(static) if (n >= kParallelMin)
-  for (int row = 0; row < nrows; ++row) {
+
+  // B1 of one row; accumulator a of automaton i at acc[a * stride + i - a0].
+  auto pair_row = [&](int row, double* __restrict acc, size_t stride) __attribute__((always_inline)) {
+    const int a0 = rows_[row].start, len = rows_[row].len;
+    double* __restrict A0 = acc;
+    double* __restrict A1 = acc + stride;
+    double* __restrict A2 = acc + 2 * stride;
+    double* __restrict A3 = acc + 3 * stride;
+    double* __restrict A4 = acc + 4 * stride;
+    double* __restrict A5 = acc + 5 * stride;
+    double* __restrict A6 = acc + 6 * stride;
+    double* __restrict E0 = acc + 7 * stride;
+    double* __restrict E1 = acc + 8 * stride;
+    double* __restrict E2 = acc + 9 * stride;
+    double* __restrict E3 = acc + 10 * stride;
+    double* __restrict E4 = acc + 11 * stride;
+    double* __restrict E5 = acc + 12 * stride;
+    auto side = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ux, double uy, double uz)
+                    __attribute__((always_inline)) {
+      const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ux, uy, uz, d0);
+      PairIn in;
+      in.dvx = vx[j] - vx[i];
+      in.dvy = vy[j] - vy[i];
+      in.dvz = vz[j] - vz[i];
+      in.osx = wx[i] + wx[j];
+      in.osy = wy[i] + wy[j];
+      in.osz = wz[i] + wz[j];
+      in.wo = w[i];
+      in.wt = w[j];
+      in.bo = b[i];
+      in.bt = b[j];
+      in.sn = snp[bi];
+      in.tx = txp[bi];
+      in.ty = typ[bi];
+      in.tz = tzp[bi];
+      const PairOut out = pair_update<kLinear>(in, g, dx, dy, dz, S, dt, inv_d);
+      snp[bi] = out.sn;
+      txp[bi] = out.tx;
+      typ[bi] = out.ty;
+      tzp[bi] = out.tz;
+      const int l = i - a0;
+      A0[l] += out.fx;
+      A1[l] += out.fy;
+      A2[l] += out.fz;
+      A3[l] += out.mx;
+      A4[l] += out.my;
+      A5[l] += out.mz;
+      A6[l] += out.tr;
+      // The automaton's own share of the pair's strain (A8's split by compliance).
+      const double share = 2.0 * w[i] / (w[i] + w[j]);
+      E0[l] += share * out.e11;
+      E1[l] += share * out.e22;
+      E2[l] += share * out.e33;
+      E3[l] += share * out.e12;
+      E4[l] += share * out.e23;
+      E5[l] += share * out.e13;
+    };
+    for (int l = 0; l < len; ++l) {
+      A0[l] = A1[l] = A2[l] = A3[l] = A4[l] = A5[l] = 0.0;
+      A6[l] = 0.0;
+      E0[l] = E1[l] = E2[l] = E3[l] = E4[l] = E5[l] = 0.0;
+    }
+    for (int s = 0; s < H; ++s) {
+      const Run run = runs_[static_cast<size_t>(row) * K + s];
+      const int off = run.off;
+      const size_t base = static_cast<size_t>(s) * n;
+      const double ex = model_.lattice.unit[s].x(), ey = model_.lattice.unit[s].y(), ez = model_.lattice.unit[s].z();
+#pragma omp simd
+      for (int i = run.a; i < run.b; ++i) {
+        const int j = i + off;
+        side(i, j, base + i, px[j] - px[i], py[j] - py[i], pz[j] - pz[i], ex, ey, ez);
+      }
+      const size_t rs = static_cast<size_t>(row) * K + s;
+      for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
+        const int i = extra_[e];
+        const int j = nb[base + i];
+        double dx = px[j] - px[i], dy = py[j] - py[i], dz = pz[j] - pz[i];
+        if constexpr (kPeriodic) {
+          dx = wrap(dx, Lx, iLx);
+          dy = wrap(dy, Ly, iLy);
+          dz = wrap(dz, Lz, iLz);
+        }
+        side(i, j, base + i, dx, dy, dz, ex, ey, ez);
+      }
+    }
+  };
+
+  // B2 of one row, with the accumulators B1 left.
+  auto integrate_row = [&](int row, double* __restrict acc, size_t stride) __attribute__((always_inline)) {
     const int a0 = rows_[row].start, a1 = a0 + rows_[row].len;
+    double* __restrict A0 = acc;
+    double* __restrict A1 = acc + stride;
+    double* __restrict A2 = acc + 2 * stride;
+    double* __restrict A3 = acc + 3 * stride;
+    double* __restrict A4 = acc + 4 * stride;
+    double* __restrict A5 = acc + 5 * stride;
+    double* __restrict A6 = acc + 6 * stride;
+    double* __restrict E0 = acc + 7 * stride;
+    double* __restrict E1 = acc + 8 * stride;
+    double* __restrict E2 = acc + 9 * stride;
+    double* __restrict E3 = acc + 10 * stride;
+    double* __restrict E4 = acc + 11 * stride;
+    double* __restrict E5 = acc + 12 * stride;
+    auto other = [&](int i, int j, size_t bi, double dx, double dy, double dz, double ex, double ey, double ez)
+                     __attribute__((always_inline)) {
+      const PairGeo<kLinear> g = pair_geometry<kLinear>(dx, dy, dz, ex, ey, ez, d0);
+      PairOut out;
+      pair_loads(out, g, snp[bi], txp[bi], typ[bi], tzp[bi], S, w[j] + w[i], inv_d);
+      const int l = i - a0;
+      A0[l] -= out.fx;
+      A1[l] -= out.fy;
+      A2[l] -= out.fz;
+      A3[l] += out.mx;
+      A4[l] += out.my;
+      A5[l] += out.mz;
+      A6[l] += out.tr;
+      // The automaton's own share of the pair's strain (A8's split by compliance).
+      const double share = 2.0 * w[i] / (w[i] + w[j]);
+      E0[l] += share * out.e11;
+      E1[l] += share * out.e22;
+      E2[l] += share * out.e33;
+      E3[l] += share * out.e12;
+      E4[l] += share * out.e23;
+      E5[l] += share * out.e13;
+    };
     for (int s = H; s < K; ++s) {
       const Run run = runs_[static_cast<size_t>(row) * K + s];
       const int off = run.off;
       const size_t base = static_cast<size_t>(s - H) * n;
       // The owner's forward direction (from the owner j to i).
       const common::Vec3& u = model_.lattice.unit[s - H];
-      const double ux = u.x(), uy = u.y(), uz = u.z();
+      const double ex = u.x(), ey = u.y(), ez = u.z();
 #pragma omp simd
       for (int i = run.a; i < run.b; ++i) {
         const int j = i + off;  // the owner of this pair
-        // The owner's frame, as in pair_forces: the same bits.
-        other(i, j, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j], ux, uy, uz);
+        // The owner's frame, as in B1: the same bits.
+        other(i, j, base + j, px[i] - px[j], py[i] - py[j], pz[i] - pz[j], ex, ey, ez);
       }
       const size_t rs = static_cast<size_t>(row) * K + s;
       for (int e = extra_start_[rs]; e < extra_start_[rs + 1]; ++e) {
@@ -719,18 +726,19 @@ SW_CLONES void Simulation::integrate() {
           dy = wrap(dy, Ly, iLy);
           dz = wrap(dz, Lz, iLz);
         }
-        other(i, j, base + j, dx, dy, dz, ux, uy, uz);
+        other(i, j, base + j, dx, dy, dz, ex, ey, ez);
       }
     }
 #pragma omp simd
     for (int i = a0; i < a1; ++i) {
+      const int l = i - a0;
       // A5 from the trace of A4's averaged stress (the full tensor: stress()).
-      const double P = -(A6[i] * invV) / 3.0;
+      const double P = -(A6[l] * invV) / 3.0;
       // Averaged strain tensor from the pairs' strains, its deviatoric part
       // and the equivalent (von Mises) strain sqrt(2/3 e:e).
-      const double c = escale[i];
-      const double e11 = E0[i] * c, e22 = E1[i] * c, e33 = E2[i] * c;
-      const double e12 = E3[i] * c, e23 = E4[i] * c, e13 = E5[i] * c;
+      const double cs = escale[i];
+      const double e11 = E0[l] * cs, e22 = E1[l] * cs, e33 = E2[l] * cs;
+      const double e12 = E3[l] * cs, e23 = E4[l] * cs, e13 = E5[l] * cs;
       const double em = (e11 + e22 + e33) / 3.0;
       const double d1 = e11 - em, d2 = e22 - em, d3 = e33 - em;
       const double eps = std::sqrt(2.0 / 3.0 * (d1 * d1 + d2 * d2 + d3 * d3 + 2.0 * (e12 * e12 + e23 * e23 + e13 * e13)));
@@ -740,18 +748,18 @@ SW_CLONES void Simulation::integrate() {
       Epk[i] = eps > Epk[i] ? eps : Epk[i];
       // Kick (A1) and drift.
       const double im = im_a[i], iJ = iJ_a[i];
-      const double nvx = vx[i] * damp + A0[i] * im * dt;
-      const double nvy = vy[i] * damp + A1[i] * im * dt;
-      const double nvz = vz[i] * damp + A2[i] * im * dt;
+      const double nvx = vx[i] * damp + A0[l] * im * dt;
+      const double nvy = vy[i] * damp + A1[l] * im * dt;
+      const double nvz = vz[i] * damp + A2[l] * im * dt;
       ux[i] = nvx;
       uy[i] = nvy;
       uz[i] = nvz;
       qx[i] = px[i] + nvx * dt;
       qy[i] = py[i] + nvy * dt;
       qz[i] = pz[i] + nvz * dt;
-      ox[i] = wx[i] * damp + A3[i] * iJ * dt;
-      oy[i] = wy[i] * damp + A4[i] * iJ * dt;
-      oz[i] = wz[i] * damp + A5[i] * iJ * dt;
+      ox[i] = wx[i] * damp + A3[l] * iJ * dt;
+      oy[i] = wy[i] * damp + A4[l] * iJ * dt;
+      oz[i] = wz[i] * damp + A5[l] * iJ * dt;
     }
     if constexpr (kFluid) {
       for (int i = a0; i < a1; ++i)
@@ -773,24 +781,24 @@ SW_CLONES void Simulation::integrate() {
         damp_[i] = options_.damping * dt * (m * (sx * sx + sy * sy + sz * sz) + J * (gx * gx + gy * gy + gz * gz));
       }
     }
-  }
-  // The loaded automata (the applicator's outer face, few): redo their
-  // stress and kick with the pressure on the outer face (q = R, n outward).
-  if (load_) {
-    const std::vector<int>& la = model_.loaded.automata;
-    for (size_t k = 0; k < la.size(); ++k) {
-      const int i = la[k];
-      const common::Vec3& A = model_.loaded.area[k];
-      const double fex = p_load * A.x(), fey = p_load * A.y(), fez = p_load * A.z();
-      const double inv_a = 1.0 / A.norm();
-      const double nx = -A.x() * inv_a, ny = -A.y() * inv_a, nz = -A.z() * inv_a;
-      const double P = -((A6[i] + R * (nx * fex + ny * fey + nz * fez)) * invV) / 3.0;
+    // The loaded automata of the row (the applicator's outer face): redo
+    // their stress and kick with the pressure on the outer face (q = R, n
+    // outward).
+    for (int e = row_loaded_start_[row]; e < row_loaded_start_[row + 1]; ++e) {
+      const int k = row_loaded_[e];
+      const int i = model_.loaded.automata[k];
+      const int l = i - a0;
+      const common::Vec3& Ar = model_.loaded.area[k];
+      const double fex = p_load * Ar.x(), fey = p_load * Ar.y(), fez = p_load * Ar.z();
+      const double inv_a = 1.0 / Ar.norm();
+      const double nx = -Ar.x() * inv_a, ny = -Ar.y() * inv_a, nz = -Ar.z() * inv_a;
+      const double P = -((A6[l] + R * (nx * fex + ny * fey + nz * fez)) * invV) / 3.0;
       Pout[i] = P;
       Ppk[i] = std::max(loaded_peaks_[2 * k], P);
       const double im = im_a[i];
-      ux[i] = vx[i] * damp + (A0[i] + fex) * im * dt;
-      uy[i] = vy[i] * damp + (A1[i] + fey) * im * dt;
-      uz[i] = vz[i] * damp + (A2[i] + fez) * im * dt;
+      ux[i] = vx[i] * damp + (A0[l] + fex) * im * dt;
+      uy[i] = vy[i] * damp + (A1[l] + fey) * im * dt;
+      uz[i] = vz[i] * damp + (A2[l] + fez) * im * dt;
       qx[i] = px[i] + ux[i] * dt;
       qy[i] = py[i] + uy[i] * dt;
       qz[i] = pz[i] + uz[i] * dt;
@@ -800,27 +808,91 @@ SW_CLONES void Simulation::integrate() {
                       0.5 / iJ_a[i] * (wx[i] * ox[i] + wy[i] * oy[i] + wz[i] * oz[i]);
         // Work over the last drift, (f^{n-1} + f^n)/2 . (x^n - x^{n-1}):
         // with the kinetic energy above the balance is exact for a linear system.
-        work_[i] = 0.5 * (p_prev + p_load) * (A.x() * vx[i] + A.y() * vy[i] + A.z() * vz[i]) * dt;
+        work_[i] = 0.5 * (p_prev + p_load) * (Ar.x() * vx[i] + Ar.y() * vy[i] + Ar.z() * vz[i]) * dt;
       }
     }
-  }
-  // Prescribed velocities (few automata): override the kick on the fixed axes.
-  if (!model_.constraints.empty()) {
-    const double cscale = model_.constraint_scale ? model_.constraint_scale(t + 0.5 * dt) : 1.0;
-    for (size_t k = 0; k < model_.constraints.size(); ++k) {
+    // Prescribed velocities of the row: override the kick on the fixed axes.
+    for (int e = row_constraint_start_[row]; e < row_constraint_start_[row + 1]; ++e) {
+      const int k = row_constraint_[e];
       const VelocityConstraint& con = model_.constraints[k];
       const int i = con.automaton;
+      const int l = i - a0;
       if (con.axes & 1) ux[i] = con.velocity.x() * cscale;
       if (con.axes & 2) uy[i] = con.velocity.y() * cscale;
       if (con.axes & 4) uz[i] = con.velocity.z() * cscale;
       qx[i] = px[i] + ux[i] * dt;
       qy[i] = py[i] + uy[i] * dt;
       qz[i] = pz[i] + uz[i] * dt;
-      constraint_force_[k] = common::Vec3(A0[i], A1[i], A2[i]);
+      constraint_force_[k] = common::Vec3(A0[l], A1[l], A2[l]);
+    }
+  };
+
+  const int nrows = static_cast<int>(rows_.size());
+  const int lag = lag_;
+  const size_t rstride = static_cast<size_t>(ring_cap_) + static_cast<size_t>(max_row_);
+  const int max_threads = omp_get_max_threads();
+  if (static_cast<int>(thread_acc_.size()) < max_threads) thread_acc_.resize(static_cast<size_t>(max_threads));
+  auto row_start = [&](int r) { return r < nrows ? rows_[r].start : n; };
+#pragma omp parallel if (n >= kParallelMin)
+  {
+    const int T = omp_get_num_threads(), th = omp_get_thread_num();
+    const int R0 = static_cast<int>(static_cast<std::int64_t>(nrows) * th / T);
+    const int R1 = static_cast<int>(static_cast<std::int64_t>(nrows) * (th + 1) / T);
+    // Rows [R0, lo) and [hi, R1) wait for the other blocks' B1.
+    const int lo = R0 > 0 ? std::min(R0 + lag, R1) : R0;
+    const int hi = R1 < nrows ? std::max(R1 - lag, lo) : R1;
+    const size_t front = static_cast<size_t>(row_start(lo) - row_start(R0));
+    const size_t dstride = front + static_cast<size_t>(row_start(R1) - row_start(hi));
+    std::vector<double>& buf = thread_acc_[static_cast<size_t>(th)];
+    const size_t need = 13 * (rstride + dstride);
+    if (buf.size() < need) buf.resize(need);
+    double* ring = buf.data();
+    double* defer = ring + 13 * rstride;
+    auto acc_of = [&](int row, size_t& stride) {
+      if (row < lo) {
+        stride = dstride;
+        return defer + (rows_[row].start - row_start(R0));
+      }
+      if (row >= hi) {
+        stride = dstride;
+        return defer + front + (rows_[row].start - row_start(hi));
+      }
+      stride = rstride;
+      return ring + ring_off_[row];
+    };
+    // A of the rows whose b the neighbouring blocks' B1 reads.
+    std::vector<double> sum_buf(static_cast<size_t>(max_row_));
+    double* sum = sum_buf.data();
+    for (int k = R0; k < lo; ++k) predictor_row(k, sum);
+    for (int k = hi; k < R1; ++k) predictor_row(k, sum);
+#pragma omp barrier
+    for (int k = R0; k < R1 + 2 * lag; ++k) {
+      size_t stride = 0;
+      if (k >= lo && k < hi) predictor_row(k, sum);
+      const int r = k - lag;
+      if (r >= R0 && r < R1) {
+        double* acc = acc_of(r, stride);
+        pair_row(r, acc, stride);
+      }
+      const int g = k - 2 * lag;
+      if (g >= lo && g < hi) {
+        double* acc = acc_of(g, stride);
+        integrate_row(g, acc, stride);
+      }
+    }
+#pragma omp barrier
+    for (int g = R0; g < lo; ++g) {
+      size_t stride = 0;
+      double* acc = acc_of(g, stride);
+      integrate_row(g, acc, stride);
+    }
+    for (int g = hi; g < R1; ++g) {
+      size_t stride = 0;
+      double* acc = acc_of(g, stride);
+      integrate_row(g, acc, stride);
     }
   }
 }
-
 void Simulation::step() {
   const bool fluid = fluid_on_;
   if (load_) {
@@ -833,9 +905,7 @@ void Simulation::step() {
   const bool linear = options_.geometry == Geometry::kLinear;
 #define SW_STEP(P, F, L)        \
   {                             \
-    predictor<P, F, L>();       \
-    pair_forces<P, L>();        \
-    integrate<P, F, L>();       \
+    step_rows<P, F, L>();       \
   }
   if (periodic_) {
     if (fluid) { if (linear) SW_STEP(true, true, true) else SW_STEP(true, true, false) }
@@ -850,7 +920,9 @@ void Simulation::step() {
     work_total_ += deterministic_sum(n_, [&](std::int64_t i) { return work_[i]; });
     damping_total_ += deterministic_sum(n_, [&](std::int64_t i) { return damp_[i]; });
   }
-  if (filtration_) filtration_->advance(theta_.data(), zeta_.data(), track_energy_ ? &dissipation_total_ : nullptr);
+  // The predictor left each automaton's pore pressure for this zeta and theta.
+  if (filtration_)
+    filtration_->advance(theta_.data(), zeta_.data(), track_energy_ ? &dissipation_total_ : nullptr, pore_.data());
   cur_ = 1 - cur_;
   ++steps_;
   // NaN/Inf stop the run naming where (checked on the cheap global sums).

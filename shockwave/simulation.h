@@ -223,11 +223,7 @@ class Simulation {
   };
   void build_rows();
   template <bool kPeriodic, bool kFluid, bool kLinear>
-  void predictor();
-  template <bool kPeriodic, bool kLinear>
-  void pair_forces();
-  template <bool kPeriodic, bool kFluid, bool kLinear>
-  void integrate();
+  void step_rows();
   double potential_energy() const;
 
   const Model& model_;
@@ -247,7 +243,6 @@ class Simulation {
   std::vector<std::uint8_t> poro_;
   // Per automaton.
   std::vector<double> f_, wa_;  ///< free-surface factor, compliance R/(2G) per automaton
-  std::array<std::vector<double>, 13> acc_;  ///< F (3), M (3), trace of the A4 sum (1), strain sum (6)
   std::vector<double> strain_scale_;  ///< 3 / (number of pairs)
   std::vector<std::int32_t> constraint_of_;
   std::vector<double> loaded_peaks_;  ///< peaks of the loaded automata before the step
@@ -256,6 +251,18 @@ class Simulation {
   std::vector<std::int32_t> extra_;        ///< automata of the general path, by row and direction
   std::vector<std::int32_t> extra_start_;  ///< [row * K + direction] -> first index into extra_
   int max_row_ = 0;
+  /// Largest row distance of a bond (step_rows).
+  int lag_ = 0;
+  /// Accumulators of step_rows (F (3), M (3), trace of the A4 sum
+  /// (1), strain sum (6)) per thread: a ring of ring_cap_ automata (row r at
+  /// ring_off_[r]) and the rows that wait for the other threads (scratch, not
+  /// state: rewritten every step).
+  int ring_cap_ = 0;
+  std::vector<std::int32_t> ring_off_;
+  std::vector<std::vector<double>> thread_acc_;
+  /// Loaded automata (index into model.loaded.automata) and constraints
+  /// (index into model.constraints) by row: [start[row], start[row + 1]).
+  std::vector<std::int32_t> row_loaded_start_, row_loaded_, row_constraint_start_, row_constraint_;
   std::vector<double> inv3G_a_, inv_mass_a_, inv_inertia_a_;  ///< per automaton
   std::vector<std::uint8_t> drained_;
   std::vector<double> pos_[2][3], vel_[2][3], omg_[2][3];

@@ -75,6 +75,7 @@ void counters(benchmark::State& state, const Model& m, const Simulation& sim, st
   state.counters["steps"] = static_cast<double>(steps);
   state.counters["dt_ns"] = sim.time_step() * 1e9;
   state.counters["substeps"] = sim.filtration() ? sim.filtration()->substeps() : 0;
+  state.counters["fast_automata"] = sim.filtration() ? static_cast<double>(sim.filtration()->fast_automata()) : 0.0;
   state.counters["threads"] = omp_get_max_threads();
   state.counters["wall_s"] = wall;
   state.counters["throughput"] = m.size() * static_cast<double>(steps) / wall;       // automaton-steps/s
