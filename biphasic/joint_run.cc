@@ -250,12 +250,13 @@ std::vector<SurfaceLoads> JointRun::layer_loads(const JointFrame& frame,
   return out;
 }
 
-LayerStep JointRun::evaluate(int layer, const SurfaceLoads& loads) const {
+LayerStep JointRun::evaluate(int layer, const SurfaceLoads& loads, const Eigen::VectorXd& u,
+                             const Eigen::VectorXd& p) const {
   const LayerProblem& lp = *problems_[layer];
   const LayerSystem& sys = lp.system();
   const LayerMesh& m = sys.mesh;
   LayerStep s;
-  s.fields = nodal_fields(sys, lp.integrator().u(), lp.integrator().p());
+  s.fields = nodal_fields(sys, u, p);
   s.loads = loads;
   const Eigen::VectorXd& area = node_areas_[layer];
   double fluid = 0.0, total = 0.0;
@@ -285,7 +286,7 @@ LayerStep JointRun::evaluate(int layer, const SurfaceLoads& loads) const {
 }
 
 int JointRun::run(const std::vector<double>& frame_times, const std::vector<std::vector<SurfaceLoads>>& frame_loads,
-                  const std::function<void(int, double, const std::vector<LayerStep>&)>& on_step) {
+                  const std::function<void(int, double, const std::vector<LayerStep>&)>& on_step, int first_step) {
   if (frame_times.size() < 2 || frame_loads.size() != frame_times.size()) {
     throw common::InputError("biphasic: expected at least two frames with loads, found " +
                              std::to_string(frame_times.size()) + " times and " +
@@ -302,7 +303,7 @@ int JointRun::run(const std::vector<double>& frame_times, const std::vector<std:
   const int steps = static_cast<int>(std::floor((frame_times.back() - t0) / dt + 1e-9));
   std::vector<LayerStep> results(nl);
   std::vector<std::exception_ptr> errors(nl);
-  for (int i = 1; i <= steps; ++i) {
+  for (int i = std::max(first_step, 1); i <= steps; ++i) {
     const double t = t0 + i * dt;
     // Layers are independent: one thread per layer (deterministic).
 #pragma omp parallel for schedule(dynamic, 1)
@@ -310,7 +311,7 @@ int JointRun::run(const std::vector<double>& frame_times, const std::vector<std:
       try {
         const SurfaceLoads loads = loads_at(frame_times, per_layer[l], t);
         problems_[l]->step(loads);
-        results[l] = evaluate(l, loads);
+        results[l] = evaluate(l, loads, problems_[l]->integrator().u(), problems_[l]->integrator().p());
       } catch (...) {
         errors[l] = std::current_exception();
       }
@@ -320,6 +321,30 @@ int JointRun::run(const std::vector<double>& frame_times, const std::vector<std:
     if (on_step) on_step(i, t, results);
   }
   return steps;
+}
+
+void JointRun::restore(const std::vector<TrapezoidalState>& states) {
+  if (states.size() != problems_.size())
+    throw std::invalid_argument("biphasic: " + std::to_string(states.size()) + " layer states for " +
+                                std::to_string(problems_.size()) + " layers");
+  for (size_t l = 0; l < problems_.size(); ++l) problems_[l]->restore(states[l]);
+}
+
+std::vector<LayerStep> JointRun::results_at(const std::vector<double>& frame_times,
+                                            const std::vector<std::vector<SurfaceLoads>>& frame_loads, double t,
+                                            const std::vector<Eigen::VectorXd>& u,
+                                            const std::vector<Eigen::VectorXd>& p) const {
+  const size_t nl = layers_.size();
+  if (u.size() != nl || p.size() != nl)
+    throw std::invalid_argument("biphasic: a step's fields for " + std::to_string(u.size()) + " layers, expected " +
+                                std::to_string(nl));
+  std::vector<LayerStep> results(nl);
+  for (size_t l = 0; l < nl; ++l) {
+    std::vector<SurfaceLoads> mine;
+    for (const auto& f : frame_loads) mine.push_back(f[l]);
+    results[l] = evaluate(static_cast<int>(l), loads_at(frame_times, mine, t), u[l], p[l]);
+  }
+  return results;
 }
 
 }  // namespace arthrosim::biphasic

@@ -143,11 +143,21 @@ class JointRun {
   /// their loads from layer_loads). After each step `on_step(step, time,
   /// per-layer results)` is called in step order. Returns the number of
   /// steps.
+  /// `first_step` > 1 continues a run whose layers were restored
+  /// (LayerProblem::restore) to the state after step first_step - 1.
   int run(const std::vector<double>& frame_times, const std::vector<std::vector<SurfaceLoads>>& frame_loads,
-          const std::function<void(int, double, const std::vector<LayerStep>&)>& on_step);
+          const std::function<void(int, double, const std::vector<LayerStep>&)>& on_step, int first_step = 1);
+  /// Continues from a checkpoint: restores each layer's integrator state.
+  void restore(const std::vector<TrapezoidalState>& states);
+  /// What run() reported at step `step` (time t) of a run whose layers had the
+  /// displacements u[l] and pressures p[l] after it: the results of a step
+  /// already done, evaluated again (a resumed run rewrites its output).
+  std::vector<LayerStep> results_at(const std::vector<double>& frame_times,
+                                    const std::vector<std::vector<SurfaceLoads>>& frame_loads, double t,
+                                    const std::vector<Eigen::VectorXd>& u, const std::vector<Eigen::VectorXd>& p) const;
 
  private:
-  LayerStep evaluate(int layer, const SurfaceLoads& loads) const;
+  LayerStep evaluate(int layer, const SurfaceLoads& loads, const Eigen::VectorXd& u, const Eigen::VectorXd& p) const;
   void build_layer(int layer);
 
   std::vector<JointLayer> layers_;

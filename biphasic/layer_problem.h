@@ -40,6 +40,8 @@ class LayerProblem {
 
   const LayerSystem& system() const { return system_; }
   const TrapezoidalIntegrator& integrator() const { return *integrator_; }
+  /// Continues from a checkpointed integrator state (TrapezoidalIntegrator::restore).
+  void restore(const TrapezoidalState& s) { integrator_->restore(s); }
   double time() const { return integrator_->time(); }
   /// Force the layer exerts on its bone at the current step [N] (bone frame;
   /// minus the summed support reactions of the bone-side dofs). Under a

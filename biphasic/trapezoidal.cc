@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <sstream>
+#include <stdexcept>
+#include <string>
 
 #include "common/error.h"
 #include "common/finite.h"
@@ -242,6 +244,47 @@ Eigen::VectorXd TrapezoidalIntegrator::reaction() const {
 
 Eigen::VectorXd TrapezoidalIntegrator::flux_reaction() const {
   return -(system_.A.transpose() * v_) - system_.B * p_ - last_F_Q_;
+}
+
+}  // namespace arthrosim::biphasic
+
+namespace arthrosim::biphasic {
+
+TrapezoidalState TrapezoidalIntegrator::state() const {
+  TrapezoidalState s;
+  s.time = time_;
+  s.steps = steps_;
+  s.u = u_;
+  s.v = v_;
+  s.p = p_;
+  s.last_F_t = last_F_t_;
+  s.last_F_Q = last_F_Q_;
+  s.solves = counters_.solves;
+  s.solve_s = counters_.solve_s;
+  s.step_s = counters_.step_s;
+  s.max_relative_residual = counters_.max_relative_residual;
+  return s;
+}
+
+void TrapezoidalIntegrator::restore(const TrapezoidalState& s) {
+  if (s.u.size() != u_.size() || s.v.size() != v_.size() || s.p.size() != p_.size() ||
+      s.last_F_t.size() != last_F_t_.size() || s.last_F_Q.size() != last_F_Q_.size()) {
+    throw std::invalid_argument("biphasic: layer '" + system_.mesh.name + "': a state of " +
+                                std::to_string(s.u.size()) + " u and " + std::to_string(s.p.size()) +
+                                " p dofs for a system of " + std::to_string(u_.size()) + " and " +
+                                std::to_string(p_.size()));
+  }
+  time_ = s.time;
+  steps_ = s.steps;
+  u_ = s.u;
+  v_ = s.v;
+  p_ = s.p;
+  last_F_t_ = s.last_F_t;
+  last_F_Q_ = s.last_F_Q;
+  counters_.solves = s.solves;
+  counters_.solve_s = s.solve_s;
+  counters_.step_s = s.step_s;
+  counters_.max_relative_residual = s.max_relative_residual;
 }
 
 }  // namespace arthrosim::biphasic

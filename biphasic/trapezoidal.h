@@ -71,6 +71,19 @@ struct StepInput {
   Eigen::VectorXd F_Q;      ///< prescribed-flux vector (np) [m^3/s]
 };
 
+/// What carries over from one step to the next (a checkpoint of the run,
+/// pipelines/biphasic_checkpoint.h): restoring it into an integrator built
+/// from the same system and options continues bit-identically (the
+/// factorisation is rebuilt by the constructor; factorising the same matrix
+/// gives the same factors). Wall times are restored too, as accumulated so far.
+struct TrapezoidalState {
+  double time = 0.0;
+  int steps = 0;
+  Eigen::VectorXd u, v, p, last_F_t, last_F_Q;
+  int solves = 0;
+  double solve_s = 0.0, step_s = 0.0, max_relative_residual = 0.0;
+};
+
 class TrapezoidalIntegrator {
  public:
   /// `fixed_u`: u-dof indices with prescribed displacement; `fixed_p`: p-dof
@@ -101,6 +114,9 @@ class TrapezoidalIntegrator {
   /// control volume, i.e. minus the outflow through it.
   Eigen::VectorXd flux_reaction() const;
   const IntegratorCounters& counters() const { return counters_; }
+  TrapezoidalState state() const;
+  /// Continues from `s` (sizes checked: std::invalid_argument naming the layer).
+  void restore(const TrapezoidalState& s);
   const std::vector<int>& fixed_u() const { return fixed_u_; }
   const std::vector<int>& fixed_p() const { return fixed_p_; }
   const TrapezoidalOptions& options() const { return options_; }

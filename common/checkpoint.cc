@@ -5,7 +5,11 @@
 
 #include <cstdlib>
 
+#include <exception>
+
 #include "common/hashing.h"
+#include "common/hdf5.h"
+#include "common/log.h"
 
 namespace arthrosim::common {
 namespace fs = std::filesystem;
@@ -43,6 +47,57 @@ void checkpoint_test_kill(int n, bool before_rename) {
   if (at == nullptr) return;
   const std::string want = std::to_string(n) + (before_rename ? ".partial" : "");
   if (want == at) ::kill(::getpid(), SIGKILL);
+}
+
+void write_checkpoint(const fs::path& path, const std::string& format, std::int64_t format_version,
+                      const std::string& identity, int sequence, const std::function<void(H5File&)>& body) {
+  AtomicOutput atomic(path);
+  {
+    H5File f(atomic.temp().string(), H5File::Mode::kTruncate);
+    f.set_attribute("/", "format", format);
+    f.set_attribute("/", "format_version", format_version);
+    f.set_attribute("/", "identity", identity);
+    body(f);
+    f.flush();
+  }
+  checkpoint_test_kill(sequence, true);
+  atomic.commit();
+  checkpoint_test_kill(sequence, false);
+}
+
+bool read_checkpoint(const fs::path& path, const std::string& format, std::int64_t format_version,
+                     std::string& identity, std::string& why, const std::function<void(const H5File&)>& body) {
+  try {
+    const H5File f(path.string(), H5File::Mode::kRead);
+    if (!f.has_attribute("/", "format") || f.attribute_string("/", "format") != format) {
+      why = "not an " + format;
+      return false;
+    }
+    if (f.attribute_int("/", "format_version") != format_version) {
+      why = "format_version " + std::to_string(f.attribute_int("/", "format_version")) + " (this build writes " +
+            std::to_string(format_version) + ")";
+      return false;
+    }
+    identity = f.attribute_string("/", "identity");
+    body(f);
+    return true;
+  } catch (const std::exception& e) {
+    why = e.what();
+    return false;
+  }
+}
+
+bool resume_from_checkpoint(const fs::path& path, const std::string& identity,
+                            const std::function<bool(std::string& found_identity, std::string& why)>& read) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return false;
+  std::string found, why;
+  const bool ok = read(found, why);
+  if (ok && found == identity) return true;
+  if (ok) why = "it belongs to another run (inputs, options, command line or build differ)";
+  log_warn("not resuming from " + path.string() + ": " + why + "; starting over");
+  fs::remove(path, ec);
+  return false;
 }
 
 }  // namespace arthrosim::common

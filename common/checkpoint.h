@@ -6,13 +6,17 @@
 // of one) at an interval of wall time, and on start continues from a
 // checkpoint whose identity is its own run's.
 #include <chrono>
+#include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "common/output_file.h"
 
 namespace arthrosim::common {
+
+class H5File;
 
 /// "<out>.checkpoint".
 std::filesystem::path checkpoint_name(const std::filesystem::path& out);
@@ -45,5 +49,26 @@ class CheckpointClock {
 /// place; "<n>.partial": after the n-th was written, before its rename. No
 /// effect without the variable.
 void checkpoint_test_kill(int n, bool before_rename);
+
+/// The frame of every checkpoint file: the root attributes format,
+/// format_version and identity, the stage's own datasets (`body`), then the
+/// atomic rename with the kill tests' hook around it (`sequence`: 1, 2, ...,
+/// the checkpoints of this process).
+void write_checkpoint(const std::filesystem::path& path, const std::string& format, std::int64_t format_version,
+                      const std::string& identity, int sequence, const std::function<void(H5File&)>& body);
+
+/// Reads a checkpoint written by write_checkpoint: checks format and version,
+/// then `body` reads the stage's datasets. False with `why` when the file is
+/// not one of this format and version or `body` throws (a missing dataset,
+/// inconsistent counts). `identity` receives the root attribute.
+bool read_checkpoint(const std::filesystem::path& path, const std::string& format, std::int64_t format_version,
+                     std::string& identity, std::string& why, const std::function<void(const H5File&)>& body);
+
+/// The decision at a stage's start: resume from `path` when it exists, was
+/// read (`read` returns false with a reason otherwise) and its identity is
+/// `identity`. Otherwise, when the file exists, warns "not resuming from
+/// <path>: <why>; starting over", removes it and returns false.
+bool resume_from_checkpoint(const std::filesystem::path& path, const std::string& identity,
+                            const std::function<bool(std::string& found_identity, std::string& why)>& read);
 
 }  // namespace arthrosim::common

@@ -12,6 +12,7 @@
 
 #include "biphasic/joint_run.h"
 #include "biphasic/output_file.h"
+#include "common/checkpoint.h"
 #include "common/effects.h"
 #include "common/error.h"
 #include "common/file_check.h"
@@ -21,6 +22,7 @@
 #include "common/prepared_model_file.h"
 #include "common/progress.h"
 #include "musculoskeletal/kinematics_file.h"
+#include "pipelines/biphasic_checkpoint.h"
 #include "pipelines/prepare.h"
 #include "pipelines/stages.h"
 #include "pipelines/study.h"
@@ -201,6 +203,9 @@ void BiphasicOptions::declare(common::OptionVisitor& v) {
   v.number("crop_margin_mm", crop_margin_m, Unit::kMillimetre, {0, 1e3},
            "keep each layer's quads within this distance of a vertex in contact in some frame (0: whole surface)");
   v.number("end_time_s", end_time_s, Unit::kSecond, {0, 1e4}, "last frame time simulated (default: the whole trial)");
+  v.number("checkpoint_interval_s", checkpoint_interval_s, Unit::kSecond, {0, 86400},
+           "wall time between checkpoints <out>.checkpoint (0: after every step); a rerun of the same command "
+           "continues from the last one (docs/biphasic.md, \"Checkpoints\")");
 }
 
 StageDescriptor biphasic_stage_descriptor() {
@@ -294,6 +299,8 @@ void check_options(const BiphasicStageOptions& o) {
     fail("time_step_s: expected a value > 0 s, found " + std::to_string(o.time_step_s));
   if (!(o.omega >= 0.5 && o.omega <= 1.0)) fail("omega: expected a value in [0.5, 1], found " + std::to_string(o.omega));
   biphasic::validate({o.aggregate_modulus_Pa, o.poisson_ratio, o.permeability_m4_per_Ns}, "biphasic options");
+  if (!(o.checkpoint_interval_s >= 0.0) || !std::isfinite(o.checkpoint_interval_s))
+    fail("checkpoint_interval_s: expected a value >= 0 s, found " + std::to_string(o.checkpoint_interval_s));
   if (!(o.crop_margin_m >= 0.0) || !std::isfinite(o.crop_margin_m))
     fail("crop_margin_m: expected a value >= 0 m, found " + std::to_string(o.crop_margin_m));
 }
@@ -470,7 +477,35 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
     }
     return out;
   };
-  result.steps = run.run(frame_times, frame_loads, [&](int step, double t, const std::vector<biphasic::LayerStep>& r) {
+  // Checkpoint and resume (pipelines/biphasic_checkpoint.h), tied to this
+  // run's identity (program, command line, options, the inputs' bytes, the
+  // runner's key).
+  const std::filesystem::path checkpoint_path = common::checkpoint_name(o.out);
+  BiphasicCheckpoint checkpoint;
+  checkpoint.identity = common::run_identity(
+      o.argv, options_text(o), {{o.prepared, "--prepared"}, {o.kinematics, "--kinematics"}});
+  std::optional<BiphasicCheckpoint> found;
+  const bool resume = common::resume_from_checkpoint(
+      checkpoint_path, checkpoint.identity, [&](std::string& identity, std::string& why) {
+        found = read_biphasic_checkpoint(checkpoint_path, why);
+        if (!found) return false;
+        if (found->layers.size() != layers.size() || found->steps_done < 0 || found->steps_done >= expected) {
+          why = "it holds " + std::to_string(found->layers.size()) + " layers and " +
+                std::to_string(found->steps_done) + " steps for a run of " + std::to_string(layers.size()) +
+                " layers and " + std::to_string(expected) + " steps";
+          return false;
+        }
+        identity = found->identity;
+        return true;
+      });
+  if (resume) {
+    checkpoint = std::move(*found);
+  } else {
+    checkpoint.u_history.assign(layers.size(), {});
+    checkpoint.p_history.assign(layers.size(), {});
+  }
+  common::CheckpointClock checkpoint_clock(o.checkpoint_interval_s);
+  auto on_step = [&](int step, double t, const std::vector<biphasic::LayerStep>& r) {
     const double force = force_at(t);
     BiphasicKeyStep& key = result.key_steps[t <= t_mid ? 0 : 1];
     if (key.step == 0 || force > key.force_N) {
@@ -498,7 +533,43 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
       s.peak_shear_Pa = std::max(s.peak_shear_Pa, r[i].max_shear_Pa);
     }
     progress.step();
-  });
+  };
+  if (resume) {
+    common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": " +
+                     std::to_string(checkpoint.steps_done) + " of " + std::to_string(expected) +
+                     " steps done (taken from it)");
+    const double t_first = frame_times.front();
+    for (int i = 1; i <= checkpoint.steps_done; ++i) {
+      std::vector<Eigen::VectorXd> u, p;
+      for (size_t l = 0; l < layers.size(); ++l) {
+        u.push_back(checkpoint.u_history[l][static_cast<size_t>(i - 1)]);
+        p.push_back(checkpoint.p_history[l][static_cast<size_t>(i - 1)]);
+      }
+      const double t = t_first + i * dt;  // as JointRun::run computes it
+      on_step(i, t, run.results_at(frame_times, frame_loads, t, u, p));
+    }
+    run.restore(checkpoint.layers);
+    result.resumed_steps = checkpoint.steps_done;
+  }
+  result.steps = run.run(
+      frame_times, frame_loads,
+      [&](int step, double t, const std::vector<biphasic::LayerStep>& r) {
+        on_step(step, t, r);
+        for (size_t l = 0; l < layers.size(); ++l) {
+          const biphasic::TrapezoidalIntegrator& in = run.problem(static_cast<int>(l)).integrator();
+          checkpoint.u_history[l].push_back(in.u());
+          checkpoint.p_history[l].push_back(in.p());
+        }
+        if (step < expected && checkpoint_clock.due()) {
+          checkpoint.steps_done = step;
+          checkpoint.layers.clear();
+          for (size_t l = 0; l < layers.size(); ++l)
+            checkpoint.layers.push_back(run.problem(static_cast<int>(l)).integrator().state());
+          write_biphasic_checkpoint(checkpoint_path, checkpoint, ++result.checkpoints);
+          checkpoint_clock.mark();
+        }
+      },
+      checkpoint.steps_done + 1);
   progress.finish();
   result.stepping_s = seconds_since(t0);
   for (size_t i = 0; i < layers.size(); ++i)
@@ -507,6 +578,7 @@ BiphasicStageResult run_biphasic_stage(const BiphasicStageOptions& o) {
   writer.finish(run);
   std::filesystem::rename(partial, o.out);
   biphasic::write_output_xdmf(o.out, xdmf_path_for(o.out));
+  std::filesystem::remove(checkpoint_path);
   for (size_t i = 0; i < layers.size(); ++i) {
     const biphasic::LayerProblem& p = run.problem(static_cast<int>(i));
     const biphasic::IntegratorCounters& c = p.integrator().counters();

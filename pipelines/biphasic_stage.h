@@ -48,6 +48,10 @@ struct BiphasicOptions {
   double crop_margin_m = 5 * common::units::mm;
   /// Last frame time simulated [s]; none = the whole trial.
   std::optional<double> end_time_s;
+  /// Wall time between checkpoints `<out>.checkpoint` [s] (0: after every
+  /// step); a rerun of the same command continues from the last one
+  /// (pipelines/biphasic_checkpoint.h).
+  double checkpoint_interval_s = 60.0;
   void declare(common::OptionVisitor& v);
 };
 
@@ -113,6 +117,8 @@ struct BiphasicStageResult {
   /// Mean fluid load support of each layer over the steps with contact.
   std::vector<double> mean_fluid_load_support;
   double preprocessing_s = 0.0, build_s = 0.0, stepping_s = 0.0, wall_s = 0.0;
+  int checkpoints = 0;     ///< checkpoints written by this run
+  int resumed_steps = 0;   ///< steps taken from a checkpoint (0: a fresh run)
   /// "PARTIAL INPUT: ..." when run on an incomplete kinematics file (allow_partial), else "".
   std::string partial_input;
 };

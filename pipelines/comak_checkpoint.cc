@@ -1,6 +1,7 @@
 #include "pipelines/comak_checkpoint.h"
 
 #include <exception>
+#include <stdexcept>
 
 #include "common/checkpoint.h"
 #include "common/hdf5.h"
@@ -51,13 +52,8 @@ std::vector<Eigen::VectorXd> get_series(const common::H5File& f, const std::stri
 }  // namespace
 
 void write_comak_checkpoint(const fs::path& path, const ComakCheckpoint& c, int sequence) {
-  common::AtomicOutput atomic(path);
-  {
-    common::H5File f(atomic.temp().string(), common::H5File::Mode::kTruncate);
+  common::write_checkpoint(path, kFormat, kFormatVersion, c.identity, sequence, [&](common::H5File& f) {
     const msk::ComakRunState& s = c.state;
-    f.set_attribute("/", "format", kFormat);
-    f.set_attribute("/", "format_version", kFormatVersion);
-    f.set_attribute("/", "identity", c.identity);
     f.set_attribute("/", "frames_total", c.frames_total);
     f.set_attribute("/", "frames_done", static_cast<std::int64_t>(s.frames_done));
     // The run state.
@@ -127,27 +123,12 @@ void write_comak_checkpoint(const fs::path& path, const ComakCheckpoint& c, int 
     f.write("/frames/attempts", attempts);
     f.write("/frames/ipopt_status_name", names);
     f.write("/frames/message", messages);
-    f.flush();
-  }
-  common::checkpoint_test_kill(sequence, true);
-  atomic.commit();
-  common::checkpoint_test_kill(sequence, false);
+  });
 }
 
 std::optional<ComakCheckpoint> read_comak_checkpoint(const fs::path& path, std::string& why) {
-  try {
-    const common::H5File f(path.string(), common::H5File::Mode::kRead);
-    if (!f.has_attribute("/", "format") || f.attribute_string("/", "format") != kFormat) {
-      why = "not a COMAK checkpoint";
-      return std::nullopt;
-    }
-    if (f.attribute_int("/", "format_version") != kFormatVersion) {
-      why = "format_version " + std::to_string(f.attribute_int("/", "format_version")) + " (this build writes " +
-            std::to_string(kFormatVersion) + ")";
-      return std::nullopt;
-    }
-    ComakCheckpoint c;
-    c.identity = f.attribute_string("/", "identity");
+  ComakCheckpoint c;
+  const bool ok = common::read_checkpoint(path, kFormat, kFormatVersion, c.identity, why, [&](const common::H5File& f) {
     c.frames_total = f.attribute_int("/", "frames_total");
     msk::ComakRunState& s = c.state;
     s.frames_done = static_cast<int>(f.attribute_int("/", "frames_done"));
@@ -194,13 +175,11 @@ std::optional<ComakCheckpoint> read_comak_checkpoint(const fs::path& path, std::
                              static_cast<std::size_t>(obj.size()), static_cast<std::size_t>(wall.size()),
                              static_cast<std::size_t>(status.size()), names.size(), messages.size()})
       if (size != n) {
-        why = "it holds " + std::to_string(size) + " records for " + std::to_string(n) + " frames done";
-        return std::nullopt;
+        throw std::runtime_error("it holds " + std::to_string(size) + " records for " + std::to_string(n) + " frames done");
       }
     if (s.frames_done < 1 || s.frames_done > c.frames_total || m.frames != s.frames_done) {
-      why = "inconsistent frame counts (" + std::to_string(s.frames_done) + " done of " +
-            std::to_string(c.frames_total) + ")";
-      return std::nullopt;
+      throw std::runtime_error("inconsistent frame counts (" + std::to_string(s.frames_done) + " done of " +
+            std::to_string(c.frames_total) + ")");
     }
     for (std::size_t i = 0; i < n; ++i) {
       ComakFrameRecord r;
@@ -222,11 +201,9 @@ std::optional<ComakCheckpoint> read_comak_checkpoint(const fs::path& path, std::
       r.result.message = messages[i];
       c.frames.push_back(std::move(r));
     }
-    return c;
-  } catch (const std::exception& e) {
-    why = e.what();
-    return std::nullopt;
-  }
+  });
+  if (!ok) return std::nullopt;
+  return c;
 }
 
 }  // namespace arthrosim::pipelines

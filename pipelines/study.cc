@@ -145,6 +145,9 @@ std::vector<Metric> comak_metrics(const fs::path& file, const fs::path& ref_file
   const musculoskeletal::KinematicsFileReader b(ref_file.string());
   common::require_file_format(a.file(), file.string(), common::StageFile::kKinematics);  // common/file_check.h
   common::require_file_format(b.file(), ref_file.string(), common::StageFile::kKinematics);
+  // A killed or stopped COMAK run's file: its frames are not the whole run.
+  a.require_complete(false);
+  b.require_complete(false);
   std::vector<Metric> out;
   const std::string force = musculoskeletal::KinematicsFileReader::kTibiofemoralForce;
   const std::string force_description =

@@ -1,6 +1,7 @@
 #include "pipelines/surface_checkpoint.h"
 
 #include <exception>
+#include <stdexcept>
 
 #include "common/checkpoint.h"
 #include "common/hdf5.h"
@@ -39,12 +40,7 @@ void put_column(common::H5File& f, const std::string& name, const std::vector<su
 }  // namespace
 
 void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, int sequence) {
-  common::AtomicOutput atomic(path);
-  {
-    common::H5File f(atomic.temp().string(), common::H5File::Mode::kTruncate);
-    f.set_attribute("/", "format", kFormat);
-    f.set_attribute("/", "format_version", kFormatVersion);
-    f.set_attribute("/", "identity", c.identity);
+  common::write_checkpoint(path, kFormat, kFormatVersion, c.identity, sequence, [&](common::H5File& f) {
     // The step loop.
     f.set_attribute("/", "t", c.t);
     put_long(f, "/", "k_out", c.k_out);
@@ -133,27 +129,12 @@ void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, 
     f.set_attribute("/system", "contact_time_s", c.system.contact_time_s);
     f.set_attribute("/system", "models_time_s", c.system.models_time_s);
     f.set_attribute("/system", "copy_time_s", c.system.copy_time_s);
-    f.flush();
-  }
-  common::checkpoint_test_kill(sequence, true);
-  atomic.commit();
-  common::checkpoint_test_kill(sequence, false);
+  });
 }
 
 std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, std::string& why) {
-  try {
-    const common::H5File f(path.string(), common::H5File::Mode::kRead);
-    if (!f.has_attribute("/", "format") || f.attribute_string("/", "format") != kFormat) {
-      why = "not a surface checkpoint";
-      return std::nullopt;
-    }
-    if (f.attribute_int("/", "format_version") != kFormatVersion) {
-      why = "format_version " + std::to_string(f.attribute_int("/", "format_version")) + " (this build writes " +
-            std::to_string(kFormatVersion) + ")";
-      return std::nullopt;
-    }
-    SurfaceCheckpoint c;
-    c.identity = f.attribute_string("/", "identity");
+  SurfaceCheckpoint c;
+  const bool ok = common::read_checkpoint(path, kFormat, kFormatVersion, c.identity, why, [&](const common::H5File& f) {
     c.t = f.attribute_double("/", "t");
     c.k_out = static_cast<int>(get_long(f, "/", "k_out"));
     c.penetration_warnings = get_long(f, "/", "penetration_warnings");
@@ -174,9 +155,8 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
       const Eigen::VectorXd t = f.read_vector("/frames/time");
       const Eigen::MatrixXd Q = f.read_matrix("/frames/q");
       if (t.size() != frames || Q.rows() != frames) {
-        why = "it holds " + std::to_string(t.size()) + " frame times and " + std::to_string(Q.rows()) +
-              " frames of coordinates for " + std::to_string(frames) + " frames";
-        return std::nullopt;
+        throw std::runtime_error("it holds " + std::to_string(t.size()) + " frame times and " + std::to_string(Q.rows()) +
+              " frames of coordinates for " + std::to_string(frames) + " frames");
       }
       for (long i = 0; i < frames; ++i) {
         c.frame_times.push_back(t[i]);
@@ -255,11 +235,9 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
     c.system.contact_time_s = f.attribute_double("/system", "contact_time_s");
     c.system.models_time_s = f.attribute_double("/system", "models_time_s");
     c.system.copy_time_s = f.attribute_double("/system", "copy_time_s");
-    return c;
-  } catch (const std::exception& e) {
-    why = e.what();
-    return std::nullopt;
-  }
+  });
+  if (!ok) return std::nullopt;
+  return c;
 }
 
 }  // namespace arthrosim::pipelines

@@ -3,17 +3,20 @@
 # the same run with a checkpoint after every frame / step (interval 0) and
 # with the default interval (60 s: none in these short runs), median of N
 # runs each, and the size of the last checkpoint.
-#   scripts/checkpoint_overhead.sh [BUILD_DIR] [N]
+#   scripts/checkpoint_overhead.sh [BUILD_DIR] [N] [STAGES]
+# STAGES: any of "comak surface biphasic" (default all three).
 # COMAK: the coarse knee, frames 0-19 of the synthetic trial. Surface: the
 # walking scenario of tests/pipelines/resume_test.cc (femur and medial tibial
-# cartilage at 10 mm edges, mesh contact, 5 HHT steps of 10 ms).
+# cartilage at 10 mm edges, mesh contact, 5 HHT steps of 10 ms). Biphasic: the
+# canonical two-layer case (4 element layers, 50 steps of 10 ms).
 set -eu
-B=$(cd "${1:-build}" && pwd); N=${2:-3}
+B=$(cd "${1:-build}" && pwd); N=${2:-3}; STAGES=" ${3:-comak surface biphasic} "
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 W=$(mktemp -d); trap 'rm -rf "$W"' EXIT
 cd "$W"
 median() { sort -n | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
 wall() { /usr/bin/time -f %e "$@" >/dev/null 2>time.txt || { cat time.txt; exit 1; }; tail -1 time.txt; }
+if [ "${STAGES#* comak }" != "$STAGES" ]; then
 COMAK="$B/bin/arthrosim-comak --model $ROOT/data/models/knee_parametric/coarse --trial $ROOT/data/trials/synthetic_gait --first-frame 0 --last-frame 19 --out k.h5 --quiet"
 for i in $(seq "$N"); do wall $COMAK; done | median > comak_default.txt
 for i in $(seq "$N"); do wall $COMAK --checkpoint-interval-s 0; done | median > comak_every.txt
@@ -21,6 +24,8 @@ for i in $(seq "$N"); do wall $COMAK --checkpoint-interval-s 0; done | median > 
 ARTHROSIM_TEST_KILL_AT_CHECKPOINT=19 $COMAK --checkpoint-interval-s 0 >/dev/null 2>&1 || true
 echo "comak (20 frames): median wall $(cat comak_default.txt) s without checkpoints, $(cat comak_every.txt) s with one after every frame; checkpoint after 19 frames: $(stat -c %s k.h5.checkpoint) bytes (output $(stat -c %s k.h5.partial) bytes so far)"
 rm -f k.h5*
+fi
+if [ "${STAGES#* surface }" != "$STAGES" ]; then
 $B/bin/arthrosim-comak --model $ROOT/data/models/knee_parametric/coarse --trial $ROOT/data/trials/synthetic_gait --first-frame 10 --last-frame 14 --out kin.h5 --quiet >/dev/null
 $B/bin/arthrosim-prepare --model $ROOT/data/models/knee_parametric/coarse --edge-length-mm 10 --out prepared.h5 >/dev/null 2>&1
 scene() {
@@ -58,3 +63,12 @@ for i in $(seq "$N"); do wall $SURFACE --scene default.yaml; done | median > sur
 for i in $(seq "$N"); do wall $SURFACE --scene every.yaml; done | median > surface_every.txt
 ARTHROSIM_TEST_KILL_AT_CHECKPOINT=4 $SURFACE --scene every.yaml >/dev/null 2>&1 || true
 echo "surface (5 steps, 628 nodes): median wall $(cat surface_default.txt) s without checkpoints, $(cat surface_every.txt) s with one after every step; checkpoint after 4 steps: $(stat -c %s s.h5.checkpoint) bytes (output $(stat -c %s s.h5.partial) bytes so far)"
+fi
+if [ "${STAGES#* biphasic }" != "$STAGES" ]; then
+$B/bin/arthrosim-biphasic --canonical case --out c.h5 --end-time-s 0.01 --quiet >/dev/null
+BIPHASIC="$B/bin/arthrosim-biphasic --prepared case/two_layers_prepared.h5 --kinematics case/two_layers_kinematics.h5 --layers femur,tibia_medial --end-time-s 0.5 --out b.h5 --quiet"
+for i in $(seq "$N"); do wall $BIPHASIC; done | median > biphasic_default.txt
+for i in $(seq "$N"); do wall $BIPHASIC --checkpoint-interval-s 0; done | median > biphasic_every.txt
+ARTHROSIM_TEST_KILL_AT_CHECKPOINT=49 $BIPHASIC --checkpoint-interval-s 0 >/dev/null 2>&1 || true
+echo "biphasic (50 steps, 2 layers): median wall $(cat biphasic_default.txt) s without checkpoints, $(cat biphasic_every.txt) s with one after every step; checkpoint after 49 steps: $(stat -c %s b.h5.checkpoint) bytes (output $(stat -c %s b.h5.partial) bytes so far)"
+fi

@@ -64,6 +64,11 @@ int main(int argc, char** argv) {
                      "keep the quads within this distance of a vertex in contact in some frame [mm]; 0 = whole surface")
           ->capture_default_str();
   auto* o_end = app.add_option("--end-time-s", end_time_s, "last frame time simulated [s] (default: the whole trial)");
+  double checkpoint_interval_s = 60.0;
+  auto* o_ckpt = app.add_option("--checkpoint-interval-s", checkpoint_interval_s,
+                                "wall time between checkpoints <out>.checkpoint [s] (0: after every step); rerun the "
+                                "same command to continue a killed run from its last checkpoint")
+                     ->capture_default_str();
   std::string compare_to;
   app.add_option("--compare-to", compare_to,
                  "after the run (or instead of it, with --compare-only), print the relative difference of the key "
@@ -123,6 +128,7 @@ int main(int argc, char** argv) {
     if (o_k->count()) o.permeability_m4_per_Ns = k;
     if (o_margin->count()) o.crop_margin_m = margin_mm * 1e-3;
     if (o_end->count()) o.end_time_s = end_time_s;
+    if (o_ckpt->count()) o.checkpoint_interval_s = checkpoint_interval_s;
     if (compare_only) {
       if (compare_to.empty()) throw common::InputError("--compare-only needs --compare-to");
       compare();

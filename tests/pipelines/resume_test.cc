@@ -5,7 +5,8 @@
 // only dataset excepted is named where it is compared: wall times).
 //
 // The runs are the stage programs on the coarse bundled knee with a few
-// frames or steps (COMAK about 1 s, the surface stage a few seconds). Kill points: the kill tests' hook of
+// frames or steps (COMAK about 1 s, the surface stage a few seconds, the
+// biphasic stage 12 steps of the canonical two-layer case, about 1 s). Kill points: the kill tests' hook of
 // common/checkpoint.h (deterministic: right after checkpoint n is in place,
 // or after it was written and before its rename) and a SIGKILL from outside
 // while a frame is being solved.
@@ -22,14 +23,17 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "tests/test_support.h"
 #include "common/checkpoint.h"
 #include "common/hdf5.h"
 #include "common/output_file.h"
+#include "pipelines/biphasic_checkpoint.h"
 
 namespace {
 
@@ -363,6 +367,143 @@ TEST(ResumeSurface, KilledAtCheckpointsResumesBitIdentical) {
     const std::string log = surface_kill_and_resume(scratch("surface_at_" + kill_at), kill_at);
     EXPECT_NE(log.find("resuming from the checkpoint s.h5.checkpoint: " + resumes), std::string::npos) << log;
   }
+}
+
+// ---- biphasic: per step ------------------------------------------------------
+
+// The canonical two-layer case (arthrosim-biphasic --canonical), one element
+// layer, 12 steps of 10 ms, a checkpoint after every step. Between two uninterrupted runs the
+// output differs only in the layers' wall-time attributes.
+const fs::path& biphasic_case() {
+  static const fs::path dir = [] {
+    const fs::path d = scratch("biphasic_case");
+    const auto [status, printed] =
+        run("cd " + d.string() + " && " + (kBin / "arthrosim-biphasic").string() + " --canonical . --out c.h5 --quiet");
+    EXPECT_EQ(status, 0) << printed;
+    return d;
+  }();
+  return dir;
+}
+
+std::string biphasic_command() {
+  const fs::path c = biphasic_case();
+  return (kBin / "arthrosim-biphasic").string() + " --prepared " + (c / "two_layers_prepared.h5").string() +
+         " --kinematics " + (c / "two_layers_kinematics.h5").string() +
+         " --layers femur,tibia_medial --end-time-s 0.12 --element-layers 1 --checkpoint-interval-s 0 --out b.h5";
+}
+
+const fs::path& biphasic_reference() {
+  static const fs::path dir = [] {
+    const fs::path d = scratch("biphasic_reference");
+    const auto [status, printed] = run("cd " + d.string() + " && " + biphasic_command());
+    EXPECT_EQ(status, 0) << printed;
+    return d;
+  }();
+  return dir;
+}
+
+// The objects (datasets or attributes) in which h5diff finds differences
+// between the output in `dir` and the reference's. h5diff cannot leave out
+// attributes, so its report is read: each "N differences found" (N > 0)
+// belongs to the last object named before it.
+std::set<std::string> biphasic_differences(const fs::path& dir) {
+  const auto [status, report] = h5diff(biphasic_reference() / "b.h5", dir / "b.h5", {});
+  std::set<std::string> differing;
+  std::istringstream in(report);
+  std::string line, object;
+  while (std::getline(in, line)) {
+    if (line.rfind("attribute: <", 0) == 0 || line.rfind("dataset: <", 0) == 0) {
+      object = line.substr(0, line.find("> and <") + 1);
+    } else if (!line.empty() && line[0] >= '1' && line[0] <= '9' && line.find("difference") != std::string::npos) {
+      differing.insert(object);
+    }
+  }
+  if (status != 0 && status != 1) differing.insert("h5diff failed: " + report);
+  return differing;
+}
+
+// Wall times of the run: the only attributes allowed to differ.
+const std::set<std::string> kBiphasicWallTimes = [] {
+  std::set<std::string> s;
+  for (const char* layer : {"femur", "tibia_medial"})
+    for (const char* a : {"factorization_s", "solve_s", "step_s"})
+      s.insert(std::string("attribute: <") + a + " of </layers/" + layer + ">>");
+  return s;
+}();
+
+void expect_biphasic_same_as_reference(const fs::path& dir) {
+  for (const std::string& d : biphasic_differences(dir))
+    EXPECT_TRUE(kBiphasicWallTimes.count(d)) << "differs from the uninterrupted run: " << d;
+  EXPECT_TRUE(slurp(biphasic_reference() / "b.xdmf") == slurp(dir / "b.xdmf"));
+  EXPECT_FALSE(fs::exists(dir / "b.h5.checkpoint"));
+  EXPECT_FALSE(fs::exists(dir / "b.h5.partial"));
+}
+
+std::string biphasic_kill(const fs::path& dir, const std::string& kill_at) {
+  const auto [killed, printed] =
+      run("cd " + dir.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=" + kill_at + " exec " + biphasic_command());
+  EXPECT_NE(killed, 0) << "not killed at checkpoint " << kill_at << ": " << printed;
+  EXPECT_FALSE(fs::exists(dir / "b.h5"));
+  EXPECT_TRUE(fs::exists(dir / "b.h5.checkpoint"));
+  return printed;
+}
+
+std::string biphasic_rerun(const fs::path& dir) {
+  const auto [status, resumed] = run("cd " + dir.string() + " && " + biphasic_command());
+  EXPECT_EQ(status, 0) << resumed;
+  return resumed;
+}
+
+// Killed after the first step, mid-run, before a checkpoint's rename, and
+// twice in a row; each rerun of the same command resumes and matches the
+// uninterrupted run.
+TEST(ResumeBiphasic, KilledAtCheckpointsResumesBitIdentical) {
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+      {{"1"}, "1 of 12 steps done"},
+      {{"7"}, "7 of 12 steps done"},
+      {{"4.partial"}, "3 of 12 steps done"},
+      {{"3", "2"}, "5 of 12 steps done"},  // the second process resumed at 3 and did 2 more
+  };
+  for (const auto& [kills, resumes] : cases) {
+    SCOPED_TRACE(kills.front());
+    const fs::path dir = scratch("biphasic_at_" + kills.front() + "_" + std::to_string(kills.size()));
+    for (const std::string& k : kills) biphasic_kill(dir, k);
+    const std::string log = biphasic_rerun(dir);
+    EXPECT_NE(log.find("resuming from the checkpoint b.h5.checkpoint: " + resumes), std::string::npos) << log;
+    expect_biphasic_same_as_reference(dir);
+  }
+}
+
+// The comparison can fail: a checkpoint without the solid velocity (v
+// zeroed, as if the state array were left out) resumes into a different
+// result, and the test above would report it.
+TEST(ResumeBiphasic, CheckpointMissingAStateArrayIsDetected) {
+  const fs::path dir = scratch("biphasic_sabotage");
+  biphasic_kill(dir, "5");
+  std::string why;
+  std::optional<arthrosim::pipelines::BiphasicCheckpoint> c =
+      arthrosim::pipelines::read_biphasic_checkpoint(dir / "b.h5.checkpoint", why);
+  ASSERT_TRUE(c) << why;
+  c->layers[0].v.setZero();
+  arthrosim::pipelines::write_biphasic_checkpoint(dir / "b.h5.checkpoint", *c, 0);
+  EXPECT_NE(biphasic_rerun(dir).find("5 of 12 steps done"), std::string::npos);
+  std::set<std::string> wrong;
+  for (const std::string& d : biphasic_differences(dir))
+    if (!kBiphasicWallTimes.count(d)) wrong.insert(d);
+  EXPECT_TRUE(wrong.count("dataset: </layers/femur/displacement>")) << "the sabotaged resume was not detected";
+}
+
+// A checkpoint of another run (other options) is not used: warned about,
+// removed, the run starts over and still matches.
+TEST(ResumeBiphasic, CheckpointOfAnotherRunIsNotUsed) {
+  const fs::path dir = scratch("biphasic_foreign");
+  const auto [killed, p1] = run("cd " + dir.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=3 exec " +
+                                biphasic_command() + " --omega 1");
+  EXPECT_NE(killed, 0) << p1;
+  const std::string log = biphasic_rerun(dir);
+  EXPECT_NE(log.find("not resuming from b.h5.checkpoint: it belongs to another run"), std::string::npos) << log;
+  EXPECT_EQ(log.find("resuming from the checkpoint"), std::string::npos) << log;
+  expect_biphasic_same_as_reference(dir);
 }
 
 }  // namespace

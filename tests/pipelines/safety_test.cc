@@ -677,6 +677,15 @@ TEST(SafetyPartial, BiphasicRefusesAnIncompleteKinematicsFileUnlessAllowed) {
   EXPECT_NE(printed.find("--allow-partial"), std::string::npos) << printed;
   EXPECT_FALSE(fs::exists(dir / "out.h5"));
 
+  // The accuracy study compares complete runs only (before: it checked kind
+  // and version, and compared the 101 frames as if they were the run).
+  const std::string study = error_of([&] { study::comak_metrics(stopped, kinematics); });
+  EXPECT_NE(study.find(stopped.string() + ": error: incomplete kinematics file: it holds 101 of 150 frames"),
+            std::string::npos)
+      << study;
+  EXPECT_NE(error_of([&] { study::comak_metrics(kinematics, stopped); }).find("incomplete kinematics file"),
+            std::string::npos);
+
   std::tie(status, printed) = run(biphasic + " --allow-partial");
   ASSERT_EQ(status, 0) << printed;
   const common::H5File out((dir / "out.h5").string(), common::H5File::Mode::kRead);

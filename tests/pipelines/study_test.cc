@@ -167,6 +167,7 @@ void write_kinematics(const fs::path& file, int frames, double force_scale, doub
   common::H5File f(file.string(), common::H5File::Mode::kTruncate);
   f.set_attribute("/", "format", "arthrosim kinematics file");  // what the reader checks (common/file_check.h)
   f.set_attribute("/", "format_version", 1);
+  f.set_attribute("/", "frames", frames);  // the run summary of a finished run (the study refuses unfinished ones)
   Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(frames, 0.0, 1.0);
   Eigen::MatrixXd force(frames, 3), act(frames, 2);
   Eigen::VectorXi status = Eigen::VectorXi::Zero(frames);
