@@ -93,7 +93,8 @@ T gap_kernel(ContactKind kind, const V3<T>* x, double sign, V3<T>& n, T* w, T* p
     const T l = sqrt(r.squaredNorm());
     // sign = -1: the vertex is in front (an augmented contact at a
     // positive gap): n = (x0 - c)/|x0 - c| and g = +|x0 - c|.
-    n = (sign / l) * r;
+    n = r / l;
+    if (sign < 0) n = -n;
     w[0] = T(1.0);
     w[1] = -(T(1.0) - u);
     w[2] = -u;
@@ -605,7 +606,7 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     if (gs <= -delta) {
       p = kc * (-gs - 0.5 * delta);
       dp = kc;
-    } else if (gs < 0) {
+    } else {  // (-delta, 0); round-off may give a gap just above 0, as the penalty always had
       p = 0.5 * kc * gs * gs / delta;
       dp = -kc * gs / delta;
     }
