@@ -6,6 +6,7 @@
 #include <cstdlib>
 
 #include <exception>
+#include <stdexcept>
 
 #include "common/hashing.h"
 #include "common/hdf5.h"
@@ -47,6 +48,21 @@ void checkpoint_test_kill(int n, bool before_rename) {
   if (at == nullptr) return;
   const std::string want = std::to_string(n) + (before_rename ? ".partial" : "");
   if (want == at) ::kill(::getpid(), SIGKILL);
+}
+
+Eigen::MatrixXd stack_rows(const std::vector<Eigen::VectorXd>& v) {
+  Eigen::MatrixXd M(static_cast<Eigen::Index>(v.size()), v.empty() ? 0 : v.front().size());
+  for (size_t i = 0; i < v.size(); ++i) M.row(static_cast<Eigen::Index>(i)) = v[i].transpose();
+  return M;
+}
+
+std::vector<Eigen::VectorXd> unstack_rows(const Eigen::MatrixXd& M, std::int64_t rows, const std::string& name) {
+  if (M.rows() != rows)
+    throw std::runtime_error(name + ": expected " + std::to_string(rows) + " rows, found " + std::to_string(M.rows()));
+  std::vector<Eigen::VectorXd> v;
+  v.reserve(static_cast<size_t>(M.rows()));
+  for (Eigen::Index i = 0; i < M.rows(); ++i) v.push_back(M.row(i).transpose());
+  return v;
 }
 
 void write_checkpoint(const fs::path& path, const std::string& format, std::int64_t format_version,

@@ -5,6 +5,7 @@
 // rename, so a kill leaves the previous checkpoint or the new one, never half
 // of one) at an interval of wall time, and on start continues from a
 // checkpoint whose identity is its own run's.
+#include <Eigen/Core>
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
@@ -49,6 +50,12 @@ class CheckpointClock {
 /// place; "<n>.partial": after the n-th was written, before its rename. No
 /// effect without the variable.
 void checkpoint_test_kill(int n, bool before_rename);
+
+/// A history of equal-length vectors (one per frame or step) as the rows of
+/// one matrix, the form checkpoints store it in; and back, where
+/// std::runtime_error names the dataset `name` unless `M` has `rows` rows.
+Eigen::MatrixXd stack_rows(const std::vector<Eigen::VectorXd>& v);
+std::vector<Eigen::VectorXd> unstack_rows(const Eigen::MatrixXd& M, std::int64_t rows, const std::string& name);
 
 /// The frame of every checkpoint file: the root attributes format,
 /// format_version and identity, the stage's own datasets (`body`), then the

@@ -15,21 +15,6 @@ constexpr std::int64_t kFormatVersion = 1;
 
 std::string layer_group(size_t l) { return "/layers/" + std::to_string(l); }
 
-// Rows: one vector per step.
-Eigen::MatrixXd rows_of(const std::vector<Eigen::VectorXd>& v) {
-  Eigen::MatrixXd M(static_cast<Eigen::Index>(v.size()), v.empty() ? 0 : v.front().size());
-  for (size_t i = 0; i < v.size(); ++i) M.row(static_cast<Eigen::Index>(i)) = v[i].transpose();
-  return M;
-}
-
-std::vector<Eigen::VectorXd> vectors_of(const Eigen::MatrixXd& M, int rows, const std::string& name) {
-  if (M.rows() != rows)
-    throw std::runtime_error(name + ": expected " + std::to_string(rows) + " steps, found " + std::to_string(M.rows()));
-  std::vector<Eigen::VectorXd> v;
-  for (Eigen::Index i = 0; i < M.rows(); ++i) v.push_back(M.row(i).transpose());
-  return v;
-}
-
 }  // namespace
 
 void write_biphasic_checkpoint(const fs::path& path, const BiphasicCheckpoint& c, int sequence) {
@@ -53,8 +38,8 @@ void write_biphasic_checkpoint(const fs::path& path, const BiphasicCheckpoint& c
       f.write(g + "/last_F_t", s.last_F_t);
       f.write(g + "/last_F_Q", s.last_F_Q);
       if (c.steps_done > 0) {
-        f.write(g + "/u_history", rows_of(c.u_history[l]));
-        f.write(g + "/p_history", rows_of(c.p_history[l]));
+        f.write(g + "/u_history", common::stack_rows(c.u_history[l]));
+        f.write(g + "/p_history", common::stack_rows(c.p_history[l]));
       }
     }
   });
@@ -82,9 +67,9 @@ std::optional<BiphasicCheckpoint> read_biphasic_checkpoint(const fs::path& path,
       if (s.steps != c.steps_done)
         throw std::runtime_error(g + ": " + std::to_string(s.steps) + " steps, expected " + std::to_string(c.steps_done));
       c.layers.push_back(std::move(s));
-      c.u_history.push_back(c.steps_done > 0 ? vectors_of(f.read_matrix(g + "/u_history"), c.steps_done, g + "/u_history")
+      c.u_history.push_back(c.steps_done > 0 ? common::unstack_rows(f.read_matrix(g + "/u_history"), c.steps_done, g + "/u_history")
                                              : std::vector<Eigen::VectorXd>());
-      c.p_history.push_back(c.steps_done > 0 ? vectors_of(f.read_matrix(g + "/p_history"), c.steps_done, g + "/p_history")
+      c.p_history.push_back(c.steps_done > 0 ? common::unstack_rows(f.read_matrix(g + "/p_history"), c.steps_done, g + "/p_history")
                                              : std::vector<Eigen::VectorXd>());
     }
   });

@@ -63,9 +63,7 @@ void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, 
     f.create_group("/frames");
     if (!c.frame_times.empty()) {
       f.write("/frames/time", c.frame_times);
-      Eigen::MatrixXd Q(static_cast<Eigen::Index>(c.frame_q.size()), c.frame_q.front().size());
-      for (std::size_t i = 0; i < c.frame_q.size(); ++i) Q.row(static_cast<Eigen::Index>(i)) = c.frame_q[i].transpose();
-      f.write("/frames/q", Q);
+      f.write("/frames/q", common::stack_rows(c.frame_q));
     }
     f.create_group("/steps");
     if (!c.steps.empty()) {
@@ -153,15 +151,11 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
     const long frames = get_long(f, "/", "frames"), steps = get_long(f, "/", "steps");
     if (frames > 0) {
       const Eigen::VectorXd t = f.read_vector("/frames/time");
-      const Eigen::MatrixXd Q = f.read_matrix("/frames/q");
-      if (t.size() != frames || Q.rows() != frames) {
-        throw std::runtime_error("it holds " + std::to_string(t.size()) + " frame times and " + std::to_string(Q.rows()) +
-              " frames of coordinates for " + std::to_string(frames) + " frames");
-      }
-      for (long i = 0; i < frames; ++i) {
-        c.frame_times.push_back(t[i]);
-        c.frame_q.push_back(Q.row(i).transpose());
-      }
+      if (t.size() != frames)
+        throw std::runtime_error("it holds " + std::to_string(t.size()) + " frame times for " + std::to_string(frames) +
+                                 " frames");
+      c.frame_times.assign(t.data(), t.data() + t.size());
+      c.frame_q = common::unstack_rows(f.read_matrix("/frames/q"), frames, "/frames/q");
     }
     if (steps > 0) {
       auto d = [&](const char* name) {
