@@ -1032,6 +1032,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         bool at_steady = false;
         int step_augmentations = 0;
         long augmentation_iterations = 0;
+        bool reports_current = false;  // `reports` already hold the accepted q's contacts
         if (stop_change > 0) {
           at_steady = integrator.advance_to_steady_state(stop_change, t_next, &last_change) &&
                       t_next >= b.par.osmotic_ramp_s;
@@ -1048,15 +1049,17 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           integrator.advance_to(t_next);
           for (;;) {
             const Eigen::VectorXd& qa = integrator.q();
+            reports = contact_reports(qa);
+            reports_current = true;
             double pen = 0;
-            for (const cartilage::ContactPairReport& rep : contact_reports(qa))
-              pen = std::max(pen, rep.counts.max_penetration_m);
+            for (const cartilage::ContactPairReport& rep : reports) pen = std::max(pen, rep.counts.max_penetration_m);
             const double def = max_abs_deflection(qa, t_next);
             if (!(pen > opt.contact.augment_tolerance * def) || step_augmentations == max_augmentations) break;
             for (int k = 0; k < system.num_contacts(); ++k)
               system.set_contact_multipliers(k, system.updated_contact_multipliers(k, qa));
             // restore() rewinds the counters too: keep this attempt's work.
             augmentation_iterations += integrator.statistics().newton_iterations - iterations0;
+            reports_current = false;
             integrator.restore(start);
             integrator.advance_to(t_next);
             ++step_augmentations;
@@ -1091,7 +1094,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
         sr.max_deflection_m = max_def;
         sr.change_m = last_change;
         if (contact) {
-          reports = contact_reports(integrator.q());
+          if (!reports_current) reports = contact_reports(integrator.q());
           double pen = 0, rim_depth = 0, unfaded = 0;
           long active = 0;
           for (const cartilage::ContactPairReport& rep : reports) {
