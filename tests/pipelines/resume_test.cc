@@ -369,6 +369,54 @@ TEST(ResumeSurface, KilledAtCheckpointsResumesBitIdentical) {
   }
 }
 
+// The walking scenario with contact_augmentations (augmented Lagrangian,
+// docs/contact.md) over its first three steps: the stage warns that it writes
+// no checkpoint (the multipliers are not saved) and leaves none; per step it
+// records its multiplier updates, and a step that stopped updating before
+// the limit meets the tolerance (0.1 of the max deflection); the totals
+// agree with the per-step records (Newton iterations include the discarded
+// attempts'), and the penalty-only run of the same steps breaks the rule in
+// the first step that was augmented.
+TEST(ResumeSurface, AugmentedContactWritesNoCheckpointAndRecordsItsUpdates) {
+  const fs::path dir = scratch("surface_augmented");
+  std::ifstream in(surface_inputs() / "walk.yaml");
+  std::stringstream scene;
+  scene << in.rdbuf() << "      end_time_s: 0.03\n";
+  std::ofstream(dir / "penalty.yaml") << scene.str();
+  std::ofstream(dir / "augmented.yaml") << scene.str()
+                                        << "      contact_augmentations: 2\n      contact_augment_tolerance: 0.1\n";
+  const std::string surface = (kBin / "arthrosim-surface").string() + " --prepared " +
+                              (surface_inputs() / "prepared.h5").string() + " --kinematics " +
+                              (comak_reference() / "k.h5").string() + " --quiet";
+  auto [status, log] = run("cd " + dir.string() + " && " + surface + " --scene augmented.yaml --out a.h5");
+  ASSERT_EQ(status, 0) << log;
+  EXPECT_NE(log.find("no checkpoints with contact_augmentations"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(dir / "a.h5.checkpoint"));
+  std::tie(status, log) = run("cd " + dir.string() + " && " + surface + " --scene penalty.yaml --out p.h5");
+  ASSERT_EQ(status, 0) << log;
+  const arthrosim::common::H5File a((dir / "a.h5").string(), arthrosim::common::H5File::Mode::kRead);
+  const arthrosim::common::H5File p((dir / "p.h5").string(), arthrosim::common::H5File::Mode::kRead);
+  const Eigen::VectorXi updates = a.read_vector_int("/solver/contact_augmentations");
+  const Eigen::VectorXd ratio = a.read_vector("/solver/penetration_ratio");
+  const Eigen::VectorXd ratio_penalty = p.read_vector("/solver/penetration_ratio");
+  const Eigen::VectorXi newton = a.read_vector_int("/solver/newton_iterations");
+  EXPECT_FALSE(p.exists("/solver/contact_augmentations"));
+  ASSERT_EQ(updates.size(), ratio.size());
+  ASSERT_EQ(ratio_penalty.size(), ratio.size());
+  int first_augmented = -1;
+  for (Eigen::Index k = 0; k < updates.size(); ++k) {
+    if (updates(k) > 0 && first_augmented < 0) first_augmented = static_cast<int>(k);
+    if (updates(k) < 2) {
+      EXPECT_LE(ratio(k), 0.1) << "step " << k;
+    }
+  }
+  ASSERT_GE(first_augmented, 0) << "no step was augmented";
+  EXPECT_GT(ratio_penalty(first_augmented), 0.1);
+  EXPECT_EQ(a.attribute_int("/solver", "contact_augmentations"), static_cast<std::int64_t>(updates.sum()));
+  EXPECT_EQ(a.attribute_int("/solver", "newton_iterations"), static_cast<std::int64_t>(newton.sum()));
+  EXPECT_GT(a.attribute_int("/solver", "augmentation_newton_iterations"), 0);
+}
+
 // ---- biphasic: per step ------------------------------------------------------
 
 // The canonical two-layer case (arthrosim-biphasic --canonical), one element
