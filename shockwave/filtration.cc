@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <omp.h>
+
 #include "shockwave/reduce.h"
 
 namespace arthrosim::shockwave {
@@ -152,6 +154,23 @@ FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model
   // One conductance for every fast bond (the knee: cancellous bone only):
   // the stages then read no conductance index.
   fast_uniform_ = !fast_c_.empty() && std::all_of(fast_c_.begin(), fast_c_.end(), [&](std::uint8_t q) { return q == fast_c_[0]; });
+  {
+    // The padded, slot-major copy of the fast bonds (the stages' layout).
+    const std::int64_t nf = static_cast<std::int64_t>(fast_list_.size());
+    fast_slots_ = 0;
+    for (std::int64_t k = 0; k < nf; ++k)
+      fast_slots_ = std::max(fast_slots_, static_cast<int>(fast_row_[k + 1] - fast_row_[k]));
+    fast_ell_col_.assign(static_cast<size_t>(fast_slots_) * nf, 0);
+    fast_ell_c_.assign(fast_uniform_ ? 0 : static_cast<size_t>(fast_slots_) * nf, 0);
+    for (std::int64_t k = 0; k < nf; ++k)
+      for (int q = 0; q < fast_slots_; ++q) {
+        const std::int64_t e = fast_row_[k] + q;
+        const size_t at = static_cast<size_t>(q) * nf + k;
+        const bool real = e < fast_row_[k + 1];
+        fast_ell_col_[at] = real ? fast_col_[e] : static_cast<std::int32_t>(k);
+        if (!fast_uniform_) fast_ell_c_[at] = real ? fast_c_[e] : 0;
+      }
+  }
   for (auto& y : fast_y_) y.assign(fast_list_.size(), 0.0);
   fast_y0_.assign(fast_list_.size(), 0.0);
   fast_l0_.assign(fast_list_.size(), 0.0);
@@ -159,6 +178,108 @@ FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model
   for (auto& p : fast_p_) p.assign(fast_list_.size() + 1, 0.0);  // last: a drained neighbour (P = 0)
   dissip_.assign(n, 0.0);
 }
+
+namespace {
+
+// The stage kernels are also compiled for AVX-512 and AVX2 (8 and 4 fast
+// automata per vector), chosen at run time; every lane does the scalar
+// operations of its automaton in the scalar order (no FMA contraction), so all
+// variants give the same bits. GCC only, as in simulation.cc.
+#if defined(__GNUC__) && !defined(__clang__)
+#define FT_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define FT_CLONES
+#endif
+
+// One RKL2 stage (filtration.h) for the fast automata [k0, k1):
+//   first:  L = L(Y_0) (kept in ly0), Y_1 = Y_0 + mut L;
+//   else:   Y_j = mu Y_{j-1} + nu Y_{j-2} + rest Y_0 + mut L(Y_{j-1}) + gat L(Y_0);
+// and the pressure M (Y_j - a theta). The flux sum runs over the padded slots
+// in bond order; "no transfer where rho <= rho_0" as a select, not a branch
+// (the signs of P change from bond to bond once the pore fluid moves).
+struct Stage {
+  std::int64_t k0, k1, nf;
+  int slots;
+  const std::int32_t* col;   // [slot * nf + k]
+  const std::uint8_t* cidx;  // [slot * nf + k], null: every bond has cuniform
+  const double* ctab;
+  double cuniform;
+  const double* p;  // pressure of Y_{j-1} (nf + 1 values: the last a drained reservoir at 0)
+  const double* mt;
+  const std::uint8_t* ft;
+  const double* ath;
+  bool first;
+  double mu, nu, rest, mut, gat;
+  const double *y0, *y1, *y2;
+  double *ly0, *yn, *pn;
+};
+
+template <bool kUniform, bool kFirst>
+inline __attribute__((always_inline)) void stage_loop(const Stage& a) {
+  const std::int64_t nf = a.nf;
+  const int slots = a.slots;
+  const std::uint8_t* __restrict cidx = a.cidx;
+  const double* __restrict ctab = a.ctab;
+  const double cu = a.cuniform;
+  const double* __restrict p = a.p;
+  const double* __restrict mt = a.mt;
+  const std::uint8_t* __restrict ft = a.ft;
+  const double* __restrict ath = a.ath;
+  const double* __restrict y0 = a.y0;
+  const double* __restrict y1 = a.y1;
+  const double* __restrict y2 = a.y2;
+  double* __restrict ly0 = a.ly0;
+  double* __restrict yn = a.yn;
+  double* __restrict pn = a.pn;
+  const double mu = a.mu, nu = a.nu, rest = a.rest, mut = a.mut, gat = a.gat;
+  // Blocks of automata; their flux sums (slot by slot, each sum in slot order
+  // from +0 as in the scalar loop) stay in L1.
+  constexpr std::int64_t kBlock = 512;
+  alignas(64) double fb[kBlock];
+  for (std::int64_t kb = a.k0; kb < a.k1; kb += kBlock) {
+    const std::int64_t len = std::min(kBlock, a.k1 - kb);
+    for (std::int64_t l = 0; l < len; ++l) fb[l] = 0.0;
+    const double* __restrict pb = p + kb;
+    for (int s = 0; s < slots; ++s) {
+      const std::int32_t* __restrict cs = a.col + s * nf + kb;
+      const std::uint8_t* __restrict qs = kUniform ? nullptr : cidx + s * nf + kb;
+#pragma omp simd
+      for (std::int64_t l = 0; l < len; ++l) {
+        const double pi = pb[l], pj = p[cs[l]];
+        // No transfer where rho <= rho_0: max(P_i, P_j) <= 0.
+        const double dp = std::max(pi, pj) > 0.0 ? pj - pi : 0.0;
+        const double C = kUniform ? cu : ctab[qs[l]];
+        fb[l] += C * dp;
+      }
+    }
+#pragma omp simd
+    for (std::int64_t l = 0; l < len; ++l) {
+      const std::int64_t k = kb + l;
+      const double f = fb[l];
+      double v;
+      if constexpr (kFirst) {
+        ly0[k] = f;
+        v = y0[k] + mut * f;
+      } else {
+        v = mu * y1[k] + nu * y2[k] + rest * y0[k] + mut * f + gat * ly0[k];
+      }
+      yn[k] = v;
+      pn[k] = mt[ft[k]] * (v - ath[k]);
+    }
+  }
+}
+
+FT_CLONES void fast_stage(const Stage& a) {
+  if (a.cidx) {
+    if (a.first) stage_loop<false, true>(a);
+    else stage_loop<false, false>(a);
+  } else {
+    if (a.first) stage_loop<true, true>(a);
+    else stage_loop<true, false>(a);
+  }
+}
+
+}  // namespace
 
 void FiltrationTerm::pressures(const std::vector<int>& list, const double* theta, const double* zeta) {
   const std::int64_t n = static_cast<std::int64_t>(list.size());
@@ -185,7 +306,7 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
     double sum = 0.0, e = 0.0;
     for (std::int64_t q = row[k]; q < row[k + 1]; ++q) {
       const double pj = p[col[q]];
-      const double dp = (pi > 0.0 || pj > 0.0) ? pj - pi : 0.0;
+      const double dp = std::max(pi, pj) > 0.0 ? pj - pi : 0.0;
       const double C = cond ? ctab[cond[q]] : cuniform;
       sum += C * dp;
       e += C * dp * dp;
@@ -235,40 +356,46 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
         pp[0][k] = mt[ft[k]] * (y0[k] - ath[k]);
         pstart[k] = pp[0][k];
       }
+      // This thread's share of the fast set (the static schedule of omp for).
+      const std::int64_t T = omp_get_num_threads(), th = omp_get_thread_num();
+      Stage st{};
+      st.k0 = nfast * th / T;
+      st.k1 = nfast * (th + 1) / T;
+      st.nf = nfast;
+      st.slots = fast_slots_;
+      st.col = fast_ell_col_.data();
+      st.cidx = fcond ? fast_ell_c_.data() : nullptr;
+      st.ctab = ctab;
+      st.cuniform = cuniform;
+      st.mt = mt;
+      st.ft = ft;
+      st.ath = ath;
+      st.y0 = y0;
+      st.ly0 = ly0;
       // Stage 1: Y_1 = Y_0 + b_1 w_1 dt L(Y_0).
-      {
-        const double mut = bcoef(1) * w1 * tau_V;
-        const double* p0 = pp[0];
-        double* yn = y[1];
-        double* pn = pp[1];
-#pragma omp for schedule(static)
-        for (std::int64_t k = 0; k < nfast; ++k) {
-          const double f = flux(fast_row_.data(), fast_col_.data(), fcond, k, p0, p0[k], 0.0, nullptr);
-          ly0[k] = f;
-          const double v = y0[k] + mut * f;
-          yn[k] = v;
-          pn[k] = mt[ft[k]] * (v - ath[k]);
-        }
-      }
+      st.first = true;
+      st.mut = bcoef(1) * w1 * tau_V;
+      st.p = pp[0];
+      st.yn = y[1];
+      st.pn = pp[1];
+      fast_stage(st);
+#pragma omp barrier
       // Y_j = mu_j Y_{j-1} + nu_j Y_{j-2} + (1 - mu_j - nu_j) Y_0
       //       + mu_j w_1 dt L(Y_{j-1}) - (1 - b_{j-1}) mu_j w_1 dt L(Y_0).
+      st.first = false;
       for (int j = 2; j <= stages; ++j) {
-        const double mu = (2.0 * j - 1.0) / j * bcoef(j) / bcoef(j - 1);
-        const double nu = -(j - 1.0) / j * bcoef(j) / bcoef(j - 2);
-        const double rest = 1.0 - mu - nu;
-        const double mut = mu * w1 * tau_V, gat = -(1.0 - bcoef(j - 1)) * mu * w1 * tau_V;
-        const double* y1 = y[(j - 1) % 3];
-        const double* y2 = j == 2 ? y0 : y[(j - 2) % 3];
-        double* yn = y[j % 3];
-        const double* p1 = pp[(j - 1) % 2];
-        double* pn = pp[j % 2];
-#pragma omp for schedule(static)
-        for (std::int64_t k = 0; k < nfast; ++k) {
-          const double f = flux(fast_row_.data(), fast_col_.data(), fcond, k, p1, p1[k], 0.0, nullptr);
-          const double v = mu * y1[k] + nu * y2[k] + rest * y0[k] + mut * f + gat * ly0[k];
-          yn[k] = v;
-          pn[k] = mt[ft[k]] * (v - ath[k]);
-        }
+        st.mu = (2.0 * j - 1.0) / j * bcoef(j) / bcoef(j - 1);
+        st.nu = -(j - 1.0) / j * bcoef(j) / bcoef(j - 2);
+        st.rest = 1.0 - st.mu - st.nu;
+        st.mut = st.mu * w1 * tau_V;
+        st.gat = -(1.0 - bcoef(j - 1)) * st.mu * w1 * tau_V;
+        st.y1 = y[(j - 1) % 3];
+        st.y2 = j == 2 ? y0 : y[(j - 2) % 3];
+        st.yn = y[j % 3];
+        st.p = pp[(j - 1) % 2];
+        st.pn = pp[j % 2];
+        fast_stage(st);
+#pragma omp barrier
       }
       const double* ys = y[stages % 3];
       const double* ps = pp[stages % 2];

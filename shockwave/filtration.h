@@ -103,6 +103,13 @@ class FiltrationTerm {
   std::vector<std::int32_t> slow_col_, fast_col_;
   std::vector<std::uint8_t> slow_c_, fast_c_;  ///< index into ctab_
   std::vector<double> ctab_;
+  // The fast bonds again, padded to fast_slots_ per automaton and stored slot
+  // by slot ([slot * fast automata + k]) for the stages' vector loops; a
+  // padding slot names the automaton itself (a zero pressure difference, a
+  // flux of +0 that leaves the sum's bits unchanged).
+  int fast_slots_ = 0;
+  std::vector<std::int32_t> fast_ell_col_;
+  std::vector<std::uint8_t> fast_ell_c_;  ///< index into ctab_ (empty when fast_uniform_)
   std::vector<double> fast_m_, fast_a_, fast_ath_;  ///< per fast automaton (fast_ath_: a theta of the step)
   std::vector<std::uint8_t> fast_tissue_;           ///< per fast automaton
   bool fast_uniform_ = false;                       ///< every fast bond has the conductance ctab_[fast_c_[0]]
