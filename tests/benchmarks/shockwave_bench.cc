@@ -6,12 +6,17 @@
 //    filtration sub-steps, throughput in automaton-steps per second of wall
 //    time and per CPU second);
 //  - BM_KneeFullRun/<d>: the whole 100 us of simulated time (the pulse, 24 us,
-//    plus the p-wave transit through the capsule), i.e. the cost of one EFD.
+//    plus the p-wave transit through the capsule), i.e. the cost of one EFD;
+//  - BM_KneeLateSteps/<d>: 40 steps from 70 % of that run, rounded down to a
+//    multiple of 40 (1 mm: steps 800-839; the steps before untimed): the cost of a step once the wave and the pore fluid have spread through
+//    the knee (at rest, in the first steps, every pore pressure is 0 and the
+//    filtration's no-transfer rule always takes the same side).
 // d in micrometres (1500 and 1000). Wall time depends on what else runs on
 // the machine: the CPU-time counters are the per-core figures.
 //
 //   build/bench/shockwave_bench --benchmark_filter=KneeSteps
 //   build/bench/shockwave_bench --benchmark_filter=KneeFullRun/1000
+//   build/bench/shockwave_bench --benchmark_filter=KneeLateSteps/1000
 //   OMP_NUM_THREADS=1 build/bench/shockwave_bench --benchmark_filter=KneeSteps
 #include <benchmark/benchmark.h>
 #include <omp.h>
@@ -132,6 +137,32 @@ void BM_KneeFullRun(benchmark::State& state) {
   }
   counters(state, m, *sim, steps * state.iterations(), wall, cpu);
 }
+void BM_KneeLateSteps(benchmark::State& state) {
+  const Model& m = knee(static_cast<int>(state.range(0)));
+  const PressurePulse pulse(PulseShape{}, 330.0);
+  const double end_time = 100e-6;
+  const std::int64_t steps = 40;
+  std::int64_t skip = 0;
+  double wall = 0.0, cpu = 0.0;
+  std::unique_ptr<Simulation> sim;
+  for (auto _ : state) {
+    state.PauseTiming();
+    sim = std::make_unique<Simulation>(m, SimulationOptions{}, pulse);
+    const std::int64_t full = static_cast<std::int64_t>(std::ceil(end_time / sim->time_step())) + 1;
+    skip = full * 7 / 10 / steps * steps;
+    sim->run(skip);
+    state.ResumeTiming();
+    const auto t0 = std::chrono::steady_clock::now();
+    const double c0 = cpu_seconds();
+    sim->run(steps);
+    wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    cpu += cpu_seconds() - c0;
+  }
+  counters(state, m, *sim, steps * state.iterations(), wall, cpu);
+  state.counters["first_step"] = static_cast<double>(skip);
+}
+BENCHMARK(BM_KneeLateSteps)->Arg(1500)->Arg(1000)->Unit(benchmark::kSecond)->Iterations(1);
+
 BENCHMARK(BM_KneeFullRun)->Arg(1500)->Arg(1000)->Unit(benchmark::kSecond)->Iterations(1);
 
 }  // namespace
