@@ -155,6 +155,23 @@ FiltrationTerm::FiltrationTerm(const Model& m, double dt, double safety) : model
   // the stages then read no conductance index.
   fast_uniform_ = !fast_c_.empty() && std::all_of(fast_c_.begin(), fast_c_.end(), [&](std::uint8_t q) { return q == fast_c_[0]; });
   {
+    // The padded, slot-major copy of the slow bonds.
+    const std::int64_t nfl = static_cast<std::int64_t>(fluid_.size());
+    slow_slots_ = 0;
+    for (std::int64_t k = 0; k < nfl; ++k)
+      slow_slots_ = std::max(slow_slots_, static_cast<int>(slow_row_[k + 1] - slow_row_[k]));
+    slow_ell_col_.assign(static_cast<size_t>(slow_slots_) * nfl, 0);
+    slow_ell_c_.assign(static_cast<size_t>(slow_slots_) * nfl, 0);
+    for (std::int64_t k = 0; k < nfl; ++k)
+      for (int q = 0; q < slow_slots_; ++q) {
+        const std::int64_t e = slow_row_[k] + q;
+        const size_t at = static_cast<size_t>(q) * nfl + k;
+        const bool real = e < slow_row_[k + 1];
+        slow_ell_col_[at] = real ? slow_col_[e] : fluid_[k];
+        slow_ell_c_[at] = real ? slow_c_[e] : 0;
+      }
+  }
+  {
     // The padded, slot-major copy of the fast bonds (the stages' layout).
     const std::int64_t nf = static_cast<std::int64_t>(fast_list_.size());
     fast_slots_ = 0;
@@ -236,19 +253,24 @@ inline __attribute__((always_inline)) void stage_loop(const Stage& a) {
   // from +0 as in the scalar loop) stay in L1.
   constexpr std::int64_t kBlock = 512;
   alignas(64) double fb[kBlock];
+  alignas(64) std::int32_t qi[kBlock];
   for (std::int64_t kb = a.k0; kb < a.k1; kb += kBlock) {
     const std::int64_t len = std::min(kBlock, a.k1 - kb);
     for (std::int64_t l = 0; l < len; ++l) fb[l] = 0.0;
     const double* __restrict pb = p + kb;
     for (int s = 0; s < slots; ++s) {
       const std::int32_t* __restrict cs = a.col + s * nf + kb;
-      const std::uint8_t* __restrict qs = kUniform ? nullptr : cidx + s * nf + kb;
+      if constexpr (!kUniform) {
+        const std::uint8_t* __restrict qs = cidx + s * nf + kb;
+        for (std::int64_t l = 0; l < len; ++l) qi[l] = qs[l];  // int indices: GCC gathers with those only
+      }
 #pragma omp simd
       for (std::int64_t l = 0; l < len; ++l) {
         const double pi = pb[l], pj = p[cs[l]];
         // No transfer where rho <= rho_0: max(P_i, P_j) <= 0.
-        const double dp = std::max(pi, pj) > 0.0 ? pj - pi : 0.0;
-        const double C = kUniform ? cu : ctab[qs[l]];
+        const double d = pj - pi;  // computed unconditionally: the select vectorises
+        const double dp = std::max(pi, pj) > 0.0 ? d : 0.0;
+        const double C = kUniform ? cu : ctab[qi[l]];
         fb[l] += C * dp;
       }
     }
@@ -267,6 +289,69 @@ inline __attribute__((always_inline)) void stage_loop(const Stage& a) {
       pn[k] = mt[ft[k]] * (v - ath[k]);
     }
   }
+}
+
+// The slow bonds of the fluid automata [k0, k1) (list: their indices): one
+// forward Euler step of dt (h), zeta_i += dt/V sum C dP, from the pressures p
+// of the old zeta; flux sums in slot order from +0 as the scalar loop did;
+// `dis` (null: no bookkeeping) += h/2 sum C dP^2.
+struct Slow {
+  std::int64_t k0, k1, nf;
+  int slots;
+  const int* list;
+  const std::int32_t* col;
+  const std::uint8_t* cidx;
+  const double* ctab;
+  const double* p;
+  double dtV, h;
+  double* zeta;
+  double* dis;
+};
+
+template <bool kTrack>
+inline __attribute__((always_inline)) void slow_loop(const Slow& a) {
+  const std::int64_t nf = a.nf;
+  const int* __restrict list = a.list;
+  const double* __restrict ctab = a.ctab;
+  const double* __restrict p = a.p;
+  double* __restrict zeta = a.zeta;
+  double* __restrict dis = a.dis;
+  const double dtV = a.dtV, h = a.h;
+  constexpr std::int64_t kBlock = 512;
+  alignas(64) double fb[kBlock];
+  alignas(64) double eb[kBlock];
+  alignas(64) std::int32_t qi[kBlock];
+  for (std::int64_t kb = a.k0; kb < a.k1; kb += kBlock) {
+    const std::int64_t len = std::min(kBlock, a.k1 - kb);
+    for (std::int64_t l = 0; l < len; ++l) fb[l] = 0.0;
+    if constexpr (kTrack)
+      for (std::int64_t l = 0; l < len; ++l) eb[l] = 0.0;
+    const int* __restrict lb = list + kb;
+    for (int s = 0; s < a.slots; ++s) {
+      const std::int32_t* __restrict cs = a.col + s * nf + kb;
+      const std::uint8_t* __restrict qs = a.cidx + s * nf + kb;
+      for (std::int64_t l = 0; l < len; ++l) qi[l] = qs[l];  // int indices: GCC gathers with those only
+#pragma omp simd
+      for (std::int64_t l = 0; l < len; ++l) {
+        const double pi = p[lb[l]], pj = p[cs[l]];
+        const double d = pj - pi;  // computed unconditionally: the select vectorises
+        const double dp = std::max(pi, pj) > 0.0 ? d : 0.0;
+        const double C = ctab[qi[l]];
+        fb[l] += C * dp;
+        if constexpr (kTrack) eb[l] += C * dp * dp;
+      }
+    }
+    for (std::int64_t l = 0; l < len; ++l) {
+      const int i = lb[l];
+      zeta[i] += dtV * fb[l];
+      if constexpr (kTrack) dis[i] += 0.5 * h * eb[l];  // each pair is seen from both sides
+    }
+  }
+}
+
+FT_CLONES void slow_pass(const Slow& a) {
+  if (a.dis) slow_loop<true>(a);
+  else slow_loop<false>(a);
 }
 
 FT_CLONES void fast_stage(const Stage& a) {
@@ -295,35 +380,36 @@ void FiltrationTerm::advance(const double* theta, double* zeta, double* dissipat
   const double V = m.lattice.cell_volume;
   const bool track = dissipation != nullptr;
   if (track) std::fill(dissip_.begin(), dissip_.end(), 0.0);
-  // Flux sum over one automaton's bonds of one class, Jacobi (all fluxes
-  // from the same pressures); "no transfer where rho <= rho_0": a pair with
-  // both pressures <= 0 exchanges nothing. `cond` null: every bond has the
-  // fast bonds' one conductance.
+  // Fluxes are Jacobi (all from the same pressures); "no transfer where
+  // rho <= rho_0": a pair with both pressures <= 0 exchanges nothing (the
+  // kernels slow_pass and fast_stage above).
   const double* ctab = ctab_.data();
   const double cuniform = fast_uniform_ ? ctab_[fast_c_[0]] : 0.0;
-  auto flux = [&](const std::int64_t* row, const std::int32_t* col, const std::uint8_t* cond, std::int64_t k,
-                  const double* p, double pi, double h, double* dis) {
-    double sum = 0.0, e = 0.0;
-    for (std::int64_t q = row[k]; q < row[k + 1]; ++q) {
-      const double pj = p[col[q]];
-      const double dp = std::max(pi, pj) > 0.0 ? pj - pi : 0.0;
-      const double C = cond ? ctab[cond[q]] : cuniform;
-      sum += C * dp;
-      e += C * dp * dp;
-    }
-    if (dis) *dis += 0.5 * h * e;  // each pair is seen from both sides
-    return sum;
-  };
   // Slow bonds: one step of dt (the fluxes from the pressures of the old
   // zeta, so zeta can be updated in the same loop).
   if (!pore) pressures(fluid_, theta, zeta);
   const double* p = pore ? pore : p_.data();
   const std::int64_t nf = static_cast<std::int64_t>(fluid_.size());
-#pragma omp parallel for schedule(static) if (nf >= kParallelMin)
-  for (std::int64_t k = 0; k < nf; ++k) {
-    const int i = fluid_[k];
-    zeta[i] += dt_ / V * flux(slow_row_.data(), slow_col_.data(), slow_c_.data(), k, p, p[i], dt_,
-                              track ? &dissip_[i] : nullptr);
+  if (nf > 0) {
+    Slow sl{};
+    sl.nf = nf;
+    sl.slots = slow_slots_;
+    sl.list = fluid_.data();
+    sl.col = slow_ell_col_.data();
+    sl.cidx = slow_ell_c_.data();
+    sl.ctab = ctab;
+    sl.p = p;
+    sl.dtV = dt_ / V;
+    sl.h = dt_;
+    sl.zeta = zeta;
+    sl.dis = track ? dissip_.data() : nullptr;
+#pragma omp parallel if (nf >= kParallelMin) firstprivate(sl)
+    {
+      const std::int64_t T = omp_get_num_threads(), th = omp_get_thread_num();
+      sl.k0 = nf * th / T;
+      sl.k1 = nf * (th + 1) / T;
+      slow_pass(sl);
+    }
   }
   // Fast bonds: one RKL2 step of s stages on a compact copy of the fast set
   // (filtration.h; one parallel region). Y_0 and L(Y_0) are kept; Y_j (j >= 1)

@@ -107,6 +107,11 @@ class FiltrationTerm {
   // by slot ([slot * fast automata + k]) for the stages' vector loops; a
   // padding slot names the automaton itself (a zero pressure difference, a
   // flux of +0 that leaves the sum's bits unchanged).
+  // The slow bonds in the same layout ([slot * fluid automata + k], neighbour
+  // automaton index, padding: the automaton itself).
+  int slow_slots_ = 0;
+  std::vector<std::int32_t> slow_ell_col_;
+  std::vector<std::uint8_t> slow_ell_c_;
   int fast_slots_ = 0;
   std::vector<std::int32_t> fast_ell_col_;
   std::vector<std::uint8_t> fast_ell_c_;  ///< index into ctab_ (empty when fast_uniform_)
