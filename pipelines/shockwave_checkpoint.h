@@ -16,9 +16,9 @@
 //     The resumed run writes a fresh output and first writes these frames
 //     again, so no partial HDF5 file of a killed process is reopened.
 // It grows with the frames written (3 fields x automata doubles per frame
-// with write_frames) on top of the state (about 55 doubles per automaton in
-// FCC: both halves of positions, velocities and rotations, 4 x 6 pair values,
-// the fluid and the peaks).
+// with write_frames) on top of the state (53 doubles per automaton in FCC:
+// both halves of positions, velocities and rotations, 4 x 6 pair values, the
+// fluid, fields, peaks and energies).
 #include <cstdint>
 #include <filesystem>
 #include <optional>

@@ -8,7 +8,7 @@
 //
 // The stage: the 10 mm poroelastic cartilage bar (120 automata, pore fluid,
 // filtration, the velocity-driven plate reading of the EFD), two runs (EFD
-// 0.12 and 0.33 mJ/mm^2) of 25 steps and 11 frames each, a checkpoint after
+// 0.12 and 0.33 mJ/mm^2) of 25 steps and 13 frames each, a checkpoint after
 // every step (interval 0): checkpoints 1-24 are run 1's steps, 25 records
 // run 1 as finished, 26-49 are run 2's steps. Each stage run takes about
 // 0.2 s.
