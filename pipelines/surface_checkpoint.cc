@@ -1,5 +1,6 @@
 #include "pipelines/surface_checkpoint.h"
 
+#include <algorithm>
 #include <exception>
 #include <stdexcept>
 
@@ -117,6 +118,19 @@ void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, 
     f.set_attribute("/hht/newton", "factorization_s", n.factorization_s);
     f.set_attribute("/hht/newton", "solve_s", n.solve_s);
     f.set_attribute("/hht/newton", "linear_solver", n.linear_solver);
+    // The factorisation modified Newton keeps (newton_reuse_factorization):
+    // the matrix in compressed-column form and the tangent key.
+    if (h.kept.valid) {
+      const Eigen::SparseMatrix<double>& M = h.kept.matrix;
+      f.create_group("/hht/newton/kept");
+      put_long(f, "/hht/newton/kept", "rows", M.rows());
+      put_long(f, "/hht/newton/kept", "cols", M.cols());
+      f.set_attribute("/hht/newton/kept", "key", h.kept.key);
+      f.write("/hht/newton/kept/outer",
+              std::vector<int>(M.outerIndexPtr(), M.outerIndexPtr() + M.outerSize() + 1));
+      f.write("/hht/newton/kept/inner", std::vector<int>(M.innerIndexPtr(), M.innerIndexPtr() + M.nonZeros()));
+      f.write("/hht/newton/kept/values", std::vector<double>(M.valuePtr(), M.valuePtr() + M.nonZeros()));
+    }
     // The coupled system.
     f.create_group("/system");
     put(f, "/system/pattern_q", c.pattern_q);
@@ -221,6 +235,30 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
     n.factorization_s = f.attribute_double("/hht/newton", "factorization_s");
     n.solve_s = f.attribute_double("/hht/newton", "solve_s");
     n.linear_solver = f.attribute_string("/hht/newton", "linear_solver");
+    if (f.exists("/hht/newton/kept")) {
+      const long rows = get_long(f, "/hht/newton/kept", "rows"), cols = get_long(f, "/hht/newton/kept", "cols");
+      const Eigen::VectorXi outer = f.read_vector_int("/hht/newton/kept/outer");
+      const Eigen::VectorXi inner = f.read_vector_int("/hht/newton/kept/inner");
+      const Eigen::VectorXd values = f.read_vector("/hht/newton/kept/values");
+      if (rows < 0 || cols < 0 || outer.size() != cols + 1 || inner.size() != values.size() || outer[0] != 0 ||
+          outer[cols] != inner.size())
+        throw std::runtime_error("/hht/newton/kept: a compressed-column matrix of " + std::to_string(rows) + " x " +
+                                 std::to_string(cols) + " expected, found " + std::to_string(outer.size()) +
+                                 " column starts and " + std::to_string(inner.size()) + " row indices for " +
+                                 std::to_string(values.size()) + " values");
+      for (long j = 0; j < cols; ++j)
+        if (outer[j] > outer[j + 1]) throw std::runtime_error("/hht/newton/kept/outer: not ascending");
+      for (Eigen::Index k = 0; k < inner.size(); ++k)
+        if (inner[k] < 0 || inner[k] >= rows) throw std::runtime_error("/hht/newton/kept/inner: index out of range");
+      Eigen::SparseMatrix<double>& M = h.kept.matrix;
+      M.resize(rows, cols);
+      M.resizeNonZeros(values.size());
+      std::copy(outer.data(), outer.data() + outer.size(), M.outerIndexPtr());
+      std::copy(inner.data(), inner.data() + inner.size(), M.innerIndexPtr());
+      std::copy(values.data(), values.data() + values.size(), M.valuePtr());
+      h.kept.key = f.attribute_double("/hht/newton/kept", "key");
+      h.kept.valid = true;
+    }
     c.pattern_q = get(f, "/system/pattern_q");
     c.system.evaluations = get_long(f, "/system", "evaluations");
     c.system.tangent_evaluations = get_long(f, "/system", "tangent_evaluations");

@@ -6,7 +6,9 @@
 //   - the HHT integrator's state (numerics::HhtState: time, adaptive step
 //     size and its growth counter, q, v, a, F of the last step, the
 //     predictor's last change, the Newton counters and the linear solver in
-//     use after a CHOLMOD -> UMFPACK switch);
+//     use after a CHOLMOD -> UMFPACK switch, and with
+//     newton_reuse_factorization the matrix of the factorisation modified
+//     Newton keeps, refactorised on resume);
 //   - the coordinates the coupled system's contact pattern was last built
 //     around (the pattern, hence the linear solver's ordering and round-off,
 //     depends on them) and the system's counters;

@@ -959,9 +959,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       options.argv, c.canonical_options,
       {{options.scene, "--scene"}, {options.prepared, "--prepared"}, {options.kinematics, "--kinematics"},
        {opt.mesh, "mesh"}});
-  // A kept factorisation (newton_reuse_factorization) cannot be carried over;
-  // nor, yet, the augmented Lagrangian multipliers (contact_augmentations).
-  const bool checkpoints = !iopt.reuse_factorization && !steady && max_augmentations == 0;
+  // Not, yet, the augmented Lagrangian multipliers (contact_augmentations);
+  // a steady-state solve has no step boundary.
+  const bool checkpoints = !steady && max_augmentations == 0;
   if (max_augmentations > 0)
     common::log_warn("surface " + c.name + ": no checkpoints with contact_augmentations (the multipliers are not "
                      "stored yet); an interrupted run starts over");
