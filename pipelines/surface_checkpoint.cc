@@ -14,7 +14,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kFormat = "arthrosim surface checkpoint";
-constexpr std::int64_t kFormatVersion = 1;
+constexpr std::int64_t kFormatVersion = 2;
 
 void put(common::H5File& f, const std::string& name, const Eigen::VectorXd& v) {
   if (v.size() > 0) f.write(name, v);
@@ -36,6 +36,27 @@ void put_column(common::H5File& f, const std::string& name, const std::vector<su
   std::vector<T> v;
   for (const auto& s : steps) v.push_back(static_cast<T>(get(s)));
   f.write(name, v);
+}
+
+// Multipliers of every contact pair under `group` ("<group>/pair_<k>/a|b";
+// an empty side is not written, so it reads back empty).
+void put_multipliers(common::H5File& f, const std::string& group, const SurfaceCheckpoint::PairMultipliers& m) {
+  f.create_group(group);
+  put_long(f, group, "pairs", static_cast<long>(m.size()));
+  for (std::size_t k = 0; k < m.size(); ++k) {
+    const std::string g = group + "/pair_" + std::to_string(k);
+    f.create_group(g);
+    put(f, g + "/a", m[k][0]);
+    put(f, g + "/b", m[k][1]);
+  }
+}
+SurfaceCheckpoint::PairMultipliers get_multipliers(const common::H5File& f, const std::string& group) {
+  SurfaceCheckpoint::PairMultipliers m(static_cast<std::size_t>(get_long(f, group, "pairs")));
+  for (std::size_t k = 0; k < m.size(); ++k) {
+    const std::string g = group + "/pair_" + std::to_string(k);
+    m[k] = {get(f, g + "/a"), get(f, g + "/b")};
+  }
+  return m;
 }
 
 }  // namespace
@@ -86,6 +107,16 @@ void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, 
                          [](const S& s) { return s.max_unfaded_penetration_m; });
       put_column<double>(f, "/steps/unfaded_penetration_ratio", c.steps,
                          [](const S& s) { return s.unfaded_penetration_ratio; });
+      put_column<int>(f, "/steps/augmentations", c.steps, [](const S& s) { return s.augmentations; });
+    }
+    // Augmented Lagrangian contact.
+    put_long(f, "/", "total_augmentations", c.total_augmentations);
+    put_long(f, "/", "total_augmentation_iterations", c.total_augmentation_iterations);
+    if (!c.multipliers.empty()) {
+      put_multipliers(f, "/multipliers", c.multipliers);
+      f.create_group("/frames/multipliers");
+      for (std::size_t i = 0; i < c.frame_multipliers.size(); ++i)
+        put_multipliers(f, "/frames/multipliers/" + std::to_string(i), c.frame_multipliers[i]);
     }
     // The integrator.
     const numerics::HhtState& h = c.hht;
@@ -186,7 +217,8 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
                             wall = d("wall_s"), defl = d("max_deflection_m"), change = d("change_m"),
                             pen = d("max_penetration_m"), ratio = d("penetration_ratio"), rim = d("max_rim_depth_m"),
                             unf = d("max_unfaded_penetration_m"), unr = d("unfaded_penetration_ratio");
-      const Eigen::VectorXi it = i("newton_iterations"), rej = i("rejections"), act = i("active_contacts");
+      const Eigen::VectorXi it = i("newton_iterations"), rej = i("rejections"), act = i("active_contacts"),
+                            aug = i("augmentations");
       for (long k = 0; k < steps; ++k) {
         surface_output::StepRecord s;
         s.time = time[k];
@@ -204,7 +236,18 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
         s.max_rim_depth_m = rim[k];
         s.max_unfaded_penetration_m = unf[k];
         s.unfaded_penetration_ratio = unr[k];
+        s.augmentations = aug[k];
         c.steps.push_back(s);
+      }
+    }
+    c.total_augmentations = get_long(f, "/", "total_augmentations");
+    c.total_augmentation_iterations = get_long(f, "/", "total_augmentation_iterations");
+    if (f.exists("/multipliers")) {
+      c.multipliers = get_multipliers(f, "/multipliers");
+      for (long k = 0; k < frames; ++k) {
+        const std::string g = "/frames/multipliers/" + std::to_string(k);
+        if (!f.exists(g)) throw std::runtime_error(g + ": missing (frames written: " + std::to_string(frames) + ")");
+        c.frame_multipliers.push_back(get_multipliers(f, g));
       }
     }
     numerics::HhtState& h = c.hht;

@@ -457,14 +457,16 @@ TEST(ResumeSurface, ModifiedNewtonWithoutTheKeptFactorisationIsDetected) {
 }
 
 // The walking scenario with contact_augmentations (augmented Lagrangian,
-// docs/contact.md) over its first three steps: the stage warns that it writes
-// no checkpoint (the multipliers are not saved) and leaves none; per step it
-// records its multiplier updates, and a step that stopped updating before
-// the limit meets the tolerance (0.1 of the max deflection); the totals
-// agree with the per-step records (Newton iterations include the discarded
-// attempts'), and the penalty-only run of the same steps breaks the rule in
-// the first step that was augmented.
-TEST(ResumeSurface, AugmentedContactWritesNoCheckpointAndRecordsItsUpdates) {
+// docs/contact.md) over its first three steps: per step it records its
+// multiplier updates, and a step that stopped updating before the limit
+// meets the tolerance (0.1 of the max deflection); the totals agree with the
+// per-step records (Newton iterations include the discarded attempts'), and
+// the penalty-only run of the same steps breaks the rule in the first step
+// that was augmented. Killed after step 2, the run resumes with its
+// multipliers (the checkpoint holds them, now and per frame written) and
+// ends bit-identical; the same checkpoint with the multipliers dropped
+// resumes into another result (the comparison can fail).
+TEST(ResumeSurface, AugmentedContactRecordsItsUpdatesAndResumesBitIdentical) {
   const fs::path dir = scratch("surface_augmented");
   std::ifstream in(surface_inputs() / "walk.yaml");
   std::stringstream scene;
@@ -477,8 +479,36 @@ TEST(ResumeSurface, AugmentedContactWritesNoCheckpointAndRecordsItsUpdates) {
                               (comak_reference() / "k.h5").string() + " --quiet";
   auto [status, log] = run("cd " + dir.string() + " && " + surface + " --scene augmented.yaml --out a.h5");
   ASSERT_EQ(status, 0) << log;
-  EXPECT_NE(log.find("no checkpoints with contact_augmentations"), std::string::npos) << log;
-  EXPECT_FALSE(fs::exists(dir / "a.h5.checkpoint"));
+  EXPECT_FALSE(fs::exists(dir / "a.h5.checkpoint"));  // removed once the output is complete
+  for (const std::string kill_at : {"2", "2 sabotaged"}) {
+    SCOPED_TRACE(kill_at);
+    const bool sabotage = kill_at.size() > 1;
+    const fs::path d = scratch("surface_augmented_at_" + std::string(sabotage ? "2_sabotaged" : kill_at));
+    fs::copy_file(dir / "augmented.yaml", d / "augmented.yaml");
+    const std::string cmd = "cd " + d.string() + " && " + surface + " --scene augmented.yaml --out a.h5";
+    const auto [killed, printed] =
+        run("cd " + d.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=" + kill_at.substr(0, 1) + " exec " +
+            surface + " --scene augmented.yaml --out a.h5");
+    EXPECT_NE(killed, 0) << printed;
+    std::string why;
+    auto c = arthrosim::pipelines::read_surface_checkpoint(d / "a.h5.checkpoint", why);
+    ASSERT_TRUE(c) << why;
+    ASSERT_EQ(c->multipliers.size(), 1u);  // one contact pair
+    ASSERT_EQ(c->frame_multipliers.size(), c->frame_times.size());
+    EXPECT_GT(c->total_augmentations, 0);
+    EXPECT_GT(c->multipliers[0][0].size() + c->multipliers[0][1].size(), 0) << "no multipliers at checkpoint 2";
+    if (sabotage) {
+      c->multipliers[0] = {Eigen::VectorXd(), Eigen::VectorXd()};
+      arthrosim::pipelines::write_surface_checkpoint(d / "a.h5.checkpoint", *c, 0);
+    }
+    const auto [resumed, rlog] = run(cmd);
+    EXPECT_EQ(resumed, 0) << rlog;
+    if (sabotage) {
+      EXPECT_NE(h5diff(dir / "a.h5", d / "a.h5", {"/solver"}).first, 0) << "the resume without multipliers was not detected";
+    } else {
+      expect_same_surface_output(dir / "a.h5", d / "a.h5");
+    }
+  }
   std::tie(status, log) = run("cd " + dir.string() + " && " + surface + " --scene penalty.yaml --out p.h5");
   ASSERT_EQ(status, 0) << log;
   const arthrosim::common::H5File a((dir / "a.h5").string(), arthrosim::common::H5File::Mode::kRead);
