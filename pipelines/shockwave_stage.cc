@@ -750,8 +750,8 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     // The finished run goes into the checkpoint right away (when more runs
     // follow): a rerun after a kill in a later run takes it from there.
     checkpoint.current.reset();
-    checkpoint.finished.push_back({rr, common::sha256_file(rr.file)});
     if (r + 1 < runs.size()) {
+      checkpoint.finished.push_back({rr, common::sha256_file(rr.file)});
       write_shockwave_checkpoint(checkpoint_path, checkpoint, ++result.checkpoints);
       checkpoint_clock.mark();
     }
