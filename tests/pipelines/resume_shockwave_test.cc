@@ -21,6 +21,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "tests/test_support.h"
@@ -230,6 +231,47 @@ TEST(ResumeShockwave, CheckpointMissingAStateArrayIsDetected) {
   // Run 2 is simulated from the start and is not affected.
   for (const std::string& d : differences(reference() / "sw_efd0.33.h5", dir / "sw_efd0.33.h5"))
     EXPECT_TRUE(kWallTimes.count(d)) << d;
+}
+
+// Under the runner: `arthrosim run` of a bar scene whose shockwave stage is
+// killed in its second run fails; the plain rerun of the same `arthrosim run`
+// (same command line, same stage key) keeps the first run, resumes the second
+// and ends with the files of an uninterrupted `arthrosim run`.
+TEST(ResumeShockwave, PlainRerunOfArthrosimRunResumesTheStage) {
+  const fs::path root = scratch("runner");
+  std::ofstream(root / "scene.yaml") << "model: " << ARTHROSIM_SOURCE_DIR << R"(/data/models/knee_parametric/coarse
+outputs: [shockwave]
+shockwave:
+  effects: [mca_elastic, pore_fluid, filtration, applicator_pulse]
+  geometry: bar
+  bar_tissue: cartilage
+  bar_length_mm: 10
+  end_time_us: 10
+  output_interval_us: 1
+  efd_mj_per_mm2: [0.12, 0.33]
+  checkpoint_interval_s: 0
+)";
+  // The same output folder for every run (the runner gives the stages
+  // absolute paths, part of the files' metadata): the reference is moved aside.
+  const std::string arthrosim = (kBin / "arthrosim").string() + " run " + (root / "scene.yaml").string() +
+                                " --out " + (root / "out").string() + " --jobs 1";
+  auto [status, log] = run(arthrosim);
+  ASSERT_EQ(status, 0) << log;
+  fs::rename(root / "out", root / "reference");
+  std::tie(status, log) = run("ARTHROSIM_TEST_KILL_AT_CHECKPOINT=30 " + arthrosim);
+  EXPECT_NE(status, 0) << log;
+  ASSERT_TRUE(fs::exists(root / "out/shockwave.checkpoint")) << log;
+  std::tie(status, log) = run(arthrosim);
+  ASSERT_EQ(status, 0) << log;
+  const std::string from = "resuming from the checkpoint " + (root / "out/shockwave.checkpoint").string() + ": ";
+  EXPECT_NE(log.find(from + "efd0.12 finished before"), std::string::npos) << log;
+  EXPECT_NE(log.find(from + "efd0.33, 5 of 25 steps done"), std::string::npos) << log;
+  for (const char* r : {"shockwave_efd0.12.h5", "shockwave_efd0.33.h5"})
+    for (const std::string& d : differences(root / "reference" / r, root / "out" / r))
+      EXPECT_TRUE(kWallTimes.count(d)) << r << " differs from the uninterrupted run: " << d;
+  EXPECT_EQ(summary_without_wall_times(root / "reference/shockwave_summary.json"),
+            summary_without_wall_times(root / "out/shockwave_summary.json"));
+  EXPECT_FALSE(fs::exists(root / "out/shockwave.checkpoint"));
 }
 
 }  // namespace
