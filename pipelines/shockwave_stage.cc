@@ -9,6 +9,7 @@
 #include <optional>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 
 #include "common/checkpoint.h"
 #include "common/effects.h"
@@ -447,6 +448,21 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
           const size_t done = found->finished.size() + (found->current ? 1 : 0);
           bool same = done <= runs.size();
           for (size_t r = 0; same && r < found->finished.size(); ++r) same = found->finished[r].result.label == labels[r];
+          if (same && found->current) {
+            // Frames of this model: the at-once volumes per tissue, the fields per automaton.
+            const size_t n = static_cast<size_t>(m.size()), nt = m.tissues.size();
+            for (const ShockwaveFrame& f : found->current->frames) {
+              const bool fields = o.write_frames && f.pressure.size() == n && f.distortional_strain.size() == n &&
+                                  (f.pore_pressure.empty() || f.pore_pressure.size() == n);
+              const bool none = !o.write_frames && f.pressure.empty() && f.distortional_strain.empty() &&
+                                f.pore_pressure.empty();
+              if (f.all_at_once_m3.size() != nt || !(fields || none)) {
+                why = "its frames are not of this model (" + std::to_string(n) + " automata, " + std::to_string(nt) +
+                      " tissues)";
+                return false;
+              }
+            }
+          }
           if (!same) {
             why = "it holds " + std::to_string(found->finished.size()) + " finished runs and " +
                   (found->current ? "one" : "none") + " in progress for a stage of " + std::to_string(runs.size()) +
@@ -580,8 +596,10 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     // The run in progress: restored from the checkpoint, or a fresh one.
     if (checkpoint.current && checkpoint.current->run == static_cast<int>(r)) {
       try {
-        sim.restore(checkpoint.current->sim);
-        if (checkpoint.current->sim.steps >= steps) throw std::runtime_error("it holds every step of the run");
+        if (checkpoint.current->sim.steps >= steps)
+          throw std::runtime_error("it holds " + std::to_string(checkpoint.current->sim.steps) + " steps of a run of " +
+                                   std::to_string(steps));
+        sim.restore(checkpoint.current->sim);  // checks everything before it changes anything
       } catch (const std::exception& e) {
         common::log_warn("not resuming " + rr.label + " from " + checkpoint_path.string() + ": " + e.what() +
                          "; starting it over");
