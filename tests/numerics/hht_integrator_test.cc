@@ -19,6 +19,13 @@
 namespace arthrosim::numerics {
 namespace {
 
+// The bits of a double, for bit-for-bit comparisons.
+std::uint64_t bits(double x) {
+  std::uint64_t u;
+  std::memcpy(&u, &x, sizeof u);
+  return u;
+}
+
 /// m u'' + k u + c_cubic u^3 = 0 (c_cubic = 0: linear oscillator).
 class Oscillator final : public TimeIntegrable {
  public:
@@ -256,11 +263,6 @@ TEST(Hht, RestoredStateContinuesBitIdentical) {
   c.initialize(0, q0);
   c.restore(mid);
   c.advance_to(3.0);
-  auto bits = [](double x) {
-    std::uint64_t u;
-    std::memcpy(&u, &x, sizeof u);
-    return u;
-  };
   EXPECT_EQ(bits(c.q()(0)), bits(a.q()(0)));
   EXPECT_EQ(bits(c.v()(0)), bits(a.v()(0)));
   EXPECT_EQ(bits(c.a()(0)), bits(a.a()(0)));
@@ -301,11 +303,6 @@ TEST(Hht, RestoredKeptFactorizationContinuesBitIdentical) {
   c.initialize(0, q0);
   c.restore(mid);
   c.advance_to(1.0);
-  auto bits = [](double x) {
-    std::uint64_t u;
-    std::memcpy(&u, &x, sizeof u);
-    return u;
-  };
   EXPECT_EQ(bits(c.q()(0)), bits(a.q()(0)));
   EXPECT_EQ(bits(c.v()(0)), bits(a.v()(0)));
   EXPECT_EQ(c.statistics().factorizations, a.statistics().factorizations);
