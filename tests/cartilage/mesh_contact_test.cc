@@ -16,11 +16,15 @@
 #include "numerics/hht_integrator.h"
 #include "cartilage/mesh_contact.h"
 #include "cartilage/shell_model.h"
+#include "cartilage/surface_model.h"
 #include "common/effects.h"
 #include "common/error.h"
 #include "contact_test_helpers.h"
+#include "musculoskeletal/contact.h"
 #include "shell_test_meshes.h"
 #include "tangent_fd.h"
+
+namespace msk = arthrosim::musculoskeletal;
 
 namespace arthrosim::cartilage {
 namespace {
@@ -625,6 +629,103 @@ TEST(MeshContact, AugmentedLagrangianConvergesToNonPenetratingClosedForm) {
       EXPECT_LT(pen, 1e-3 * (d - s0));
     }
     prev_pen = pen;
+    sys.set_contact_multipliers(0, lambda);
+  }
+}
+
+// The two stages model the same cartilage: a flat layer pair of thicknesses
+// h1, h2 (E, nu) under a uniform overlap delta. Stage 1's elastic
+// foundation (msk::ContactPair, rays from the lower layer's triangle centres)
+// gives p = K delta / (h1 + h2) at every interior triangle, K from
+// msk::foundation_modulus. Stage 2 with the matched foundation
+// (cartilage::matched_foundation_stiffness, k_i = K / h_i: the surface
+// stage's foundation_from_thickness) and augmented contact removes the
+// penetration, and its springs in series carry the same p: deflections
+// p / k1 and p / k2 within 1 % (the series test's tolerance) and the
+// area-weighted mean multiplier within 3 % (the augmented test's tolerance:
+// per-vertex pressures of non-matching meshes scatter around the mean).
+// The penalty alone (no update) is 4 % low with k_c = 300 N/mm^3, so the
+// check can fail. Both stages take E and nu as given; the same K is asserted
+// to round-off. On curved, finite patches the stages differ by the shells'
+// load spreading and by sampling (docs/contact.md, "Stage 2 against stage 1").
+TEST(MeshContact, MatchedFoundationsCarryTheMusculoskeletalStagesPressure) {
+  const double E = 10e6, nu = 0.45, h1 = 1e-3, h2 = 2e-3, d = 0.3e-3, s0 = 0.05e-3, overlap = d - s0;
+  msk::ElasticFoundationParameters mat;
+  mat.youngs_modulus = E;
+  mat.poisson_ratio = nu;
+  const double K = msk::foundation_modulus(mat);
+  const Eigen::VectorXd k1v = matched_foundation_stiffness(Eigen::VectorXd::Constant(1, h1), E, nu, "h1");
+  const Eigen::VectorXd k2v = matched_foundation_stiffness(Eigen::VectorXd::Constant(1, h2), E, nu, "h2");
+  EXPECT_NEAR(k1v(0) * h1, K, 1e-12 * K);
+  EXPECT_NEAR(k2v(0) * h2, K, 1e-12 * K);
+  const double k1 = k1v(0), k2 = k2v(0), kc = 3e11;  // 300 N/mm^3, the lenhart2015 scenes' penalty
+  const double p1 = K * overlap / (h1 + h2);
+
+  const common::QuadMesh lower = shifted(testing::plate_mesh(14, 14, 20e-3, 20e-3), {-10e-3, -10e-3, 0});
+  const common::QuadMesh upper =
+      testing::flipped(shifted(testing::plate_mesh(11, 11, 14e-3, 14e-3, 0.1), {-7.3e-3, -6.9e-3, 0}), s0);
+  // Stage 1: the lower layer casts (normal +z), the upper layer is the
+  // target, placed where stage 2's upper bone ends (moved down by d).
+  {
+    msk::ContactSurface cast, target;
+    cast.body = 0;
+    cast.mesh = common::triangulate(lower);
+    cast.thickness = Eigen::VectorXd::Constant(cast.mesh.num_triangles(), h1);
+    target.body = 1;
+    target.mesh = common::triangulate(upper);
+    target.mesh.V.col(2).array() -= d;
+    target.thickness = Eigen::VectorXd::Constant(target.mesh.num_triangles(), h2);
+    const msk::ContactPair pair("layers", std::move(cast), std::move(target), mat);
+    msk::ContactPairData data;
+    msk::evaluate_contact(pair, msk::Pose::Identity(), msk::Pose::Identity(), data);
+    int interior = 0;
+    for (int i = 0; i < pair.casting().mesh.num_triangles(); ++i) {
+      if (pair.casting_centres().row(i).head<2>().norm() > 3e-3) continue;
+      EXPECT_NEAR(data.result.pressure(i), p1, 1e-9 * p1);
+      ++interior;
+    }
+    ASSERT_GT(interior, 20);
+  }
+  // Stage 2: shells on the matched foundations, augmented contact.
+  auto A = make_model(lower, 10e6, 0.5e-3), B = make_model(upper, 10e6, 0.5e-3);
+  A->add_foundation_springs(Eigen::VectorXd::Constant(A->num_nodes(), k1), BoneMotion::fixed());
+  B->add_foundation_springs(Eigen::VectorXd::Constant(B->num_nodes(), k2),
+                            testing::translating_bone(Eigen::Vector3d(0, 0, -d)));
+  fix_in_plane(*A);
+  fix_in_plane(*B);
+  CoupledShellSystem sys({A.get(), B.get()}, {"lower", "upper"});
+  ContactOptions o;
+  o.rim_vertices = true;
+  o.stiffness_N_m3 = kc;
+  sys.add_contact("lower-upper", 0, 1, o);
+  Eigen::VectorXd q0(sys.num_dofs());
+  q0 << A->reference_state(), B->reference_state();
+  auto points = [&](int m, const Eigen::VectorXd& q) {
+    const Eigen::VectorXd qm = sys.segment(m, q);
+    common::Points3 x(qm.size() / 6, 3);
+    for (int i = 0; i < x.rows(); ++i) x.row(i) = qm.segment<3>(6 * i).transpose();
+    return x;
+  };
+  for (int n = 0; n <= 2; ++n) {
+    Eigen::VectorXd q = q0;
+    solve_quasi_static(sys, 2, q);
+    const auto lambda = sys.updated_contact_multipliers(0, q);
+    double lam = 0, area = 0;
+    for (const ContactPoint& c : sys.contact(0).detect(points(0, q), points(1, q), nullptr, nullptr, false)) {
+      if (c.point.head<2>().norm() > 3e-3) continue;
+      lam += c.area * lambda[c.side[0]](c.node[0]);
+      area += c.area;
+    }
+    lam /= area;
+    const double w1 = testing::mean_normal_deflection(sys.model(0), sys.segment(0, q), Eigen::Vector3d::Zero(),
+                                                      Eigen::Vector3d::UnitZ(), 3e-3, Eigen::Vector3d::Zero(), -1.0);
+    std::printf("updates %d: w1 %.6e m (stage 1: p1/k1 %.6e), mean multiplier %.6e Pa (stage 1: p1 %.6e)\n", n, w1,
+                p1 / k1, lam, p1);
+    if (n == 0) { EXPECT_GT(std::abs(w1 / (p1 / k1) - 1), 0.02); }  // the penalty alone is off
+    if (n == 2) {
+      EXPECT_NEAR(w1, p1 / k1, 0.01 * p1 / k1);
+      EXPECT_NEAR(lam, p1, 0.03 * p1);
+    }
     sys.set_contact_multipliers(0, lambda);
   }
 }
