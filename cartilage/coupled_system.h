@@ -82,6 +82,9 @@ class CoupledShellSystem : public numerics::TimeIntegrable {
   void set_contact_multipliers(int k, const std::array<Eigen::VectorXd, 2>& lambda) {
     contacts_.at(k).contact->set_multipliers(lambda);
   }
+  const std::array<Eigen::VectorXd, 2>& contact_multipliers(int k) const {
+    return contacts_.at(k).contact->multipliers();
+  }
   /// Their Uzawa update at q (MeshContact::updated_multipliers).
   std::array<Eigen::VectorXd, 2> updated_contact_multipliers(int k, const Eigen::VectorXd& q) const;
   void attach_ledger(common::EffectLedger* ledger) { ledger_ = ledger; }

@@ -202,6 +202,7 @@ HhtState HhtIntegrator::state() const {
   s.rejected_steps = stats_.rejected_steps;
   s.rejections = stats_.rejections;
   s.newton = newton_->statistics();
+  s.kept = newton_->kept_factorization();
   s.initial_assembly_s = initial_assembly_s_;
   s.total_s = stats_.total_s;
   return s;
@@ -231,6 +232,7 @@ void HhtIntegrator::restore(const HhtState& s) {
   stats_.total_s = s.total_s;
   initial_assembly_s_ = s.initial_assembly_s;
   newton_->restore_statistics(s.newton);
+  newton_->restore_kept_factorization(s.kept);
   copy_newton_statistics();
 }
 

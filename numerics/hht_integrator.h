@@ -149,6 +149,9 @@ struct HhtState {
   std::vector<std::string> rejections;
   /// The Newton solver's counters and linear solver in use (timings too).
   NewtonStatistics newton;
+  /// The factorisation modified Newton keeps (newton_reuse_factorization;
+  /// invalid otherwise): restored, the next step reuses the same factors.
+  KeptFactorization kept;
   double initial_assembly_s = 0, total_s = 0;
 };
 

@@ -49,6 +49,44 @@ void NewtonSolver::restore_statistics(const NewtonStatistics& s) {
   stats_.linear_solver = to_string(kind);
 }
 
+KeptFactorization NewtonSolver::kept_factorization() const {
+  KeptFactorization k;
+  k.valid = opts_.reuse_factorization && factor_valid_;
+  if (k.valid) {
+    k.key = factor_key_;
+    k.matrix = factored_;
+  }
+  return k;
+}
+
+void NewtonSolver::restore_kept_factorization(const KeptFactorization& k) {
+  factor_valid_ = false;
+  if (!k.valid) return;
+  if (!opts_.reuse_factorization)
+    throw common::InputError("Newton: a kept factorisation restored into a solver without reuse_factorization");
+  const auto& P = sys_.tangent_pattern();
+  const auto& M = k.matrix;
+  const bool same = M.rows() == P.rows() && M.cols() == P.cols() && M.nonZeros() == P.nonZeros() &&
+                    M.isCompressed() &&
+                    std::equal(P.outerIndexPtr(), P.outerIndexPtr() + P.outerSize() + 1, M.outerIndexPtr()) &&
+                    std::equal(P.innerIndexPtr(), P.innerIndexPtr() + P.nonZeros(), M.innerIndexPtr());
+  if (!same)
+    throw common::InputError("Newton: the kept factorisation's matrix (" + std::to_string(M.rows()) + " x " +
+                             std::to_string(M.cols()) + ", " + std::to_string(M.nonZeros()) +
+                             " entries) does not have the system's tangent pattern (" + std::to_string(P.rows()) +
+                             " x " + std::to_string(P.cols()) + ", " + std::to_string(P.nonZeros()) + " entries)");
+  factored_ = M;
+  if (!solver_->analyzed()) {
+    solver_->analyze(factored_);
+    ++stats_.symbolic_analyses;
+  }
+  if (!solver_->factorize(factored_))
+    throw common::NumericalError("Newton: the kept factorisation could not be refactorised: " + solver_->message());
+  factor_valid_ = true;
+  factor_key_ = k.key;
+  refactor_next_ = false;
+}
+
 void NewtonSolver::sync_pattern() {
   // Constraint elimination indices in the pattern (rows/cols -> identity).
   const auto& P = sys_.tangent_pattern();
@@ -114,6 +152,7 @@ bool NewtonSolver::factorize(Eigen::SparseMatrix<double>& K, std::string& reason
     solver_->analyze(K);
     ++stats_.symbolic_analyses;
   }
+  if (opts_.reuse_factorization) factored_ = K;  // what a checkpoint of the kept factorisation holds
   bool ok = solver_->factorize(K);
   ++stats_.factorizations;
   if (!ok && solver_->kind() == LinearSolverKind::kCholmod) {

@@ -136,6 +136,18 @@ struct NewtonStatistics {
   std::string linear_solver;        ///< solver in use
 };
 
+/// The factorisation modified Newton keeps between solves
+/// (NewtonOptions::reuse_factorization): the matrix that was factorised (with
+/// the constrained rows and columns replaced by the identity, and symmetrised
+/// when CHOLMOD took a non-symmetric tangent) and the tangent_key it was built
+/// for. Checkpoints store it so that a resumed run refactorises exactly the
+/// matrix the interrupted run was still using (docs/testing.md).
+struct KeptFactorization {
+  bool valid = false;
+  double key = 0;
+  Eigen::SparseMatrix<double> matrix;
+};
+
 class NewtonSolver {
  public:
   /// The system must outlive the solver. Throws common::InputError for
@@ -168,9 +180,20 @@ class NewtonSolver {
   const NewtonStatistics& statistics() const { return stats_; }
   /// Checkpoint and resume (docs/testing.md): the counters and the linear
   /// solver in use (after a CHOLMOD -> UMFPACK switch) of an earlier solver,
-  /// set on a fresh one. A kept factorisation (reuse_factorization) is not
-  /// carried over: the next solve factorises anew.
+  /// set on a fresh one. A kept factorisation (reuse_factorization) is
+  /// carried over separately (kept_factorization / restore_kept_factorization).
   void restore_statistics(const NewtonStatistics& s);
+  /// The factorisation kept for the next solve (valid only with
+  /// reuse_factorization and after a successful factorisation).
+  KeptFactorization kept_factorization() const;
+  /// Factorises k.matrix again and keeps it for solves with tangent_key
+  /// k.key, as the solver that wrote it had it; call after
+  /// restore_statistics. The symbolic analysis this needs is counted (as the
+  /// first factorisation of a resumed run counts it), the numeric
+  /// factorisation is not (the interrupted run counted it). Throws
+  /// common::InputError when the matrix does not have the system's tangent
+  /// pattern, common::NumericalError when it cannot be factorised.
+  void restore_kept_factorization(const KeptFactorization& k);
   const NewtonOptions& options() const { return opts_; }
 
  private:
@@ -187,6 +210,7 @@ class NewtonSolver {
   bool factor_valid_ = false, refactor_next_ = false;
   double factor_key_ = 0;
   Eigen::SparseMatrix<double> K_;
+  Eigen::SparseMatrix<double> factored_;  ///< the matrix of the kept factorisation (reuse_factorization only)
   std::vector<int> zero_index_, diag_index_, transpose_index_;
   long pattern_revision_ = 0;
   std::unique_ptr<SparseDirectSolver> solver_;

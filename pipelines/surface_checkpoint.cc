@@ -1,5 +1,6 @@
 #include "pipelines/surface_checkpoint.h"
 
+#include <algorithm>
 #include <exception>
 #include <stdexcept>
 
@@ -13,7 +14,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kFormat = "arthrosim surface checkpoint";
-constexpr std::int64_t kFormatVersion = 1;
+constexpr std::int64_t kFormatVersion = 2;
 
 void put(common::H5File& f, const std::string& name, const Eigen::VectorXd& v) {
   if (v.size() > 0) f.write(name, v);
@@ -35,6 +36,27 @@ void put_column(common::H5File& f, const std::string& name, const std::vector<su
   std::vector<T> v;
   for (const auto& s : steps) v.push_back(static_cast<T>(get(s)));
   f.write(name, v);
+}
+
+// Multipliers of every contact pair under `group` ("<group>/pair_<k>/a|b";
+// an empty side is not written, so it reads back empty).
+void put_multipliers(common::H5File& f, const std::string& group, const SurfaceCheckpoint::PairMultipliers& m) {
+  f.create_group(group);
+  put_long(f, group, "pairs", static_cast<long>(m.size()));
+  for (std::size_t k = 0; k < m.size(); ++k) {
+    const std::string g = group + "/pair_" + std::to_string(k);
+    f.create_group(g);
+    put(f, g + "/a", m[k][0]);
+    put(f, g + "/b", m[k][1]);
+  }
+}
+SurfaceCheckpoint::PairMultipliers get_multipliers(const common::H5File& f, const std::string& group) {
+  SurfaceCheckpoint::PairMultipliers m(static_cast<std::size_t>(get_long(f, group, "pairs")));
+  for (std::size_t k = 0; k < m.size(); ++k) {
+    const std::string g = group + "/pair_" + std::to_string(k);
+    m[k] = {get(f, g + "/a"), get(f, g + "/b")};
+  }
+  return m;
 }
 
 }  // namespace
@@ -85,6 +107,16 @@ void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, 
                          [](const S& s) { return s.max_unfaded_penetration_m; });
       put_column<double>(f, "/steps/unfaded_penetration_ratio", c.steps,
                          [](const S& s) { return s.unfaded_penetration_ratio; });
+      put_column<int>(f, "/steps/augmentations", c.steps, [](const S& s) { return s.augmentations; });
+    }
+    // Augmented Lagrangian contact.
+    put_long(f, "/", "total_augmentations", c.total_augmentations);
+    put_long(f, "/", "total_augmentation_iterations", c.total_augmentation_iterations);
+    if (!c.multipliers.empty()) {
+      put_multipliers(f, "/multipliers", c.multipliers);
+      f.create_group("/frames/multipliers");
+      for (std::size_t i = 0; i < c.frame_multipliers.size(); ++i)
+        put_multipliers(f, "/frames/multipliers/" + std::to_string(i), c.frame_multipliers[i]);
     }
     // The integrator.
     const numerics::HhtState& h = c.hht;
@@ -117,6 +149,19 @@ void write_surface_checkpoint(const fs::path& path, const SurfaceCheckpoint& c, 
     f.set_attribute("/hht/newton", "factorization_s", n.factorization_s);
     f.set_attribute("/hht/newton", "solve_s", n.solve_s);
     f.set_attribute("/hht/newton", "linear_solver", n.linear_solver);
+    // The factorisation modified Newton keeps (newton_reuse_factorization):
+    // the matrix in compressed-column form and the tangent key.
+    if (h.kept.valid) {
+      const Eigen::SparseMatrix<double>& M = h.kept.matrix;
+      f.create_group("/hht/newton/kept");
+      put_long(f, "/hht/newton/kept", "rows", M.rows());
+      put_long(f, "/hht/newton/kept", "cols", M.cols());
+      f.set_attribute("/hht/newton/kept", "key", h.kept.key);
+      f.write("/hht/newton/kept/outer",
+              std::vector<int>(M.outerIndexPtr(), M.outerIndexPtr() + M.outerSize() + 1));
+      f.write("/hht/newton/kept/inner", std::vector<int>(M.innerIndexPtr(), M.innerIndexPtr() + M.nonZeros()));
+      f.write("/hht/newton/kept/values", std::vector<double>(M.valuePtr(), M.valuePtr() + M.nonZeros()));
+    }
     // The coupled system.
     f.create_group("/system");
     put(f, "/system/pattern_q", c.pattern_q);
@@ -172,7 +217,8 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
                             wall = d("wall_s"), defl = d("max_deflection_m"), change = d("change_m"),
                             pen = d("max_penetration_m"), ratio = d("penetration_ratio"), rim = d("max_rim_depth_m"),
                             unf = d("max_unfaded_penetration_m"), unr = d("unfaded_penetration_ratio");
-      const Eigen::VectorXi it = i("newton_iterations"), rej = i("rejections"), act = i("active_contacts");
+      const Eigen::VectorXi it = i("newton_iterations"), rej = i("rejections"), act = i("active_contacts"),
+                            aug = i("augmentations");
       for (long k = 0; k < steps; ++k) {
         surface_output::StepRecord s;
         s.time = time[k];
@@ -190,7 +236,18 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
         s.max_rim_depth_m = rim[k];
         s.max_unfaded_penetration_m = unf[k];
         s.unfaded_penetration_ratio = unr[k];
+        s.augmentations = aug[k];
         c.steps.push_back(s);
+      }
+    }
+    c.total_augmentations = get_long(f, "/", "total_augmentations");
+    c.total_augmentation_iterations = get_long(f, "/", "total_augmentation_iterations");
+    if (f.exists("/multipliers")) {
+      c.multipliers = get_multipliers(f, "/multipliers");
+      for (long k = 0; k < frames; ++k) {
+        const std::string g = "/frames/multipliers/" + std::to_string(k);
+        if (!f.exists(g)) throw std::runtime_error(g + ": missing (frames written: " + std::to_string(frames) + ")");
+        c.frame_multipliers.push_back(get_multipliers(f, g));
       }
     }
     numerics::HhtState& h = c.hht;
@@ -221,6 +278,30 @@ std::optional<SurfaceCheckpoint> read_surface_checkpoint(const fs::path& path, s
     n.factorization_s = f.attribute_double("/hht/newton", "factorization_s");
     n.solve_s = f.attribute_double("/hht/newton", "solve_s");
     n.linear_solver = f.attribute_string("/hht/newton", "linear_solver");
+    if (f.exists("/hht/newton/kept")) {
+      const long rows = get_long(f, "/hht/newton/kept", "rows"), cols = get_long(f, "/hht/newton/kept", "cols");
+      const Eigen::VectorXi outer = f.read_vector_int("/hht/newton/kept/outer");
+      const Eigen::VectorXi inner = f.read_vector_int("/hht/newton/kept/inner");
+      const Eigen::VectorXd values = f.read_vector("/hht/newton/kept/values");
+      if (rows < 0 || cols < 0 || outer.size() != cols + 1 || inner.size() != values.size() || outer[0] != 0 ||
+          outer[cols] != inner.size())
+        throw std::runtime_error("/hht/newton/kept: a compressed-column matrix of " + std::to_string(rows) + " x " +
+                                 std::to_string(cols) + " expected, found " + std::to_string(outer.size()) +
+                                 " column starts and " + std::to_string(inner.size()) + " row indices for " +
+                                 std::to_string(values.size()) + " values");
+      for (long j = 0; j < cols; ++j)
+        if (outer[j] > outer[j + 1]) throw std::runtime_error("/hht/newton/kept/outer: not ascending");
+      for (Eigen::Index k = 0; k < inner.size(); ++k)
+        if (inner[k] < 0 || inner[k] >= rows) throw std::runtime_error("/hht/newton/kept/inner: index out of range");
+      Eigen::SparseMatrix<double>& M = h.kept.matrix;
+      M.resize(rows, cols);
+      M.resizeNonZeros(values.size());
+      std::copy(outer.data(), outer.data() + outer.size(), M.outerIndexPtr());
+      std::copy(inner.data(), inner.data() + inner.size(), M.innerIndexPtr());
+      std::copy(values.data(), values.data() + values.size(), M.valuePtr());
+      h.kept.key = f.attribute_double("/hht/newton/kept", "key");
+      h.kept.valid = true;
+    }
     c.pattern_q = get(f, "/system/pattern_q");
     c.system.evaluations = get_long(f, "/system", "evaluations");
     c.system.tangent_evaluations = get_long(f, "/system", "tangent_evaluations");

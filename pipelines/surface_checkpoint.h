@@ -6,7 +6,9 @@
 //   - the HHT integrator's state (numerics::HhtState: time, adaptive step
 //     size and its growth counter, q, v, a, F of the last step, the
 //     predictor's last change, the Newton counters and the linear solver in
-//     use after a CHOLMOD -> UMFPACK switch);
+//     use after a CHOLMOD -> UMFPACK switch, and with
+//     newton_reuse_factorization the matrix of the factorisation modified
+//     Newton keeps, refactorised on resume);
 //   - the coordinates the coupled system's contact pattern was last built
 //     around (the pattern, hence the linear solver's ordering and round-off,
 //     depends on them) and the system's counters;
@@ -16,7 +18,10 @@
 //     writes a fresh output and writes these again first (frames recomputed
 //     from their coordinates), so no partial HDF5 file of a killed process is
 //     reopened;
+//   - with contact_augmentations, the contact multipliers (now and at each
+//     frame written) and the augmentation totals;
 //   - the identity of the run (common::run_identity).
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -42,6 +47,14 @@ struct SurfaceCheckpoint {
   std::vector<double> frame_times;
   std::vector<Eigen::VectorXd> frame_q;
   std::vector<surface_output::StepRecord> steps;
+  // contact_augmentations (augmented Lagrangian, docs/contact.md): each
+  // contact pair's multipliers (side a, side b; empty: none yet) now and at
+  // every frame written after the first (a frame's contact pressures depend
+  // on them), and the stage's augmentation totals.
+  using PairMultipliers = std::vector<std::array<Eigen::VectorXd, 2>>;
+  PairMultipliers multipliers;
+  std::vector<PairMultipliers> frame_multipliers;
+  long total_augmentations = 0, total_augmentation_iterations = 0;
   // Integrator and system.
   numerics::HhtState hht;
   Eigen::VectorXd pattern_q;

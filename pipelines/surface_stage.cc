@@ -959,12 +959,21 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       options.argv, c.canonical_options,
       {{options.scene, "--scene"}, {options.prepared, "--prepared"}, {options.kinematics, "--kinematics"},
        {opt.mesh, "mesh"}});
-  // A kept factorisation (newton_reuse_factorization) cannot be carried over;
-  // nor, yet, the augmented Lagrangian multipliers (contact_augmentations).
-  const bool checkpoints = !iopt.reuse_factorization && !steady && max_augmentations == 0;
-  if (max_augmentations > 0)
-    common::log_warn("surface " + c.name + ": no checkpoints with contact_augmentations (the multipliers are not "
-                     "stored yet); an interrupted run starts over");
+  // A steady-state solve has no step boundary.
+  const bool checkpoints = !steady;
+  // contact_augmentations: every pair's multipliers (saved with each
+  // checkpoint and each frame: a frame's contact pressures depend on them).
+  auto current_multipliers = [&] {
+    SurfaceCheckpoint::PairMultipliers m;
+    for (int k = 0; k < system.num_contacts(); ++k) m.push_back(system.contact_multipliers(k));
+    return m;
+  };
+  auto set_multipliers = [&](const SurfaceCheckpoint::PairMultipliers& m) {
+    if (static_cast<int>(m.size()) != system.num_contacts())
+      throw common::InputError(checkpoint_path.string() + ": multipliers of " + std::to_string(m.size()) +
+                               " contact pairs, the scenario has " + std::to_string(system.num_contacts()));
+    for (int k = 0; k < system.num_contacts(); ++k) system.set_contact_multipliers(k, m[k]);
+  };
   common::CheckpointClock checkpoint_clock(opt.checkpoint_interval_s);
   int checkpoints_written = 0;
   if (checkpoints && std::filesystem::exists(checkpoint_path)) {
@@ -972,15 +981,23 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     std::optional<SurfaceCheckpoint> found = read_surface_checkpoint(checkpoint_path, why);
     if (found && found->identity != checkpoint.identity)
       why = "it belongs to another run (inputs, options, command line or build differ)";
+    else if (found && ((max_augmentations > 0) != !found->multipliers.empty() ||
+                       static_cast<int>(found->multipliers.size()) != (max_augmentations > 0 ? system.num_contacts() : 0) ||
+                       (max_augmentations > 0 && found->frame_multipliers.size() != found->frame_times.size())))
+      why = "its contact multipliers do not match the scenario's contact pairs";
     if (found && why.empty()) {
       checkpoint = std::move(*found);
       common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": t = " +
                        std::to_string(checkpoint.t) + " s, steps done: " + std::to_string(checkpoint.steps.size()) +
                        ", frames written: " + std::to_string(checkpoint.frame_times.size() + 1) + " (taken from it)");
       // What the run wrote before, written again: frames from their coordinates.
-      for (std::size_t i = 0; i < checkpoint.frame_times.size(); ++i)
+      const bool augmented = max_augmentations > 0;
+      for (std::size_t i = 0; i < checkpoint.frame_times.size(); ++i) {
+        if (augmented) set_multipliers(checkpoint.frame_multipliers[i]);
         write_frame(checkpoint.frame_q[i], checkpoint.frame_times[i],
                     contact ? contact_reports(checkpoint.frame_q[i]) : reports);
+      }
+      if (augmented) set_multipliers(checkpoint.multipliers);
       for (const surface_output::StepRecord& sr : checkpoint.steps) {
         out.append_step(sr);
         progress.step();
@@ -1014,6 +1031,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
   long last_iterations = 0, last_rejections = 0;
   SurfaceStageResult res;
   if (!checkpoint.steps.empty()) {  // resumed
+    total_augmentations = checkpoint.total_augmentations;
+    total_augmentation_iterations = checkpoint.total_augmentation_iterations;
     last_change = checkpoint.last_change;
     last_iterations = checkpoint.last_iterations;
     last_rejections = checkpoint.last_rejections;
@@ -1167,6 +1186,9 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
           k.active_contacts_sum = res.active_contacts_sum;
           k.hht = integrator.state();
           k.pattern_q = system.pattern_coordinates();
+          if (max_augmentations > 0) k.multipliers = current_multipliers();
+          k.total_augmentations = total_augmentations;
+          k.total_augmentation_iterations = total_augmentation_iterations;
           k.system = system.statistics();
           write_surface_checkpoint(checkpoint_path, k, ++checkpoints_written);
           checkpoint_clock.mark();
@@ -1178,6 +1200,7 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
       if (checkpoints) {
         checkpoint.frame_times.push_back(t);
         checkpoint.frame_q.push_back(integrator.q());
+        if (max_augmentations > 0) checkpoint.frame_multipliers.push_back(current_multipliers());
       }
       ++k_out;
       if (stopped_steady) break;

@@ -34,6 +34,7 @@
 #include "common/hdf5.h"
 #include "common/output_file.h"
 #include "pipelines/biphasic_checkpoint.h"
+#include "pipelines/surface_checkpoint.h"
 
 namespace {
 
@@ -308,7 +309,9 @@ const fs::path& surface_reference() {
 // Every dataset and attribute of the two surface outputs equal, except the
 // step wall times (/solver/wall_s) and the timing attributes of /solver
 // (and its symbolic_analyses count, below).
-void expect_same_surface_output(const fs::path& a, const fs::path& b) {
+// `min_compared`: attributes of /solver compared at least (the contact
+// scenarios have their penetration figures besides the solver's).
+void expect_same_surface_output(const fs::path& a, const fs::path& b, int min_compared = 15) {
   auto [status, report] = h5diff(a, b, {"/solver"});
   EXPECT_EQ(status, 0) << report;
   const arthrosim::common::H5File fa(a.string(), arthrosim::common::H5File::Mode::kRead);
@@ -337,7 +340,7 @@ void expect_same_surface_output(const fs::path& a, const fs::path& b) {
       EXPECT_EQ(std::memcmp(&x, &y, sizeof x), 0) << k << ": " << x << " vs " << y;
     }
   }
-  EXPECT_GE(compared, 15);  // steps, newton_iterations, factorizations, symbolic_analyses, penetration ...
+  EXPECT_GE(compared, min_compared);  // steps, newton_iterations, factorizations, symbolic_analyses, penetration ...
 }
 
 std::string surface_kill_and_resume(const fs::path& dir, const std::string& kill_at) {
@@ -369,15 +372,101 @@ TEST(ResumeSurface, KilledAtCheckpointsResumesBitIdentical) {
   }
 }
 
+// Modified Newton (newton_reuse_factorization) keeps a factorisation across
+// steps; the checkpoint holds the matrix it factorised and the resumed run
+// refactorises it. The scenario: the dynamic osmotic swelling of the coarse
+// lateral tibial cartilage from rest (the bundled osmotic scenario's effects,
+// as SurfaceStage.DynamicOsmoticStopsAtTheStaticSteadyState runs it), 6 HHT
+// steps of 1 ms, a checkpoint after every step.
+std::string swell_command() {
+  const fs::path in = surface_inputs();
+  static const bool written = [&] {
+    std::ofstream(in / "swell.yaml") << "model: " << (kSource / "data/models/knee_parametric/coarse").string()
+                                     << "\ntrial: " << (kSource / "data/trials/synthetic_gait").string() << R"(
+outputs: [surface]
+surface:
+  scenarios:
+    swell:
+      surfaces: [tibia_lateral]
+      end_time_s: 0.006
+      time_step_s: 1e-3
+      output_interval_ms: 1
+      foundation_damping_n_s_per_mm3: 7e-3
+      osmotic_ramp_s: 0.004
+      newton_reuse_factorization: true
+      checkpoint_interval_s: 0
+      effects: [foundation_springs, foundation_damping, osmotic_pressure, periphery_fixed, inertia]
+)";
+    return true;
+  }();
+  (void)written;
+  return (kBin / "arthrosim-surface").string() + " --prepared " + (in / "prepared.h5").string() + " --kinematics " +
+         (comak_reference() / "k.h5").string() + " --scene " + (in / "swell.yaml").string() + " --out s.h5";
+}
+
+const fs::path& swell_reference() {
+  static const fs::path dir = [] {
+    const fs::path d = scratch("swell_reference");
+    const auto [status, printed] = run("cd " + d.string() + " && " + swell_command());
+    EXPECT_EQ(status, 0) << printed;
+    return d;
+  }();
+  return dir;
+}
+
+// Killed at checkpoint `kill_at`: the checkpoint holds a kept factorisation.
+void swell_kill(const fs::path& dir, const std::string& kill_at) {
+  const auto [killed, printed] =
+      run("cd " + dir.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=" + kill_at + " exec " + swell_command());
+  EXPECT_NE(killed, 0) << "not killed at checkpoint " << kill_at << ": " << printed;
+  std::string why;
+  const auto c = arthrosim::pipelines::read_surface_checkpoint(dir / "s.h5.checkpoint", why);
+  ASSERT_TRUE(c) << why;
+  EXPECT_TRUE(c->hht.kept.valid) << "no kept factorisation at checkpoint " << kill_at;
+  EXPECT_GT(c->hht.kept.matrix.nonZeros(), 0);
+}
+
+TEST(ResumeSurface, ModifiedNewtonResumesWithItsKeptFactorisationBitIdentical) {
+  for (const std::string kill_at : {"2", "5"}) {
+    SCOPED_TRACE(kill_at);
+    const fs::path dir = scratch("swell_at_" + kill_at);
+    swell_kill(dir, kill_at);
+    const auto [status, log] = run("cd " + dir.string() + " && " + swell_command());
+    EXPECT_EQ(status, 0) << log;
+    EXPECT_NE(log.find("resuming from the checkpoint s.h5.checkpoint: t = 0.00" + kill_at), std::string::npos) << log;
+    expect_same_surface_output(swell_reference() / "s.h5", dir / "s.h5", 11);
+    EXPECT_FALSE(fs::exists(dir / "s.h5.checkpoint"));
+  }
+}
+
+// The comparison can fail: the same checkpoint without its kept
+// factorisation (the resumed run factorises a fresh tangent) ends in other
+// coordinates.
+TEST(ResumeSurface, ModifiedNewtonWithoutTheKeptFactorisationIsDetected) {
+  const fs::path dir = scratch("swell_sabotage");
+  swell_kill(dir, "2");
+  std::string why;
+  auto c = arthrosim::pipelines::read_surface_checkpoint(dir / "s.h5.checkpoint", why);
+  ASSERT_TRUE(c) << why;
+  c->hht.kept = arthrosim::numerics::KeptFactorization();
+  arthrosim::pipelines::write_surface_checkpoint(dir / "s.h5.checkpoint", *c, 0);
+  const auto [status, log] = run("cd " + dir.string() + " && " + swell_command());
+  EXPECT_EQ(status, 0) << log;
+  const auto [diff, report] = h5diff(swell_reference() / "s.h5", dir / "s.h5", {"/solver"});
+  EXPECT_NE(diff, 0) << "the resume without the kept factorisation was not detected";
+}
+
 // The walking scenario with contact_augmentations (augmented Lagrangian,
-// docs/contact.md) over its first three steps: the stage warns that it writes
-// no checkpoint (the multipliers are not saved) and leaves none; per step it
-// records its multiplier updates, and a step that stopped updating before
-// the limit meets the tolerance (0.1 of the max deflection); the totals
-// agree with the per-step records (Newton iterations include the discarded
-// attempts'), and the penalty-only run of the same steps breaks the rule in
-// the first step that was augmented.
-TEST(ResumeSurface, AugmentedContactWritesNoCheckpointAndRecordsItsUpdates) {
+// docs/contact.md) over its first three steps: per step it records its
+// multiplier updates, and a step that stopped updating before the limit
+// meets the tolerance (0.1 of the max deflection); the totals agree with the
+// per-step records (Newton iterations include the discarded attempts'), and
+// the penalty-only run of the same steps breaks the rule in the first step
+// that was augmented. Killed after step 2, the run resumes with its
+// multipliers (the checkpoint holds them, now and per frame written) and
+// ends bit-identical; the same checkpoint with the multipliers dropped
+// resumes into another result (the comparison can fail).
+TEST(ResumeSurface, AugmentedContactRecordsItsUpdatesAndResumesBitIdentical) {
   const fs::path dir = scratch("surface_augmented");
   std::ifstream in(surface_inputs() / "walk.yaml");
   std::stringstream scene;
@@ -390,8 +479,36 @@ TEST(ResumeSurface, AugmentedContactWritesNoCheckpointAndRecordsItsUpdates) {
                               (comak_reference() / "k.h5").string() + " --quiet";
   auto [status, log] = run("cd " + dir.string() + " && " + surface + " --scene augmented.yaml --out a.h5");
   ASSERT_EQ(status, 0) << log;
-  EXPECT_NE(log.find("no checkpoints with contact_augmentations"), std::string::npos) << log;
-  EXPECT_FALSE(fs::exists(dir / "a.h5.checkpoint"));
+  EXPECT_FALSE(fs::exists(dir / "a.h5.checkpoint"));  // removed once the output is complete
+  for (const std::string kill_at : {"2", "2 sabotaged"}) {
+    SCOPED_TRACE(kill_at);
+    const bool sabotage = kill_at.size() > 1;
+    const fs::path d = scratch("surface_augmented_at_" + std::string(sabotage ? "2_sabotaged" : kill_at));
+    fs::copy_file(dir / "augmented.yaml", d / "augmented.yaml");
+    const std::string cmd = "cd " + d.string() + " && " + surface + " --scene augmented.yaml --out a.h5";
+    const auto [killed, printed] =
+        run("cd " + d.string() + " && ARTHROSIM_TEST_KILL_AT_CHECKPOINT=" + kill_at.substr(0, 1) + " exec " +
+            surface + " --scene augmented.yaml --out a.h5");
+    EXPECT_NE(killed, 0) << printed;
+    std::string why;
+    auto c = arthrosim::pipelines::read_surface_checkpoint(d / "a.h5.checkpoint", why);
+    ASSERT_TRUE(c) << why;
+    ASSERT_EQ(c->multipliers.size(), 1u);  // one contact pair
+    ASSERT_EQ(c->frame_multipliers.size(), c->frame_times.size());
+    EXPECT_GT(c->total_augmentations, 0);
+    EXPECT_GT(c->multipliers[0][0].size() + c->multipliers[0][1].size(), 0) << "no multipliers at checkpoint 2";
+    if (sabotage) {
+      c->multipliers[0] = {Eigen::VectorXd(), Eigen::VectorXd()};
+      arthrosim::pipelines::write_surface_checkpoint(d / "a.h5.checkpoint", *c, 0);
+    }
+    const auto [resumed, rlog] = run(cmd);
+    EXPECT_EQ(resumed, 0) << rlog;
+    if (sabotage) {
+      EXPECT_NE(h5diff(dir / "a.h5", d / "a.h5", {"/solver"}).first, 0) << "the resume without multipliers was not detected";
+    } else {
+      expect_same_surface_output(dir / "a.h5", d / "a.h5");
+    }
+  }
   std::tie(status, log) = run("cd " + dir.string() + " && " + surface + " --scene penalty.yaml --out p.h5");
   ASSERT_EQ(status, 0) << log;
   const arthrosim::common::H5File a((dir / "a.h5").string(), arthrosim::common::H5File::Mode::kRead);
