@@ -31,9 +31,9 @@ stage-2 runs given.
 Then, per run given (label=surface_gait.h5), stage 2's axial force at the
 frame. Axial: compressive force on the tibia along tibia -Y [N].
 
-Sample run (the runs of docs/contact.md, "Stage 2 against stage 1"):
+Sample run (docs/contact.md, "Stage 2 against stage 1 on the real subject"):
   /usr/bin/python3 scripts/contact_decomposition.py out/kinematics.h5 out/prepared.h5 \\
-      penalty=out/surface_gait.h5 --times 1.23,1.26,1.28,1.31
+      penalty=out/surface_gait.h5 aug=out_aug/surface_gait.h5 --times 1.21,1.23,1.26,1.28,1.29
 """
 import argparse
 import os
