@@ -531,14 +531,24 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       // that edge, weights s(1/2 + d/(2b)) and s(1/2 - d/(2b)) (d: the
       // in-plane distance of the projection from the edge, positive on the
       // closest face), so the force turns continuously from one face's
-      // normal to the other's when the closest face changes. With a
+      // normal to the other's when the closest face changes. A closest point
+      // on the edge itself (d = 0: a vertex in front of a convex kink or
+      // behind a concave one) becomes the same pair of face contacts instead
+      // of the edge contact, whose normal (p - c)/|p - c| turns through the
+      // whole kink angle within a distance of the order of the gap. With a
       // multiplier the force does not vanish at g = 0, and without the blend
       // it jumps by the angle between the faces there.
-      if (offset > 0 && c.kind == ContactKind::kVertexFace && c.fade_edge < 0 && kCreaseBlend > 0) {
+      const bool edge_feature = c.kind == ContactKind::kVertexEdge;
+      if (offset > 0 && (c.kind == ContactKind::kVertexFace || edge_feature) && c.fade_edge < 0 &&
+          kCreaseBlend > 0) {
         const int t = h.triangle;
-        int j = 0;
-        for (int k = 1; k < 3; ++k)
-          if (h.closest.bary[k] < h.closest.bary[j]) j = k;
+        int j = 0;  // the node opposite the edge
+        if (edge_feature) {
+          j = (f + 1) % 3;  // edge f - 1 joins tri[f - 1] and tri[f % 3]
+        } else {
+          for (int k = 1; k < 3; ++k)
+            if (h.closest.bary[k] < h.closest.bary[j]) j = k;
+        }
         const int e = Sf.triangle_edges(t, (j + 1) % 3);
         const int t2 = e < 0 ? -1 : (Sf.edge_triangles[e][0] == t ? Sf.edge_triangles[e][1] : Sf.edge_triangles[e][0]);
         int j2 = -1;
@@ -551,7 +561,11 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
         if (j2 >= 0) {
           const double ht = Sf.triangle_height(t, j), h2 = Sf.triangle_height(t2, j2);
           const double b = kCreaseBlend * std::min(ht, h2);
-          if (b > 0 && h.closest.bary[j] * ht < b) {
+          if (b > 0 && (edge_feature || h.closest.bary[j] * ht < b) &&
+              !(opts_.rim == RimTreatment::kFadeInside &&
+                (Sf.boundary_vertex[tri[0]] || Sf.boundary_vertex[tri[1]] || Sf.boundary_vertex[tri[2]]))) {
+            c.kind = ContactKind::kVertexFace;
+            c.node = {h.vertex, tri[0], tri[1], tri[2]};
             c.blend = true;
             c.blend_rho = {0.5, 0.5, 0.5};
             c.blend_rho[j] = 0.5 + ht / (2 * b);

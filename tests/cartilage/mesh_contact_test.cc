@@ -731,19 +731,23 @@ TEST(MeshContact, MatchedFoundationsCarryTheMusculoskeletalStagesPressure) {
 }
 
 // An augmented vertex contact at g = 0 over a crease: a plate's centre node
-// rests on the valley line of a lower surface folded by +-10 degrees
-// (concave seen from the plate), with a multiplier of 5 MPa on every plate
-// node, and the plate slides across the valley in 2 um steps. Without the
-// crease blend the closest face changes at the valley line and the node's
-// force (the multiplier's, not vanishing at g = 0) turns by the fold at once:
-// measured with the blend switched off (kCreaseBlend = 0), a change of 0.87 N
-// = 16.9 % of the node's force in one step (the Newton stall of the real
-// subject's augmented walk, docs/contact.md). With the blend (half-width 5 %
-// of the smaller triangle height) it turns over the band: 1.5 % per step
-// (2 % asserted). Tangent inside the band against central differences as in
-// AugmentedTangentMatchesFiniteDifferences (measured 4.9e-9).
+// rests 0.1 um above the crease line of a lower surface folded by +-10
+// degrees, a valley (concave seen from the plate: the closest face changes
+// at the line) and a ridge (convex: the closest point lies on the edge, whose
+// normal (p - c)/|p - c| turns through the whole kink within a few gaps),
+// with a multiplier of 20 MPa on every plate node, and the plate slides
+// across the line in 2 um steps. The node's force (the multiplier's, not
+// vanishing at g = 0) then turns by the fold. Measured with the blend
+// switched off (kCreaseBlend = 0): the largest change in one step is 27.4 %
+// (valley) and 34.7 % (ridge) of the node's force (the Newton stall of the
+// real subject's augmented walk, docs/contact.md). With the blend
+// (half-width 5 % of the smaller triangle height) 0.87 % and 0.95 % (2 %
+// asserted). Tangent inside the band against central differences as in
+// AugmentedTangentMatchesFiniteDifferences (measured 8.7e-9, 3.5e-9).
 TEST(MeshContact, AugmentedContactTurnsContinuouslyAcrossACrease) {
-  const double slope = std::tan(10.0 * M_PI / 180.0), kc = 3e11, lam = 5e6;
+  for (const double fold : {1.0, -1.0}) {  // valley (concave seen from the plate), ridge (convex)
+  SCOPED_TRACE(fold > 0 ? "valley" : "ridge");
+  const double slope = fold * std::tan(10.0 * M_PI / 180.0), kc = 3e11, lam = 2e7;
   common::QuadMesh lower = shifted(testing::plate_mesh(6, 6, 6e-3, 6e-3), {-3e-3, -3e-3, 0});
   for (int i = 0; i < lower.V.rows(); ++i) lower.V(i, 2) = slope * std::abs(lower.V(i, 0));
   // 0.1 um above the valley line (g > 0, in contact through the offset of
@@ -776,8 +780,8 @@ TEST(MeshContact, AugmentedContactTurnsContinuouslyAcrossACrease) {
     fx_last = f.x();
     prev = f;
   }
-  std::printf("crease: centre node force %.4f N (max), x-force %.4f -> %.4f N, largest change per 2 um step %.3e N "
-              "(%.3f %% of the force)\n", fmax, fx_first, fx_last, worst, 100 * worst / fmax);
+  std::printf("%s: centre node force %.4f N (max), x-force %.4f -> %.4f N, largest change per 2 um step %.3e N "
+              "(%.3f %% of the force)\n", fold > 0 ? "valley" : "ridge", fmax, fx_first, fx_last, worst, 100 * worst / fmax);
   // The force turned from one face's normal to the other's (x-component sign change) ...
   EXPECT_LT(fx_first * fx_last, 0.0);
   // ... and continuously.
@@ -787,8 +791,9 @@ TEST(MeshContact, AugmentedContactTurnsContinuouslyAcrossACrease) {
   for (int i = 0; i < B->num_nodes(); ++i) qb(ob + 6 * i) += 1.37e-6;
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(sys.num_dofs());
   const double err = system_fd_error(sys, qb, zero, 0);
-  std::printf("crease: tangent relative error %.2e\n", err);
+  std::printf("%s: tangent relative error %.2e\n", fold > 0 ? "valley" : "ridge", err);
   EXPECT_LT(err, 1e-5);
+  }
 }
 
 // With multipliers set (nonzero offsets, some contacts at positive gaps),
