@@ -1,6 +1,7 @@
 #include "pipelines/shockwave_output.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 #include "common/hdf5.h"
 #include "common/metadata.h"
@@ -88,31 +89,67 @@ ShockwaveWriter::ShockwaveWriter(const fs::path& h5_path, const shockwave::Model
 
 ShockwaveWriter::~ShockwaveWriter() = default;
 
+ShockwaveFrame shockwave_frame(const shockwave::Simulation& sim, double applied_pressure,
+                               const shockwave::RegenerationCriteria& criteria, bool fields, bool fluid,
+                               double compression_force, double compression_displacement) {
+  const shockwave::Model& m = sim.model();
+  ShockwaveFrame f;
+  f.time = sim.time();
+  f.applied_pressure = applied_pressure;
+  const shockwave::EnergyBalance e = sim.energy();
+  f.kinetic = e.kinetic;
+  f.potential = e.potential;
+  f.work = e.external_work;
+  f.dissipation = e.dissipation;
+  f.compression_force = compression_force;
+  f.compression_displacement = compression_displacement;
+  if (fields) {
+    f.pressure = sim.pressure();
+    f.distortional_strain = sim.distortional_strain();
+    if (fluid) f.pore_pressure = sim.pore_pressure();
+  }
+  for (size_t t = 0; t < m.tissues.size(); ++t)
+    f.all_at_once_m3.push_back(shockwave::regeneration_volumes(m, static_cast<int>(t), sim.pressure(),
+                                                               sim.distortional_strain(), sim.pore_pressure(), criteria)
+                                   .all);
+  return f;
+}
+
 void ShockwaveWriter::append_frame(const shockwave::Simulation& sim, double applied_pressure,
                                    const shockwave::RegenerationCriteria& criteria, double compression_force,
                                    double compression_displacement) {
+  append_frame(shockwave_frame(sim, applied_pressure, criteria, impl_->frames, impl_->fluid, compression_force,
+                               compression_displacement));
+}
+
+bool ShockwaveWriter::frames() const { return impl_->frames; }
+bool ShockwaveWriter::fluid() const { return impl_->fluid; }
+
+void ShockwaveWriter::append_frame(const ShockwaveFrame& f) {
   Impl& d = *impl_;
-  d.times.push_back(sim.time());
-  d.time->append(sim.time());
-  d.pulse->append(applied_pressure);
-  const shockwave::EnergyBalance e = sim.energy();
-  d.kinetic->append(e.kinetic);
-  d.potential->append(e.potential);
-  d.work->append(e.external_work);
-  d.dissipation->append(e.dissipation);
-  d.force->append(compression_force);
-  d.displacement->append(compression_displacement);
+  const size_t n = static_cast<size_t>(d.model.size());
+  if (f.all_at_once_m3.size() != d.model.tissues.size() ||
+      (d.frames && (f.pressure.size() != n || f.distortional_strain.size() != n ||
+                    (d.fluid && f.pore_pressure.size() != n))))
+    throw std::logic_error("ShockwaveWriter::append_frame: a frame of another model or without its fields");
+  d.times.push_back(f.time);
+  d.time->append(f.time);
+  d.pulse->append(f.applied_pressure);
+  d.kinetic->append(f.kinetic);
+  d.potential->append(f.potential);
+  d.work->append(f.work);
+  d.dissipation->append(f.dissipation);
+  d.force->append(f.compression_force);
+  d.displacement->append(f.compression_displacement);
   if (d.frames) {
-    const int n = d.model.size();
-    d.fields[0].append(Eigen::Map<const Eigen::VectorXd>(sim.pressure().data(), n));
-    d.fields[1].append(Eigen::Map<const Eigen::VectorXd>(sim.distortional_strain().data(), n));
-    if (d.fluid) d.fields[2].append(Eigen::Map<const Eigen::VectorXd>(sim.pore_pressure().data(), n));
+    const Eigen::Index N = static_cast<Eigen::Index>(n);
+    d.fields[0].append(Eigen::Map<const Eigen::VectorXd>(f.pressure.data(), N));
+    d.fields[1].append(Eigen::Map<const Eigen::VectorXd>(f.distortional_strain.data(), N));
+    if (d.fluid) d.fields[2].append(Eigen::Map<const Eigen::VectorXd>(f.pore_pressure.data(), N));
   }
   for (size_t t = 0; t < d.model.tissues.size(); ++t) {
-    const shockwave::RegenerationVolumes v = shockwave::regeneration_volumes(
-        d.model, static_cast<int>(t), sim.pressure(), sim.distortional_strain(), sim.pore_pressure(), criteria);
-    d.at_once[t]->append(v.all);
-    d.best_at_once[t] = std::max(d.best_at_once[t], v.all);
+    d.at_once[t]->append(f.all_at_once_m3[t]);
+    d.best_at_once[t] = std::max(d.best_at_once[t], f.all_at_once_m3[t]);
   }
 }
 

@@ -38,6 +38,25 @@ struct ShockwaveEffect {
   std::int64_t count = 0;
 };
 
+/// The values of one written frame: what append_frame writes, and what the
+/// stage's checkpoint holds to write the frame again on resume
+/// (pipelines/shockwave_checkpoint.h).
+struct ShockwaveFrame {
+  double time = 0.0, applied_pressure = 0.0;                       ///< [s], [Pa]
+  double kinetic = 0.0, potential = 0.0, work = 0.0, dissipation = 0.0;  ///< [J]
+  double compression_force = 0.0, compression_displacement = 0.0;  ///< [N], [m]
+  /// Per automaton (empty unless frames are written; pore pressure also
+  /// without pore fluid).
+  std::vector<double> pressure, distortional_strain, pore_pressure;
+  std::vector<double> all_at_once_m3;  ///< per tissue: all three criteria at once
+};
+
+/// The frame of `sim` at its field time; `fields`: with the per-automaton
+/// fields (`fluid`: the pore pressure too).
+ShockwaveFrame shockwave_frame(const shockwave::Simulation& sim, double applied_pressure,
+                               const shockwave::RegenerationCriteria& criteria, bool fields, bool fluid,
+                               double compression_force = 0.0, double compression_displacement = 0.0);
+
 class ShockwaveWriter {
  public:
   /// Writes the model into "<h5_path>.partial" (common/output_file.h); finish()
@@ -53,6 +72,10 @@ class ShockwaveWriter {
   void append_frame(const shockwave::Simulation& sim, double applied_pressure,
                     const shockwave::RegenerationCriteria& criteria, double compression_force = 0.0,
                     double compression_displacement = 0.0);
+  /// A frame made by shockwave_frame (with fields when frames are on).
+  void append_frame(const ShockwaveFrame& frame);
+  bool frames() const;
+  bool fluid() const;
   /// Peaks, peak-based volumes, attributes, the effect ledger; then the XDMF
   /// sidecar; closes the file and renames it to its complete name (the
   /// writer takes no more frames). Returns the largest at-once volume per tissue.

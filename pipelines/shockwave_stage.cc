@@ -3,13 +3,19 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
+#include <map>
+#include <optional>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 
+#include "common/checkpoint.h"
 #include "common/effects.h"
 #include "common/error.h"
 #include "common/output_file.h"
+#include "common/hashing.h"
 #include "common/hdf5.h"
 #include "common/prepared_model_file.h"
 #include "common/log.h"
@@ -18,6 +24,7 @@
 #include "common/scene.h"
 #include "pipelines/json.h"
 #include "pipelines/stages.h"
+#include "pipelines/shockwave_checkpoint.h"
 #include "pipelines/shockwave_output.h"
 #include "shockwave/applicator_pulse.h"
 
@@ -97,6 +104,88 @@ std::vector<shockwave::Tissue> read_tissue_table(const fs::path& path) {
   return tissues;
 }
 
+// The options as the run uses them (after the scene and the flags), one
+// "key = value" line each with every number exactly, for the checkpoint's
+// identity: a scene edited between a kill and the rerun gives another
+// identity. checkpoint_interval_s is left out (it changes no result).
+class OptionsText final : public common::OptionVisitor {
+ public:
+  std::string lines;
+  OptionVisitor& number(std::string_view key, double& si, common::Unit, common::Range, std::string_view) override {
+    if (key != "checkpoint_interval_s") line(key, exact(si));
+    return *this;
+  }
+  OptionVisitor& number(std::string_view key, std::optional<double>& si, common::Unit, common::Range,
+                        std::string_view) override {
+    line(key, si ? exact(*si) : std::string("(none)"));
+    return *this;
+  }
+  OptionVisitor& integer(std::string_view key, int& value, common::Range, std::string_view) override {
+    line(key, std::to_string(value));
+    return *this;
+  }
+  OptionVisitor& flag(std::string_view key, bool& value, std::string_view) override {
+    line(key, value ? "true" : "false");
+    return *this;
+  }
+  OptionVisitor& text(std::string_view key, std::string& value, std::string_view, std::string_view) override {
+    line(key, value);
+    return *this;
+  }
+  OptionVisitor& path(std::string_view key, fs::path& value, std::string_view) override {
+    line(key, value.string());
+    return *this;
+  }
+  OptionVisitor& text_list(std::string_view key, std::vector<std::string>& value, std::string_view,
+                           std::string_view) override {
+    std::string v;
+    for (const std::string& x : value) v += x + ",";
+    line(key, v);
+    return *this;
+  }
+  OptionVisitor& number_list(std::string_view key, std::vector<double>& si, common::Unit, common::Range,
+                             std::string_view) override {
+    std::string v;
+    for (double x : si) v += exact(x) + ",";
+    line(key, v);
+    return *this;
+  }
+  OptionVisitor& named_numbers(std::string_view key, std::map<std::string, double>& si, common::Unit, common::Range,
+                               std::string_view) override {
+    std::string v;
+    for (const auto& [k, x] : si) v += k + "=" + exact(x) + ",";
+    line(key, v);
+    return *this;
+  }
+  OptionVisitor& effect_list(std::string_view key, std::vector<std::string>& value, std::string_view,
+                             std::string_view) override {
+    std::string v;
+    for (const std::string& x : value) v += x + ",";
+    line(key, v);
+    return *this;
+  }
+
+ protected:
+  void choice_index(std::string_view key, const std::vector<std::string_view>& words, int& index,
+                    std::string_view) override {
+    line(key, index >= 0 ? std::string(words[static_cast<size_t>(index)]) : std::string("(none)"));
+  }
+
+ private:
+  static std::string exact(double v) {
+    char b[40];
+    std::snprintf(b, sizeof b, "%.17g", v);
+    return b;
+  }
+  void line(std::string_view key, const std::string& value) { lines += std::string(key) + " = " + value + "\n"; }
+};
+
+std::string resolved_options_text(ShockwaveStageOptions o) {
+  OptionsText v;
+  o.declare(v);
+  return v.lines;
+}
+
 }  // namespace
 
 const std::vector<std::pair<std::string, std::string>>& shockwave_effects() {
@@ -164,6 +253,9 @@ void ShockwaveStageOptions::declare(common::OptionVisitor& v) {
   v.number("distortional_strain_max", distortional_strain_max, Unit::kNone, {0, 1}, "regeneration: strain to");
   v.number("pore_pressure_min_mpa", pore_pressure_min_pa, Unit::kMegapascal, {0, 100}, "regeneration: pore pressure from");
   v.number("pore_pressure_max_mpa", pore_pressure_max_pa, Unit::kMegapascal, {0, 100}, "regeneration: pore pressure to");
+  v.number("checkpoint_interval_s", checkpoint_interval_s, Unit::kSecond, {0, 86400},
+           "wall time between checkpoints <out>.checkpoint (0: after every step); a rerun of the same command "
+           "continues from the last one (docs/shockwave.md, \"Checkpoints\")");
 }
 
 void check_shockwave_options(const ShockwaveStageOptions& o, const std::string& source) {
@@ -338,6 +430,51 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
   // One run per EFD (or the compression).
   const std::vector<double> runs = compression ? std::vector<double>{0.0} : o.efd_j_per_m2;
   const std::vector<std::string> labels = shockwave_run_labels(o);
+
+  // Checkpoint and resume (pipelines/shockwave_checkpoint.h), tied to this
+  // run's identity (program, command line, the options as resolved, the
+  // inputs' bytes, the runner's key). Not in a dry run (nothing is simulated).
+  const fs::path checkpoint_path = common::checkpoint_name(o.out);
+  ShockwaveCheckpoint checkpoint;
+  if (!dry_run) {
+    checkpoint.identity = common::run_identity(
+        argv, resolved_options_text(o),
+        {{o.prepared, "--prepared"}, {o.model, "--model"}, {o.tissue_table, "tissue_table"}});
+    std::optional<ShockwaveCheckpoint> found;
+    const bool resume = common::resume_from_checkpoint(
+        checkpoint_path, checkpoint.identity, [&](std::string& identity, std::string& why) {
+          found = read_shockwave_checkpoint(checkpoint_path, why);
+          if (!found) return false;
+          const size_t done = found->finished.size() + (found->current ? 1 : 0);
+          bool same = done <= runs.size();
+          for (size_t r = 0; same && r < found->finished.size(); ++r) same = found->finished[r].result.label == labels[r];
+          if (same && found->current) {
+            // Frames of this model: the at-once volumes per tissue, the fields per automaton.
+            const size_t n = static_cast<size_t>(m.size()), nt = m.tissues.size();
+            for (const ShockwaveFrame& f : found->current->frames) {
+              const bool fields = o.write_frames && f.pressure.size() == n && f.distortional_strain.size() == n &&
+                                  (f.pore_pressure.empty() || f.pore_pressure.size() == n);
+              const bool none = !o.write_frames && f.pressure.empty() && f.distortional_strain.empty() &&
+                                f.pore_pressure.empty();
+              if (f.all_at_once_m3.size() != nt || !(fields || none)) {
+                why = "its frames are not of this model (" + std::to_string(n) + " automata, " + std::to_string(nt) +
+                      " tissues)";
+                return false;
+              }
+            }
+          }
+          if (!same) {
+            why = "it holds " + std::to_string(found->finished.size()) + " finished runs and " +
+                  (found->current ? "one" : "none") + " in progress for a stage of " + std::to_string(runs.size()) +
+                  " runs";
+            return false;
+          }
+          identity = found->identity;
+          return true;
+        });
+    if (resume) checkpoint = std::move(*found);
+  }
+  common::CheckpointClock checkpoint_clock(o.checkpoint_interval_s);
   for (std::size_t r = 0; r < runs.size(); ++r) {
     const double efd = runs[r];
     ShockwaveRunResult rr;
@@ -437,6 +574,48 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       result.runs.push_back(std::move(rr));
       continue;
     }
+    // A run that finished before the checkpoint: its file is kept (if it is
+    // still the one written) and its results are taken, not simulated again.
+    if (r < checkpoint.finished.size()) {
+      const ShockwaveFinishedRun& done = checkpoint.finished[r];
+      std::error_code ec;
+      if (fs::is_regular_file(rr.file, ec) && common::sha256_file(rr.file) == done.file_sha256) {
+        common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": " + rr.label +
+                         " finished before, " + rr.file.string() + " kept (not simulated again)");
+        ShockwaveRunResult taken = done.result;
+        taken.file = rr.file;
+        result.runs.push_back(std::move(taken));
+        ++result.runs_taken;
+        continue;
+      }
+      common::log_warn("not taking " + rr.label + " from the checkpoint " + checkpoint_path.string() + ": " +
+                       rr.file.string() + " is missing or changed since; simulating it again");
+      checkpoint.finished.resize(r);
+      checkpoint.current.reset();
+    }
+    // The run in progress: restored from the checkpoint, or a fresh one.
+    if (checkpoint.current && checkpoint.current->run == static_cast<int>(r)) {
+      try {
+        if (checkpoint.current->sim.steps >= steps)
+          throw std::runtime_error("it holds " + std::to_string(checkpoint.current->sim.steps) + " steps of a run of " +
+                                   std::to_string(steps));
+        sim.restore(checkpoint.current->sim);  // checks everything before it changes anything
+      } catch (const std::exception& e) {
+        common::log_warn("not resuming " + rr.label + " from " + checkpoint_path.string() + ": " + e.what() +
+                         "; starting it over");
+        checkpoint.current.reset();
+      }
+    } else {
+      checkpoint.current.reset();
+    }
+    if (!checkpoint.current) {
+      // Fresh: a Simulation that was not restored is at step 0.
+      if (sim.steps_done() != 0) throw std::logic_error("shockwave stage: a half-restored run");
+      checkpoint.current.emplace();
+      checkpoint.current->run = static_cast<int>(r);
+    }
+    ShockwaveRunProgress& cur = *checkpoint.current;
+    cur.sim = {};  // the state is taken from sim when a checkpoint is written
     ShockwaveWriter writer(rr.file, run_model, rr.label, o.write_frames, sim.pore_fluid(), options_text, argv);
     // The effect ledger: what this run built.
     std::vector<ShockwaveEffect> effects;
@@ -453,11 +632,14 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     common::ProgressOptions po;
     if (!progress) po.mode = common::ProgressOptions::Mode::kOff;
     common::Progress bar("shockwave " + rr.label, steps, po);
+    const std::int64_t first_step = sim.steps_done();
     const auto t0 = std::chrono::steady_clock::now();
     const std::clock_t c0 = std::clock();
-    // The bar: mean pressure of two lattice layers each step (peak arrival times).
+    // The bar: mean pressure of two lattice layers each step (peak arrival
+    // times), kept with the checkpoint's run state.
     std::vector<int> st1, st2;
-    std::vector<double> p1, p2;
+    std::vector<double>& p1 = cur.bar_p1;
+    std::vector<double>& p2 = cur.bar_p2;
     if (sm.bar) {
       const int nx = m.grid.count[0];
       st1 = shockwave::layer(m, 0, nx / 4);
@@ -480,8 +662,17 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       for (const common::Vec3& c : sim.constraint_forces()) f += c.dot(m.loaded.normal);
       return -f / face_area;
     };
-    if (driven) rr.peak_pressure_pa = 0.0;
-    for (std::int64_t s = 0; s < steps; ++s) {
+    if (driven) rr.peak_pressure_pa = cur.peak_pressure_pa;  // 0 for a fresh run
+    if (first_step > 0) {
+      common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": " + rr.label + ", " +
+                       std::to_string(first_step) + " of " + std::to_string(steps) +
+                       " steps done, frames written: " + std::to_string(cur.frames.size()) + " (taken from it)");
+      result.resumed_steps = first_step;
+      bar.update(first_step);
+    }
+    for (const ShockwaveFrame& f : cur.frames) writer.append_frame(f);
+    rr.frames = static_cast<int>(cur.frames.size());
+    for (std::int64_t s = first_step; s < steps; ++s) {
       sim.step();
       if (driven) rr.peak_pressure_pa = std::max(rr.peak_pressure_pa, face_pressure());
       if (sm.bar) {
@@ -494,9 +685,18 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
       if (s % every == 0 || s + 1 == steps) {
         double disp = 0.0;
         if (compression && !top.empty()) disp = -sim.displacement(run_model.constraints[top[0]].automaton).y();
-        writer.append_frame(sim, load ? load(sim.time()) : (driven ? face_pressure() : 0.0), crit,
-                            compression ? top_force() : 0.0, disp);
+        ShockwaveFrame frame = shockwave_frame(sim, load ? load(sim.time()) : (driven ? face_pressure() : 0.0), crit,
+                                               o.write_frames, sim.pore_fluid(), compression ? top_force() : 0.0, disp);
+        writer.append_frame(frame);
+        cur.frames.push_back(std::move(frame));
         ++rr.frames;
+      }
+      if (s + 1 < steps && checkpoint_clock.due()) {
+        cur.sim = sim.state();
+        cur.peak_pressure_pa = driven ? rr.peak_pressure_pa : 0.0;
+        write_shockwave_checkpoint(checkpoint_path, checkpoint, ++result.checkpoints);
+        cur.sim = {};
+        checkpoint_clock.mark();
       }
       if ((s & 15) == 0) bar.update(s + 1);
     }
@@ -565,6 +765,14 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     s << rr.label << ": " << steps << " steps in " << number(rr.wall_s) << " s (" << number(m.size() * double(steps) / rr.wall_s)
       << " automaton-steps/s), wrote " << rr.file.string();
     common::log_info(s.str());
+    // The finished run goes into the checkpoint right away (when more runs
+    // follow): a rerun after a kill in a later run takes it from there.
+    checkpoint.current.reset();
+    if (r + 1 < runs.size()) {
+      checkpoint.finished.push_back({rr, common::sha256_file(rr.file)});
+      write_shockwave_checkpoint(checkpoint_path, checkpoint, ++result.checkpoints);
+      checkpoint_clock.mark();
+    }
     result.runs.push_back(std::move(rr));
   }
   if (dry_run) return result;
@@ -622,7 +830,10 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     // menisci against the EFD, as an SVG plot (none for the bar, which has
     // no tissue volumes). Written as <name>.partial and renamed, like the
     // other outputs (common/output_file.h).
-    if (sm.bar) return result;
+    if (sm.bar) {
+      fs::remove(checkpoint_path);
+      return result;
+    }
     result.volumes_svg = fs::path(o.out.string() + "_volumes.svg");
     std::ostringstream svg;
     const double W = 640, H = 420, L = 70, R = 20, T = 30, B = 60;
@@ -677,6 +888,7 @@ ShockwaveStageResult run_shockwave_stage(const ShockwaveStageOptions& o, const s
     if (!file) throw common::InputError(atomic.temp().string(), 0, "write failed");
     atomic.commit();
   }
+  fs::remove(checkpoint_path);  // every output is complete
   return result;
 }
 

@@ -83,6 +83,8 @@ struct ShockwaveStageOptions {
   double distortional_strain_max = 1.1e-2;
   double pore_pressure_min_pa = 0.02 * common::units::mpa;
   double pore_pressure_max_pa = 2 * common::units::mpa;
+  /// Wall time between checkpoints <out>.checkpoint [s] (0: after every step).
+  double checkpoint_interval_s = 60.0;
 
   // Defaults with a unit are written as number times unit (common/options.h),
   // so that each is exactly what the scene reader makes of its text.
@@ -142,6 +144,9 @@ struct ShockwaveStageResult {
   int filtration_substeps = 0;
   double build_s = 0.0;
   std::vector<ShockwaveRunResult> runs;
+  int checkpoints = 0;        ///< written by this process (pipelines/shockwave_checkpoint.h)
+  int runs_taken = 0;         ///< finished runs taken from a checkpoint, not simulated again
+  std::int64_t resumed_steps = 0;  ///< steps of the run in progress taken from a checkpoint
   std::filesystem::path summary_json, volumes_svg;
 };
 

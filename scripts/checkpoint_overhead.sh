@@ -4,13 +4,15 @@
 # with the default interval (60 s: none in these short runs), median of N
 # runs each, and the size of the last checkpoint.
 #   scripts/checkpoint_overhead.sh [BUILD_DIR] [N] [STAGES]
-# STAGES: any of "comak surface biphasic" (default all three).
+# STAGES: any of "comak surface biphasic shockwave" (default all four).
 # COMAK: the coarse knee, frames 0-19 of the synthetic trial. Surface: the
 # walking scenario of tests/pipelines/resume_test.cc (femur and medial tibial
 # cartilage at 10 mm edges, mesh contact, 5 HHT steps of 10 ms). Biphasic: the
-# canonical two-layer case (4 element layers, 50 steps of 10 ms).
+# canonical two-layer case (4 element layers, 50 steps of 10 ms). Shockwave:
+# the coarse knee at d = 2 mm (93,464 automata), one 0.33 mJ/mm^2 pulse for
+# 5 us (42 steps, a frame every 1 us).
 set -eu
-B=$(cd "${1:-build}" && pwd); N=${2:-3}; STAGES=" ${3:-comak surface biphasic} "
+B=$(cd "${1:-build}" && pwd); N=${2:-3}; STAGES=" ${3:-comak surface biphasic shockwave} "
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 W=$(mktemp -d); trap 'rm -rf "$W"' EXIT
 cd "$W"
@@ -71,4 +73,12 @@ for i in $(seq "$N"); do wall $BIPHASIC; done | median > biphasic_default.txt
 for i in $(seq "$N"); do wall $BIPHASIC --checkpoint-interval-s 0; done | median > biphasic_every.txt
 ARTHROSIM_TEST_KILL_AT_CHECKPOINT=49 $BIPHASIC --checkpoint-interval-s 0 >/dev/null 2>&1 || true
 echo "biphasic (50 steps, 2 layers): median wall $(cat biphasic_default.txt) s without checkpoints, $(cat biphasic_every.txt) s with one after every step; checkpoint after 49 steps: $(stat -c %s b.h5.checkpoint) bytes (output $(stat -c %s b.h5.partial) bytes so far)"
+fi
+if [ "${STAGES#* shockwave }" != "$STAGES" ]; then
+$B/bin/arthrosim-prepare --model $ROOT/data/models/knee_parametric/coarse --out sw_prepared.h5 >/dev/null 2>&1
+SHOCKWAVE="$B/bin/arthrosim-shockwave --prepared sw_prepared.h5 --model $ROOT/data/models/knee_parametric/coarse --automaton-diameter-mm 2 --end-time-us 5 --output-interval-us 1 --out sw --quiet"
+for i in $(seq "$N"); do wall $SHOCKWAVE; done | median > shockwave_default.txt
+for i in $(seq "$N"); do wall $SHOCKWAVE --checkpoint-interval-s 0; done | median > shockwave_every.txt
+ARTHROSIM_TEST_KILL_AT_CHECKPOINT=41 $SHOCKWAVE --checkpoint-interval-s 0 >/dev/null 2>&1 || true
+echo "shockwave (2 mm knee, 93,464 automata, 42 steps): median wall $(cat shockwave_default.txt) s without checkpoints, $(cat shockwave_every.txt) s with one after every step; checkpoint after 41 steps: $(stat -c %s sw.checkpoint) bytes (output $(stat -c %s sw_efd0.33.h5.partial) bytes so far)"
 fi

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 #include <omp.h>
 
@@ -1132,6 +1133,92 @@ common::Vec3 Simulation::angular_momentum() const {
     });
   }
   return L;
+}
+
+// ---------------------------------------------------------------------------
+// State for checkpoints (SimulationState).
+
+std::vector<std::pair<std::string, std::vector<double>*>> Simulation::state_arrays() {
+  std::vector<std::pair<std::string, std::vector<double>*>> v;
+  const char* axis[3] = {"x", "y", "z"};
+  for (int b = 0; b < 2; ++b)
+    for (int a = 0; a < 3; ++a) {
+      const std::string tail = std::to_string(b) + "_" + axis[a];
+      v.emplace_back("position_" + tail, &pos_[b][a]);
+      v.emplace_back("velocity_" + tail, &vel_[b][a]);
+      v.emplace_back("angular_velocity_" + tail, &omg_[b][a]);
+    }
+  v.emplace_back("pair_normal_stress", &sn_);
+  v.emplace_back("pair_tangential_x", &tx_);
+  v.emplace_back("pair_tangential_y", &ty_);
+  v.emplace_back("pair_tangential_z", &tz_);
+  v.emplace_back("volumetric_strain", &theta_);
+  v.emplace_back("fluid_content", &zeta_);
+  v.emplace_back("pore_pressure", &pore_);
+  v.emplace_back("pressure", &pressure_);
+  v.emplace_back("distortional_strain", &distortional_);
+  v.emplace_back("peak_pressure", &peak_pressure_);
+  v.emplace_back("peak_distortional_strain", &peak_distortional_);
+  v.emplace_back("peak_pore_pressure", &peak_pore_);
+  v.emplace_back("kinetic_energy", &kinetic_);
+  v.emplace_back("work", &work_);
+  v.emplace_back("damping_energy", &damp_);
+  return v;
+}
+
+SimulationState Simulation::state() const {
+  SimulationState st;
+  st.steps = steps_;
+  st.buffer = cur_;
+  st.kinetic = kinetic_now_;
+  st.work = work_total_;
+  st.dissipation = dissipation_total_;
+  st.damping = damping_total_;
+  for (const auto& [name, array] : const_cast<Simulation*>(this)->state_arrays())
+    if (!array->empty()) st.arrays.emplace_back(name, *array);
+  std::vector<double> cf;
+  cf.reserve(3 * constraint_force_.size());
+  for (const common::Vec3& f : constraint_force_) cf.insert(cf.end(), {f.x(), f.y(), f.z()});
+  if (!cf.empty()) st.arrays.emplace_back("constraint_force", std::move(cf));
+  return st;
+}
+
+void Simulation::restore(const SimulationState& st) {
+  if (st.steps < 0 || (st.buffer != 0 && st.buffer != 1))
+    throw std::runtime_error("simulation state: expected steps >= 0 and buffer 0 or 1, found " +
+                             std::to_string(st.steps) + " and " + std::to_string(st.buffer));
+  auto find = [&](const std::string& name) -> const std::vector<double>* {
+    for (const auto& [n, a] : st.arrays)
+      if (n == name) return &a;
+    return nullptr;
+  };
+  std::vector<std::pair<std::string, std::vector<double>*>> mine = state_arrays();
+  std::vector<double> cf_flat(3 * constraint_force_.size());
+  mine.emplace_back("constraint_force", &cf_flat);
+  // Check everything before changing anything.
+  size_t expected = 0;
+  for (const auto& [name, array] : mine) {
+    if (array->empty()) continue;
+    ++expected;
+    const std::vector<double>* a = find(name);
+    if (a == nullptr) throw std::runtime_error("simulation state: the array " + name + " is missing");
+    if (a->size() != array->size())
+      throw std::runtime_error("simulation state: the array " + name + " has " + std::to_string(a->size()) +
+                               " values, expected " + std::to_string(array->size()));
+  }
+  if (st.arrays.size() != expected)
+    throw std::runtime_error("simulation state: " + std::to_string(st.arrays.size()) + " arrays, expected " +
+                             std::to_string(expected) + " (one of another run)");
+  for (const auto& [name, array] : mine)
+    if (!array->empty()) *array = *find(name);
+  for (size_t k = 0; k < constraint_force_.size(); ++k)
+    constraint_force_[k] = common::Vec3(cf_flat[3 * k], cf_flat[3 * k + 1], cf_flat[3 * k + 2]);
+  steps_ = st.steps;
+  cur_ = st.buffer;
+  kinetic_now_ = st.kinetic;
+  work_total_ = st.work;
+  dissipation_total_ = st.dissipation;
+  damping_total_ = st.damping;
 }
 
 }  // namespace arthrosim::shockwave

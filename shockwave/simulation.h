@@ -38,6 +38,8 @@
 #include <functional>
 #include <array>
 #include <memory>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "common/mesh.h"
@@ -127,6 +129,32 @@ struct EnergyBalance {
   double residual() const { return external_work - dissipation - damping - kinetic - potential; }
 };
 
+/// Everything a Simulation carries from one step to the next, for
+/// checkpoints (pipelines/shockwave_checkpoint.h): restoring it into a
+/// Simulation built from the same model, options and load continues the run
+/// bit for bit (tests/shockwave/simulation_state_test.cc). Held: the step
+/// count and which half of the double buffers is current; positions,
+/// velocities and angular velocities of both halves; the pair state (normal
+/// stress and tangential force of each bond); volumetric strain, fluid
+/// content zeta and pore pressure; the fields of the last step (pressure,
+/// distortional strain, constraint forces); the peaks; the energy
+/// bookkeeping (per automaton and the accumulated totals). Not held, because
+/// every step rewrites them before reading them: the predictor's b_, the
+/// loaded automata's peaks before the step, the row sweep's per-thread ring
+/// and accumulators, and the filtration term's stage buffers (FiltrationTerm
+/// keeps nothing between steps: zeta lives here). A member added to
+/// Simulation that carries over between steps belongs in state_arrays().
+struct SimulationState {
+  std::int64_t steps = 0;
+  int buffer = 0;  ///< index of the current half of the double buffers
+  /// Energy bookkeeping: the kinetic energy of the last step and the totals
+  /// of work, filtration dissipation and damping [J].
+  double kinetic = 0.0, work = 0.0, dissipation = 0.0, damping = 0.0;
+  /// The state arrays by name, in a fixed order (an array that is empty in
+  /// this run, e.g. zeta without pore fluid, is left out).
+  std::vector<std::pair<std::string, std::vector<double>>> arrays;
+};
+
 class Simulation {
  public:
   /// `load(t)`: pressure on model.loaded at time t [Pa] (empty: no load).
@@ -210,6 +238,13 @@ class Simulation {
   /// positions and velocities of the last half step [kg m^2/s].
   common::Vec3 angular_momentum() const;
 
+  /// The state after the steps done (SimulationState).
+  SimulationState state() const;
+  /// Continues from `state`, taken from a Simulation of the same model,
+  /// options and load. std::runtime_error naming the array when one of this
+  /// run's arrays is missing, of another length, or one is unknown.
+  void restore(const SimulationState& state);
+
   /// Sets the initial velocity of every automaton (before the first step).
   void set_velocity(int i, const common::Vec3& v);
   void set_angular_velocity(int i, const common::Vec3& w);
@@ -225,6 +260,9 @@ class Simulation {
   template <bool kPeriodic, bool kFluid, bool kLinear>
   void step_rows();
   double potential_energy() const;
+  /// The members SimulationState holds (name, array), in its order; the
+  /// constraint forces separately (Vec3).
+  std::vector<std::pair<std::string, std::vector<double>*>> state_arrays();
 
   const Model& model_;
   SimulationOptions options_;
