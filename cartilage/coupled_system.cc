@@ -262,7 +262,7 @@ void CoupledShellSystem::evaluate(const numerics::EvalRequest& req, Eigen::Vecto
         T += kq * A * cc * c.G * (c.H * v12).transpose();
         T += kv * A * cc * c.G * c.G.transpose();
       }
-      if (c.fade_edge >= 0) T -= kq * c.area * c.pressure * c.G * c.fade_grad.transpose();
+      if (c.fade_edge >= 0 || c.blend) T -= kq * c.area * c.pressure * c.G * c.fade_grad.transpose();
       double* vals = K->valuePtr();
       for (int j = 0; j < 12; ++j)
         for (int i = 0; i < 12; ++i) {

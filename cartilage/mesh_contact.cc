@@ -173,6 +173,10 @@ struct ContactGeometry {
 // barycentric interpolation of rho at the closest point and s the smoothstep
 // r^2 (3 - 2 r): zero with zero slope at the rim (C1 with the region beyond
 // it, where nothing is a contact); its gradient by the same AD pass.
+// Crease blend half-width as a fraction of the smaller of the two
+// triangles' heights over their common edge.
+constexpr double kCreaseBlend = 0.05;
+
 template <class T>
 T inside_fade(const T* w, const double* rho) {
   T r = -(w[1] * rho[0] + w[2] * rho[1] + w[3] * rho[2]);
@@ -282,6 +286,13 @@ void build_from_triangles(ContactSurface& s, const common::TriangleMesh& tri) {
   s.vertex_triangles = topo.vertex_triangles;
   s.boundary_vertex.assign(s.num_nodes, 0);
   for (int v : topo.boundary_vertices) s.boundary_vertex[v] = 1;
+  s.triangle_height.resize(tri.num_triangles(), 3);
+  for (int t = 0; t < tri.num_triangles(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d a = tri.V.row(tri.F(t, (k + 1) % 3)).transpose(), b = tri.V.row(tri.F(t, (k + 2) % 3)).transpose();
+      const double len = (b - a).norm();
+      s.triangle_height(t, k) = len > 0 ? 2 * area(t) / len : 0.0;
+    }
   s.edge_area = Eigen::VectorXd::Zero(s.edges.rows());
   for (int e = 0; e < s.edges.rows(); ++e)
     for (int t : s.edge_triangles[e])
@@ -515,6 +526,57 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
       c.side = {sv, sf, sf, sf};
       c.area = 0.5 * vertex_weight_[sv](h.vertex);
       vf_active[sv][h.vertex] = 1;
+      // Crease blend (augmented contacts only): within a band of half-width
+      // b of an interior edge, the contact is shared with the face across
+      // that edge, weights s(1/2 + d/(2b)) and s(1/2 - d/(2b)) (d: the
+      // in-plane distance of the projection from the edge, positive on the
+      // closest face), so the force turns continuously from one face's
+      // normal to the other's when the closest face changes. A closest point
+      // on the edge itself (d = 0: a vertex in front of a convex kink or
+      // behind a concave one) becomes the same pair of face contacts instead
+      // of the edge contact, whose normal (p - c)/|p - c| turns through the
+      // whole kink angle within a distance of the order of the gap. With a
+      // multiplier the force does not vanish at g = 0, and without the blend
+      // it jumps by the angle between the faces there.
+      const bool edge_feature = c.kind == ContactKind::kVertexEdge;
+      if (offset > 0 && (c.kind == ContactKind::kVertexFace || edge_feature) && c.fade_edge < 0 &&
+          kCreaseBlend > 0) {
+        const int t = h.triangle;
+        int j = 0;  // the node opposite the edge
+        if (edge_feature) {
+          j = (f + 1) % 3;  // edge f - 1 joins tri[f - 1] and tri[f % 3]
+        } else {
+          for (int k = 1; k < 3; ++k)
+            if (h.closest.bary[k] < h.closest.bary[j]) j = k;
+        }
+        const int e = Sf.triangle_edges(t, (j + 1) % 3);
+        const int t2 = e < 0 ? -1 : (Sf.edge_triangles[e][0] == t ? Sf.edge_triangles[e][1] : Sf.edge_triangles[e][0]);
+        int j2 = -1;
+        if (t2 >= 0 && tn[sf].row(t2).squaredNorm() > 0) {
+          for (int k = 0; k < 3; ++k)
+            if (Sf.F(t2, k) != tri[(j + 1) % 3] && Sf.F(t2, k) != tri[(j + 2) % 3]) j2 = k;
+          for (int k = 0; k < 3 && j2 >= 0; ++k)
+            if (opts_.rim == RimTreatment::kFadeInside && Sf.boundary_vertex[Sf.F(t2, k)]) j2 = -1;
+        }
+        if (j2 >= 0) {
+          const double ht = Sf.triangle_height(t, j), h2 = Sf.triangle_height(t2, j2);
+          const double b = kCreaseBlend * std::min(ht, h2);
+          if (b > 0 && (edge_feature || h.closest.bary[j] * ht < b) &&
+              !(opts_.rim == RimTreatment::kFadeInside &&
+                (Sf.boundary_vertex[tri[0]] || Sf.boundary_vertex[tri[1]] || Sf.boundary_vertex[tri[2]]))) {
+            c.kind = ContactKind::kVertexFace;
+            c.node = {h.vertex, tri[0], tri[1], tri[2]};
+            c.blend = true;
+            c.blend_rho = {0.5, 0.5, 0.5};
+            c.blend_rho[j] = 0.5 + ht / (2 * b);
+            ContactPoint c2 = c;
+            c2.node = {h.vertex, Sf.F(t2, 0), Sf.F(t2, 1), Sf.F(t2, 2)};
+            c2.blend_rho = {0.5, 0.5, 0.5};
+            c2.blend_rho[j2] = 0.5 + h2 / (2 * b);
+            out.push_back(std::move(c2));
+          }
+        }
+      }
       out.push_back(std::move(c));
     }
   }
@@ -580,8 +642,11 @@ std::vector<ContactPoint> MeshContact::detect(const common::Points3& xa, const c
     if (c.fade_edge == 0) {
       const ContactSurface& Sf = *S[c.side[1]];
       for (int j = 0; j < 3; ++j) rho[j] = Sf.boundary_vertex[c.node[j + 1]] ? 0.0 : 1.0;
+    } else if (c.blend) {
+      for (int j = 0; j < 3; ++j) rho[j] = c.blend_rho[j];
     }
-    const ContactGeometry geo = contact_geometry(c.kind, x, sign, c.fade_edge == 1, c.fade_edge == 0 ? rho : nullptr,
+    const ContactGeometry geo = contact_geometry(c.kind, x, sign, c.fade_edge == 1,
+                                                 (c.fade_edge == 0 || c.blend) ? rho : nullptr,
                                                  want_hessian ? &c.H : nullptr);
     c.gap = geo.g;
     c.G = geo.G;
@@ -666,8 +731,21 @@ std::array<Eigen::VectorXd, 2> MeshContact::updated_multipliers(const common::Po
                                                                 const common::Points3& xb) const {
   std::array<Eigen::VectorXd, 2> out = {Eigen::VectorXd::Zero(a_.num_nodes), Eigen::VectorXd::Zero(b_.num_nodes)};
   // At rest (no velocities): the elastic pressure, damping excluded.
-  for (const ContactPoint& c : detect(xa, xb, nullptr, nullptr, false))
-    if (c.kind != ContactKind::kEdgeEdge) out[c.side[0]](c.node[0]) = c.pressure;
+  // A vertex in a crease blend has two contacts: its multiplier is their
+  // fade-weighted pressure.
+  std::array<Eigen::VectorXd, 2> blend_sum = out, blend_weight = out;
+  for (const ContactPoint& c : detect(xa, xb, nullptr, nullptr, false)) {
+    if (c.kind == ContactKind::kEdgeEdge) continue;
+    if (!c.blend) {
+      out[c.side[0]](c.node[0]) = c.pressure;
+    } else {
+      blend_sum[c.side[0]](c.node[0]) += c.fade * c.pressure;
+      blend_weight[c.side[0]](c.node[0]) += c.fade;
+    }
+  }
+  for (int s = 0; s < 2; ++s)
+    for (Eigen::Index i = 0; i < out[s].size(); ++i)
+      if (blend_weight[s](i) > 0) out[s](i) = blend_sum[s](i) / blend_weight[s](i);
   return out;
 }
 

@@ -101,6 +101,8 @@ struct ContactSurface {
   Eigen::VectorXd triangle_area;  ///< reference area per triangle [m^2]
   Eigen::VectorXd vertex_area;  ///< reference tributary area per node [m^2] (1/3 of adjacent triangles)
   Eigen::VectorXd edge_area;    ///< reference tributary area per edge [m^2] (1/3 of adjacent triangles)
+  /// Reference height of node k of triangle t over its opposite edge [m].
+  Eigen::Matrix<double, Eigen::Dynamic, 3> triangle_height;
 };
 
 /// How contact ends at a surface's open boundary (rim); docs/contact.md, "Rims".
@@ -210,6 +212,12 @@ struct ContactPoint {
   int fade_edge = -1;
   double fade = 1;
   Eigen::Matrix<double, 12, 1> fade_grad = Eigen::Matrix<double, 12, 1>::Zero();
+  /// Crease blend of an augmented vertex-face contact (docs/contact.md,
+  /// "Augmented Lagrangian"): the contact with one of the two faces beside
+  /// an edge, weighted by fade = s(sum_k N_k blend_rho_k) (s the smoothstep,
+  /// N the barycentric coordinates of the projection on this face's plane).
+  bool blend = false;
+  std::array<double, 3> blend_rho{};
 };
 
 /// Counts of one evaluation.
