@@ -116,10 +116,12 @@ TEST(RealSubjectPipeline, EveryStageRunsOnTheRealKneeInAShortWindow) {
     EXPECT_TRUE(defl.allFinite()) << path;
     if (std::string(sc) == "osmotic") continue;
     // The stage-2 axial force follows stage 1's at heel strike: measured
-    // +9 % here (the whole walk: RMS 5.1 % of the stage-1 mean, the loading
-    // phase +79 N on ~1,300 N); 20 % leaves room for the shells' sampling of
-    // the contact, and still fails on a lost compartment (about half the
-    // force each) or an unloaded walk.
+    // +17 / +18 % (gait) and +11 / +12 % (gait_osmotic) at 1.21 / 1.22 s
+    // with the scene's augmented contact, where the cartilage takes the
+    // whole overlap and the 1-mm shells spread the load onto springs
+    // outside the contact (docs/contact.md, "Stage 2 against stage 1 on the
+    // real subject"). 25 % leaves room for that, and still fails on a lost
+    // compartment (about half the force each) or an unloaded walk.
     const Eigen::VectorXd tt = f.read_vector("/trial_time");
     const Eigen::MatrixXd F2 = f.read_matrix("/contact/tibiofemoral/force");
     int compared = 0;
@@ -128,7 +130,7 @@ TEST(RealSubjectPipeline, EveryStageRunsOnTheRealKneeInAShortWindow) {
       if (std::isnan(a1)) continue;
       ++compared;
       EXPECT_GT(a1, 500.0) << "stage 1 at heel strike, " << tt(i) << " s";
-      EXPECT_NEAR(-F2(i, 1) / a1, 1.0, 0.2) << sc << " at " << tt(i) << " s";
+      EXPECT_NEAR(-F2(i, 1) / a1, 1.0, 0.25) << sc << " at " << tt(i) << " s";
     }
     EXPECT_GE(compared, 2) << sc;
     // The seed's accuracy rule is recorded for every step (docs/contact.md).
@@ -137,6 +139,11 @@ TEST(RealSubjectPipeline, EveryStageRunsOnTheRealKneeInAShortWindow) {
     EXPECT_EQ(ratio.size(), steps.size()) << sc;
     EXPECT_TRUE(ratio.allFinite()) << sc;
     EXPECT_GT(ratio.maxCoeff(), 0.0) << sc << ": no step in contact";
+    // The walks' augmented contact (contact_augmentations 8, tolerance
+    // 0.08): every step meets the seed's rule, penetration <= 0.1 x
+    // deflection (the penalty alone: about 0.18-0.24 at heel strike).
+    EXPECT_LE(ratio.maxCoeff(), 0.1) << sc;
+    EXPECT_TRUE(f.exists("/solver/contact_augmentations")) << sc;
   }
 
   // Post: the report with the accuracy rule and the split-line comparison.
