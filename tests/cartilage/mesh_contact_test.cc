@@ -36,6 +36,14 @@ common::QuadMesh shifted(common::QuadMesh m, const Eigen::Vector3d& d) {
   return m;
 }
 
+// The node positions of model m of a coupled system at its coordinates q.
+common::Points3 node_positions(const CoupledShellSystem& sys, int m, const Eigen::VectorXd& q) {
+  const Eigen::VectorXd qm = sys.segment(m, q);
+  common::Points3 x(qm.size() / 6, 3);
+  for (int i = 0; i < x.rows(); ++i) x.row(i) = qm.segment<3>(6 * i).transpose();
+  return x;
+}
+
 std::unique_ptr<ShellModel> make_model(const common::QuadMesh& mesh, double E, double t) {
   ShellMaterial mat;
   mat.youngs_modulus_Pa = E;
@@ -583,12 +591,7 @@ TEST(MeshContact, AugmentedLagrangianConvergesToNonPenetratingClosedForm) {
   sys.add_contact("lower-upper", 0, 1, o);
   Eigen::VectorXd q0(sys.num_dofs());
   q0 << A->reference_state(), B->reference_state();
-  auto points = [&](int m, const Eigen::VectorXd& q) {
-    const Eigen::VectorXd qm = sys.segment(m, q);
-    common::Points3 x(qm.size() / 6, 3);
-    for (int i = 0; i < x.rows(); ++i) x.row(i) = qm.segment<3>(6 * i).transpose();
-    return x;
-  };
+  auto points = [&](int m, const Eigen::VectorXd& q) { return node_positions(sys, m, q); };
   double prev_pen = 0;
   for (int n = 0; n <= 3; ++n) {
     Eigen::VectorXd q = q0;
@@ -700,12 +703,7 @@ TEST(MeshContact, MatchedFoundationsCarryTheMusculoskeletalStagesPressure) {
   sys.add_contact("lower-upper", 0, 1, o);
   Eigen::VectorXd q0(sys.num_dofs());
   q0 << A->reference_state(), B->reference_state();
-  auto points = [&](int m, const Eigen::VectorXd& q) {
-    const Eigen::VectorXd qm = sys.segment(m, q);
-    common::Points3 x(qm.size() / 6, 3);
-    for (int i = 0; i < x.rows(); ++i) x.row(i) = qm.segment<3>(6 * i).transpose();
-    return x;
-  };
+  auto points = [&](int m, const Eigen::VectorXd& q) { return node_positions(sys, m, q); };
   for (int n = 0; n <= 2; ++n) {
     Eigen::VectorXd q = q0;
     solve_quasi_static(sys, 2, q);
