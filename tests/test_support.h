@@ -1,6 +1,7 @@
 // Small helpers shared by the test files: the message of an expected
-// exception, a whole text file, and an emptied scratch folder under the build
-// tree.
+// exception, a whole text file, an emptied scratch folder under the build
+// tree, a shell command's status and output, and the objects two HDF5 files
+// differ in.
 #pragma once
 
 #include <sys/wait.h>
@@ -10,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <set>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -51,6 +53,27 @@ inline std::pair<int, std::string> run_shell(const std::string& command) {
   while (p && std::fgets(buf, sizeof buf, p)) out += buf;
   const int status = p ? ::pclose(p) : -1;
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+/// The objects (datasets or attributes) in which `h5diff -r a b` finds
+/// differences, as h5diff names them ("dataset: </x>", "attribute: <k of
+/// </x>>"). h5diff cannot leave out attributes, so its report is read: each
+/// "N differences found" (N > 0) belongs to the last object named before
+/// it. A failure of h5diff itself is one entry "h5diff failed: ...".
+inline std::set<std::string> h5diff_differences(const std::filesystem::path& a, const std::filesystem::path& b) {
+  const auto [status, report] = run_shell("h5diff -r " + a.string() + " " + b.string());
+  std::set<std::string> differing;
+  std::istringstream in(report);
+  std::string line, object;
+  while (std::getline(in, line)) {
+    if (line.rfind("attribute: <", 0) == 0 || line.rfind("dataset: <", 0) == 0) {
+      object = line.substr(0, line.find("> and <") + 1);
+    } else if (!line.empty() && line[0] >= '1' && line[0] <= '9' && line.find("difference") != std::string::npos) {
+      differing.insert(object);
+    }
+  }
+  if (status != 0 && status != 1) differing.insert("h5diff failed: " + report);
+  return differing;
 }
 
 }  // namespace arthrosim::test_support

@@ -66,23 +66,8 @@ fs::path reference(const std::string& extra = "") {
   return done[extra] = d;
 }
 
-// The objects (datasets or attributes) in which h5diff finds differences.
-// h5diff cannot leave out attributes, so its report is read: each "N
-// differences found" (N > 0) belongs to the last object named before it.
 std::set<std::string> differences(const fs::path& a, const fs::path& b) {
-  const auto [status, report] = run("h5diff -r " + a.string() + " " + b.string());
-  std::set<std::string> differing;
-  std::istringstream in(report);
-  std::string line, object;
-  while (std::getline(in, line)) {
-    if (line.rfind("attribute: <", 0) == 0 || line.rfind("dataset: <", 0) == 0) {
-      object = line.substr(0, line.find("> and <") + 1);
-    } else if (!line.empty() && line[0] >= '1' && line[0] <= '9' && line.find("difference") != std::string::npos) {
-      differing.insert(object);
-    }
-  }
-  if (status != 0 && status != 1) differing.insert("h5diff failed: " + report);
-  return differing;
+  return arthrosim::test_support::h5diff_differences(a, b);
 }
 
 // Wall times: the only attributes allowed to differ.

@@ -567,24 +567,10 @@ const fs::path& biphasic_reference() {
   return dir;
 }
 
-// The objects (datasets or attributes) in which h5diff finds differences
-// between the output in `dir` and the reference's. h5diff cannot leave out
-// attributes, so its report is read: each "N differences found" (N > 0)
-// belongs to the last object named before it.
+// The objects (datasets or attributes) in which the output in `dir` differs
+// from the reference's.
 std::set<std::string> biphasic_differences(const fs::path& dir) {
-  const auto [status, report] = h5diff(biphasic_reference() / "b.h5", dir / "b.h5", {});
-  std::set<std::string> differing;
-  std::istringstream in(report);
-  std::string line, object;
-  while (std::getline(in, line)) {
-    if (line.rfind("attribute: <", 0) == 0 || line.rfind("dataset: <", 0) == 0) {
-      object = line.substr(0, line.find("> and <") + 1);
-    } else if (!line.empty() && line[0] >= '1' && line[0] <= '9' && line.find("difference") != std::string::npos) {
-      differing.insert(object);
-    }
-  }
-  if (status != 0 && status != 1) differing.insert("h5diff failed: " + report);
-  return differing;
+  return arthrosim::test_support::h5diff_differences(biphasic_reference() / "b.h5", dir / "b.h5");
 }
 
 // Wall times of the run: the only attributes allowed to differ.
