@@ -968,10 +968,8 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     for (int k = 0; k < system.num_contacts(); ++k) m.push_back(system.contact_multipliers(k));
     return m;
   };
+  // (A checkpoint's pair counts are checked before it is used.)
   auto set_multipliers = [&](const SurfaceCheckpoint::PairMultipliers& m) {
-    if (static_cast<int>(m.size()) != system.num_contacts())
-      throw common::InputError(checkpoint_path.string() + ": multipliers of " + std::to_string(m.size()) +
-                               " contact pairs, the scenario has " + std::to_string(system.num_contacts()));
     for (int k = 0; k < system.num_contacts(); ++k) system.set_contact_multipliers(k, m[k]);
   };
   common::CheckpointClock checkpoint_clock(opt.checkpoint_interval_s);
@@ -981,10 +979,14 @@ SurfaceStageResult run_surface_stage(const SurfaceStageOptions& options) {
     std::optional<SurfaceCheckpoint> found = read_surface_checkpoint(checkpoint_path, why);
     if (found && found->identity != checkpoint.identity)
       why = "it belongs to another run (inputs, options, command line or build differ)";
-    else if (found && ((max_augmentations > 0) != !found->multipliers.empty() ||
-                       static_cast<int>(found->multipliers.size()) != (max_augmentations > 0 ? system.num_contacts() : 0) ||
-                       (max_augmentations > 0 && found->frame_multipliers.size() != found->frame_times.size())))
-      why = "its contact multipliers do not match the scenario's contact pairs";
+    else if (found) {
+      // contact_augmentations: the multipliers of every pair, now and per frame.
+      const std::size_t pairs = max_augmentations > 0 ? static_cast<std::size_t>(system.num_contacts()) : 0;
+      bool match = found->multipliers.size() == pairs &&
+                   found->frame_multipliers.size() == (pairs > 0 ? found->frame_times.size() : 0);
+      for (const SurfaceCheckpoint::PairMultipliers& m : found->frame_multipliers) match = match && m.size() == pairs;
+      if (!match) why = "its contact multipliers do not match the scenario's contact pairs";
+    }
     if (found && why.empty()) {
       checkpoint = std::move(*found);
       common::log_info("resuming from the checkpoint " + checkpoint_path.string() + ": t = " +
