@@ -9,7 +9,7 @@ set_tests_properties(sample.arthrosim.schema PROPERTIES LABELS sample
 # The demo scene runs prepare, comak, the three surface scenarios and post;
 # registered once that program is part of the source tree. The suite shortens
 # the two walking scenarios to their first 30 ms (seating plus three steps)
-# with --set; README command 1 runs the demo as bundled (the whole gait cycle).
+# with --set; the README names the demo as bundled (the whole gait cycle).
 if(EXISTS ${CMAKE_SOURCE_DIR}/pipelines/apps/arthrosim-prepare.cc)
   set(_demo_out ${CMAKE_BINARY_DIR}/sample_runs/arthrosim_demo)
   set(_demo_short --set surface.scenarios.gait.end_time_s=0.03 --set surface.scenarios.gait_osmotic.end_time_s=0.03)
