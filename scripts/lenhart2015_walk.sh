@@ -8,7 +8,7 @@
 #   - per walking scenario: the axial-force RMS difference to stage 1, the
 #     seed's accuracy rule per step, femoral deflection and principal strains
 #     at the first peak beside the seed's (scripts/gait_figures.py).
-# About 40 min on the shared 2-core machine (the two walks side by side with
+# About 6 min on the 2-core machine (the two walks side by side with
 # --jobs 2; one at a time: --jobs 1). Long: run it with nice.
 #
 #   nice scripts/lenhart2015_walk.sh OUTDIR [BIN_DIR] [--jobs N] [--set KEY=VALUE ...]

@@ -1,0 +1,77 @@
+#!/usr/bin/python3
+"""The real subject's gait walk at several shell resolutions (stage 2 against
+stage 1: docs/surface_output.md, "The real subject", resolution series).
+
+For each variant, writes a copy of data/scenes/lenhart2015_gait.yaml with only
+the gait scenario and the variant's per-surface edge lengths (prepare's
+`surface_edge_length_mm`, a list the runner's --set cannot change), runs it
+with `arthrosim run` (prepare, COMAK, surface.gait) and prints
+scripts/gait_figures.py's comparison with stage 1 and the wall time.
+
+  nice /usr/bin/python3 scripts/lenhart2015_resolution.py OUTDIR [--window] [--bin build/bin]
+      [--variants seed,tibia15,both]
+
+  seed     femur 4 mm (3,588 shells, the seed's count), tibial plateaus 3 mm (the scene)
+  tibia15  femur 4 mm, tibial plateaus 1.5 mm
+  both     femur 2 mm (14,421 shells), tibial plateaus 1.5 mm
+
+--window runs 1.21-1.33 s (the gait scenario to 0.11 s: 12 frames in contact)
+instead of the whole walk (1.21-2.32 s). Whole walk, one variant at a time on
+the 2-core machine: about 6, 15 and 35 min.
+"""
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+import yaml
+
+VARIANTS = {
+    "seed": ["femur=4"],
+    "tibia15": ["femur=4", "tibia_medial=1.5", "tibia_lateral=1.5"],
+    "both": ["femur=2", "tibia_medial=1.5", "tibia_lateral=1.5"],
+}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out")
+    ap.add_argument("--window", action="store_true", help="1.21-1.33 s only")
+    ap.add_argument("--bin", default="build/bin")
+    ap.add_argument("--variants", default="seed,tibia15,both")
+    a = ap.parse_args()
+    root = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
+    scene = yaml.safe_load(open(os.path.join(root, "data/scenes/lenhart2015_gait.yaml")))
+    scene["model"] = os.path.join(root, "data/models/lenhart2015")
+    scene["trial"] = os.path.join(root, "data/trials/lenhart2015_overground17")
+    gait = scene["surface"]["scenarios"]["gait"]
+    scene["surface"]["scenarios"] = {"gait": gait}
+    scene.pop("post", None)
+    scene["outputs"] = ["surface"]
+    if a.window:
+        scene["trial.end_s"] = 1.33
+        gait["end_time_s"] = 0.11
+    os.makedirs(a.out, exist_ok=True)
+    for name in a.variants.split(","):
+        if name not in VARIANTS:
+            sys.exit("unknown variant %r; expected any of %s" % (name, ", ".join(VARIANTS)))
+        scene["prepare"]["surface_edge_length_mm"] = VARIANTS[name]
+        d = os.path.abspath(os.path.join(a.out, name))
+        os.makedirs(d, exist_ok=True)
+        path = os.path.join(d, "scene.yaml")
+        with open(path, "w") as f:
+            yaml.safe_dump(scene, f, sort_keys=False)
+        t0 = time.time()
+        with open(os.path.join(d, "run.log"), "w") as log:
+            rc = subprocess.call([os.path.join(a.bin, "arthrosim"), "run", path, "--out", d, "--jobs", "1"],
+                                 stdout=log, stderr=subprocess.STDOUT)
+        if rc != 0:
+            sys.exit("%s: arthrosim run failed (exit %d), see %s/run.log" % (name, rc, d))
+        print("== %s (%s): %.0f s wall" % (name, ", ".join(VARIANTS[name]), time.time() - t0), flush=True)
+        subprocess.check_call([sys.executable, os.path.join(root, "scripts/gait_figures.py"),
+                               os.path.join(d, "kinematics.h5"), os.path.join(d, "surface_gait.h5")])
+
+
+if __name__ == "__main__":
+    main()
