@@ -6,7 +6,13 @@ For each variant, writes a copy of data/scenes/lenhart2015_gait.yaml with only
 the gait scenario and the variant's per-surface edge lengths (prepare's
 `surface_edge_length_mm`, a list the runner's --set cannot change), runs it
 with `arthrosim run` (prepare, COMAK, surface.gait) and prints
-scripts/gait_figures.py's comparison with stage 1 and the wall time.
+scripts/gait_figures.py's comparison with stage 1, the wall time, and per shell surface the number of quads and the
+shells' bending length against their size: lambda h, with lambda =
+(k / 4D)^(1/4) the foundation's bending wavenumber (k = K / h_cartilage,
+K = 37.93 MPa from the scene's matched 10 MPa / 0.45; D = E t^3 / (12 (1 -
+nu^2)) of the seed's 1-mm, 400-MPa shell) and h the square root of a quad's
+area (ShellVerification.StiffFoundationSpreadingNeedsTheBendingLengthResolved:
+a line load spreads 18 % too wide at lambda h = 1.2, 4.9 % at 0.6).
 
   nice /usr/bin/python3 scripts/lenhart2015_resolution.py OUTDIR [--window] [--bin build/bin]
       [--variants seed,tibia15,both]
@@ -25,6 +31,8 @@ import subprocess
 import sys
 import time
 
+import h5py
+import numpy as np
 import yaml
 
 VARIANTS = {
@@ -32,6 +40,25 @@ VARIANTS = {
     "tibia15": ["femur=4", "tibia_medial=1.5", "tibia_lateral=1.5"],
     "both": ["femur=2", "tibia_medial=1.5", "tibia_lateral=1.5"],
 }
+
+
+def bending_length_table(prepared, gait):
+    E = gait.get("youngs_modulus_mpa", 400) * 1e6
+    t = gait.get("shell_thickness_mm", 1) * 1e-3
+    nu = gait.get("poisson_ratio", 0.3)
+    Em = gait.get("matched_youngs_modulus_mpa", 10) * 1e6
+    num = gait.get("matched_poisson_ratio", 0.45)
+    K = (1 - num) * Em / ((1 + num) * (1 - 2 * num))
+    D = E * t ** 3 / (12 * (1 - nu ** 2))
+    with h5py.File(prepared, "r") as f:
+        for s in ("femur", "tibia_medial", "tibia_lateral"):
+            g = f["surfaces/%s/quads" % s]
+            V, Q, h = g["nodes"][:], g["quads"][:], g["thickness"][:]
+            area = 0.5 * np.linalg.norm(np.cross(V[Q[:, 2]] - V[Q[:, 0]], V[Q[:, 3]] - V[Q[:, 1]]), axis=1)
+            lam = (K / h[Q].mean(axis=1) / (4 * D)) ** 0.25
+            lh = lam * np.sqrt(area)
+            print("  %-14s %6d quads, sqrt(area) mean %.2f mm, lambda h median %.2f, 90th percentile %.2f"
+                  % (s, len(Q), np.sqrt(area).mean() * 1e3, np.median(lh), np.percentile(lh, 90)))
 
 
 def main():
@@ -69,6 +96,7 @@ def main():
         if rc != 0:
             sys.exit("%s: arthrosim run failed (exit %d), see %s/run.log" % (name, rc, d))
         print("== %s (%s): %.0f s wall" % (name, ", ".join(VARIANTS[name]), time.time() - t0), flush=True)
+        bending_length_table(os.path.join(d, "prepared.h5"), gait)
         subprocess.check_call([sys.executable, os.path.join(root, "scripts/gait_figures.py"),
                                os.path.join(d, "kinematics.h5"), os.path.join(d, "surface_gait.h5")])
 
