@@ -410,6 +410,29 @@ TEST(ShellVerification, FoundationUniformPressureDeflectsByPOverK) {
   EXPECT_LT(worst, 1e-4);
 }
 
+// Deflection under the load line of a free strip (nx x 1 quads, length L,
+// width b, thickness t, nu of mat) on springs of modulus k acting in both
+// directions, loaded by P across its width at mid-length. The springs act
+// along the normal only: the in-plane rigid motions are held at the load
+// line (x and y of one node, x of the other; zero there by symmetry and
+// nu = 0).
+double strip_on_foundation_deflection(int nx, double L, double b, double t, double k, const ShellMaterial& mat,
+                                      double P) {
+  common::QuadMesh mesh = plate_mesh(nx, 1, L, b);
+  ShellModel model(mesh, up(mesh.num_nodes()), Eigen::VectorXd::Constant(mesh.num_nodes(), t), mat);
+  model.add_internal_forces();
+  model.add_foundation_springs(k, BoneMotion::fixed(), /*compressive_only=*/false);
+  const int mid0 = nx / 2, mid1 = (nx + 1) + nx / 2;  // the two nodes across the width at x = L/2
+  model.add_point_loads("line load", {{mid0, Eigen::Vector3d(0, 0, -P / 2)}, {mid1, Eigen::Vector3d(0, 0, -P / 2)}},
+                        [](double s) { return s; });
+  model.fix_nodes("in-plane", {mid0}, {true, true, false, false, false, false});
+  model.fix_nodes("in-plane x", {mid1}, {true, false, false, false, false, false});
+  numerics::HhtIntegrator solver(model, static_options(1.0));
+  solver.initialize(0, model.reference_state());
+  solver.advance_to(1.0);
+  return -(solver.q()(6 * mid0 + 2) + solver.q()(6 * mid1 + 2)) / 2;
+}
+
 // A shell on its foundation spreads a load (Hetenyi's beam on an elastic
 // foundation): a free strip of length L and width b, nu = 0 (beam theory and
 // cylindrical bending coincide), on springs acting in both directions with
@@ -438,22 +461,7 @@ TEST(ShellVerification, BeamOnElasticFoundationSpreadsALineLoad) {
   mat.poisson_ratio = 0.0;
   std::vector<double> errors;
   for (int nx : {20, 40, 80}) {
-    common::QuadMesh mesh = plate_mesh(nx, 1, L, b);
-    ShellModel model(mesh, up(mesh.num_nodes()), Eigen::VectorXd::Constant(mesh.num_nodes(), t), mat);
-    model.add_internal_forces();
-    model.add_foundation_springs(k, BoneMotion::fixed(), /*compressive_only=*/false);
-    const int mid0 = nx / 2, mid1 = (nx + 1) + nx / 2;  // the two nodes across the width at x = L/2
-    model.add_point_loads("line load", {{mid0, Eigen::Vector3d(0, 0, -P / 2)}, {mid1, Eigen::Vector3d(0, 0, -P / 2)}},
-                          [](double s) { return s; });
-    // The springs act along the normal only: hold the in-plane rigid motions
-    // at the load line (x and y of one node, x of the other; zero there by
-    // symmetry and nu = 0).
-    model.fix_nodes("in-plane", {mid0}, {true, true, false, false, false, false});
-    model.fix_nodes("in-plane x", {mid1}, {true, false, false, false, false, false});
-    numerics::HhtIntegrator solver(model, static_options(1.0));
-    solver.initialize(0, model.reference_state());
-    solver.advance_to(1.0);
-    const double w0 = -(solver.q()(6 * mid0 + 2) + solver.q()(6 * mid1 + 2)) / 2;
+    const double w0 = strip_on_foundation_deflection(nx, L, b, t, k, mat, P);
     errors.push_back(std::abs(w0 - w_ref) / w_ref);
     std::printf("beam on foundation nx=%d (lambda h = %.3f): w0/w_ref = %.6f, error %.3e\n", nx,
                 lambda * L / nx, w0 / w_ref, errors.back());
@@ -490,19 +498,7 @@ TEST(ShellVerification, StiffFoundationSpreadingNeedsTheBendingLengthResolved) {
   const std::vector<int> nxs = {10, 20, 40, 80, 160};
   std::vector<double> W;
   for (int nx : nxs) {
-    common::QuadMesh mesh = plate_mesh(nx, 1, L, b);
-    ShellModel model(mesh, up(mesh.num_nodes()), Eigen::VectorXd::Constant(mesh.num_nodes(), t), mat);
-    model.add_internal_forces();
-    model.add_foundation_springs(k, BoneMotion::fixed(), /*compressive_only=*/false);
-    const int mid0 = nx / 2, mid1 = (nx + 1) + nx / 2;
-    model.add_point_loads("line load", {{mid0, Eigen::Vector3d(0, 0, -P / 2)}, {mid1, Eigen::Vector3d(0, 0, -P / 2)}},
-                          [](double s) { return s; });
-    model.fix_nodes("in-plane", {mid0}, {true, true, false, false, false, false});
-    model.fix_nodes("in-plane x", {mid1}, {true, false, false, false, false, false});
-    numerics::HhtIntegrator solver(model, static_options(1.0));
-    solver.initialize(0, model.reference_state());
-    solver.advance_to(1.0);
-    const double w0 = -(solver.q()(6 * mid0 + 2) + solver.q()(6 * mid1 + 2)) / 2;
+    const double w0 = strip_on_foundation_deflection(nx, L, b, t, k, mat, P);
     W.push_back(P / (w0 * k * b));
   }
   const size_t n = W.size();
