@@ -23,7 +23,7 @@ a line load spreads 18 % too wide at lambda h = 1.2, 4.9 % at 0.6).
 
 --window runs 1.21-1.33 s (the gait scenario to 0.11 s: 12 frames in contact)
 instead of the whole walk (1.21-2.32 s). Whole walk, one variant at a time on
-the 2-core machine: about 6, 15 and 35 min.
+the 2-core machine: about 6, 15 and 24 min.
 """
 import argparse
 import os
