@@ -9,8 +9,8 @@ with `arthrosim run` (prepare, COMAK, surface.gait) and prints
 scripts/gait_figures.py's comparison with stage 1, the wall time, and per shell surface the number of quads and the
 shells' bending length against their size: lambda h, with lambda =
 (k / 4D)^(1/4) the foundation's bending wavenumber (k = K / h_cartilage,
-K = 37.93 MPa from the scene's matched 10 MPa / 0.45; D = E t^3 / (12 (1 -
-nu^2)) of the seed's 1-mm, 400-MPa shell) and h the square root of a quad's
+K from the run's matched modulus and Poisson ratio, 37.93 MPa from 10 MPa /
+0.45; D = E t^3 / (12 (1 - nu^2)) of the run's shell, the seed's 1 mm, 400 MPa) and h the square root of a quad's
 area (ShellVerification.StiffFoundationSpreadingNeedsTheBendingLengthResolved:
 a line load spreads 18 % too wide at lambda h = 1.2, 4.9 % at 0.6).
 
@@ -42,12 +42,14 @@ VARIANTS = {
 }
 
 
-def bending_length_table(prepared, gait):
-    E = gait.get("youngs_modulus_mpa", 400) * 1e6
-    t = gait.get("shell_thickness_mm", 1) * 1e-3
-    nu = gait.get("poisson_ratio", 0.3)
-    Em = gait.get("matched_youngs_modulus_mpa", 10) * 1e6
-    num = gait.get("matched_poisson_ratio", 0.45)
+def bending_length_table(prepared, surface):
+    # The shell and matched-foundation options as the surface stage resolved
+    # them (its /options attribute: "surface.gait.<key> = <value>" lines).
+    with h5py.File(surface, "r") as f:
+        opts = dict(line.split(" = ", 1) for line in f.attrs["options"].splitlines() if " = " in line)
+    o = lambda key: float(opts["surface.gait." + key])
+    E, t, nu = o("youngs_modulus_mpa") * 1e6, o("shell_thickness_mm") * 1e-3, o("poisson_ratio")
+    Em, num = o("matched_youngs_modulus_mpa") * 1e6, o("matched_poisson_ratio")
     K = (1 - num) * Em / ((1 + num) * (1 - 2 * num))
     D = E * t ** 3 / (12 * (1 - nu ** 2))
     with h5py.File(prepared, "r") as f:
@@ -96,7 +98,7 @@ def main():
         if rc != 0:
             sys.exit("%s: arthrosim run failed (exit %d), see %s/run.log" % (name, rc, d))
         print("== %s (%s): %.0f s wall" % (name, ", ".join(VARIANTS[name]), time.time() - t0), flush=True)
-        bending_length_table(os.path.join(d, "prepared.h5"), gait)
+        bending_length_table(os.path.join(d, "prepared.h5"), os.path.join(d, "surface_gait.h5"))
         subprocess.check_call([sys.executable, os.path.join(root, "scripts/gait_figures.py"),
                                os.path.join(d, "kinematics.h5"), os.path.join(d, "surface_gait.h5")])
 
