@@ -300,7 +300,12 @@ ShellElement::ShellElement(const std::array<Eigen::Vector3d, 4>& X,
       }
       const double dA = A1.cross(A2).norm();
       area_ += dA;
-      for (int k = 0; k < 4; ++k) nodal_area_[k] += N[k] * dA;
+      SurfacePoint& sp = surface_points_[2 * j + i];
+      sp.dA = dA;
+      for (int k = 0; k < 4; ++k) {
+        nodal_area_[k] += N[k] * dA;
+        sp.N[k] = N[k];
+      }
     }
 }
 

@@ -88,6 +88,15 @@ class ShellElement {
   /// Reference mid-surface area [m^2] and the share int N_k dA of each node.
   double area() const { return area_; }
   const std::array<double, 4>& nodal_areas() const { return nodal_area_; }
+  /// The 2x2 Gauss points of the reference mid-surface: the bilinear shape
+  /// functions N_k there and the area weight dA (sum of dA = area(); sum of
+  /// N_k dA = nodal_areas()[k]). A surface integral int f dA of a field
+  /// interpolated from the nodes is sum_g dA_g f(sum_k N_k f_k).
+  struct SurfacePoint {
+    std::array<double, 4> N;
+    double dA;
+  };
+  const std::array<SurfacePoint, 4>& surface_points() const { return surface_points_; }
   const std::array<double, 4>& thickness() const { return h_; }
 
   /// Slot functions phi_s at (xi, eta, zeta) (s = 2k: N_k multiplies r_k;
@@ -130,6 +139,7 @@ class ShellElement {
   Vector24 q0_;
   double area_ = 0;
   std::array<double, 4> nodal_area_{};
+  std::array<SurfacePoint, 4> surface_points_{};
   double lambda_ = 0, mu_ = 0;
   Eigen::Matrix<double, 6, 6> D_;  ///< energy matrix: W = eps^T D eps / 2
 };

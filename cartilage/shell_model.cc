@@ -172,14 +172,17 @@ ShellTerm& ShellModel::add_internal_forces() {
   return register_term(make_internal_forces_term(*this), num_elements());
 }
 
-ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone, bool compressive_only) {
-  return add_foundation_springs(Eigen::VectorXd::Constant(num_nodes_, k), std::move(bone), compressive_only);
+ShellTerm& ShellModel::add_foundation_springs(double k, BoneMotion bone, bool compressive_only,
+                                              FoundationIntegration integration) {
+  return add_foundation_springs(Eigen::VectorXd::Constant(num_nodes_, k), std::move(bone), compressive_only,
+                               integration);
 }
 
 ShellTerm& ShellModel::add_foundation_springs(const Eigen::VectorXd& k_per_node, BoneMotion bone,
-                                              bool compressive_only) {
-  return register_term(make_foundation_springs_term(*this, k_per_node, std::move(bone), compressive_only),
-                       num_nodes_);
+                                              bool compressive_only, FoundationIntegration integration) {
+  return register_term(
+      make_foundation_springs_term(*this, k_per_node, std::move(bone), compressive_only, integration),
+      integration == FoundationIntegration::kNodal ? num_nodes_ : 4 * num_elements());
 }
 
 ShellTerm& ShellModel::add_foundation_damping(double c, BoneMotion bone, bool compressive_only, double gate_m) {

@@ -66,6 +66,11 @@ struct BoneMotion {
   static BoneMotion fixed();
 };
 
+/// How foundation_springs integrates the foundation over the surface:
+/// springs at the nodes with their nodal areas (the seed's elements), or the
+/// element-consistent (Galerkin) integral (ShellModel::add_foundation_springs).
+enum class FoundationIntegration { kNodal, kConsistent };
+
 /// Writes access to the tangent values in the model's fixed pattern.
 class TangentAssembler {
  public:
@@ -163,12 +168,24 @@ class ShellModel : public numerics::TimeIntegrable {
   /// k_N_m3: foundation modulus [N/m^3] (seed 002: 0.7 N/mm^3 = 7e8 N/m^3).
   /// compressive_only = false makes the springs act in tension too (tests
   /// of the elastic-foundation closed forms).
+  ///
+  /// integration = kConsistent integrates the same foundation over each
+  /// element instead (Galerkin): the deflection delta_g = sum_k N_k delta_k
+  /// and modulus k_g = sum_k N_k k_k at the element's 2x2 mid-surface Gauss
+  /// points, energy sum_g k_g dA_g max(delta_g, 0)^2 / 2 (compressive-only
+  /// per Gauss point), which couples the four nodes of an element. Under a
+  /// uniform deflection both give the same force; where the deflection
+  /// varies over a few elements (a foundation stiff enough that the shell's
+  /// bending length lambda^-1 = (4 D / k)^(1/4) spans 1-2 elements) the
+  /// nodal springs let the shell spread a load wider (docs/contact.md).
   ShellTerm& add_foundation_springs(double k_N_m3, BoneMotion bone = BoneMotion::fixed(),
-                                    bool compressive_only = true);
+                                    bool compressive_only = true,
+                                    FoundationIntegration integration = FoundationIntegration::kNodal);
   /// As above with a modulus per node [N/m^3] (e.g. k_i = K / h_i from the
   /// local cartilage thickness h_i, the elastic-foundation layer modulus).
   ShellTerm& add_foundation_springs(const Eigen::VectorXd& k_per_node_N_m3, BoneMotion bone,
-                                    bool compressive_only = true);
+                                    bool compressive_only = true,
+                                    FoundationIntegration integration = FoundationIntegration::kNodal);
   /// Matching dampers: force c A_i d(delta_i)/dt n_i(t). When
   /// compressive_only (the seed's spring-dampers are compressive elements)
   /// it is gated by the compression: H(delta_i / gate_m) with H the

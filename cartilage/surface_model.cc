@@ -28,6 +28,11 @@ void SurfaceParameters::declare(common::OptionVisitor& v) {
            "density of the shells (used by inertia)");
   v.number("foundation_stiffness_n_per_mm3", foundation_stiffness_N_m3, Unit::kNewtonPerCubicMillimetre, {0, 1e6},
            "foundation spring stiffness per unit area and unit compression (foundation_springs)");
+  v.choice("foundation_integration", foundation_integration,
+           {{"nodal", FoundationIntegration::kNodal}, {"consistent", FoundationIntegration::kConsistent}},
+           "foundation_springs: springs at the nodes with their nodal areas (nodal, the seed's) or the foundation "
+           "integrated over each element at its Gauss points (consistent): on a foundation stiff enough that the "
+           "shells' bending length spans 1-2 elements, nodal springs spread a load wider (docs/contact.md)");
   v.number("foundation_damping_n_s_per_mm3", foundation_damping_N_s_m3, Unit::kNewtonSecondPerCubicMillimetre,
            {0, 1e12}, "foundation damping per unit area and unit compression rate (foundation_damping)");
   v.number("osmotic_pressure_mpa", osmotic_pressure_Pa, Unit::kMegapascal, {0, 100},

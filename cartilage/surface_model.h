@@ -90,6 +90,9 @@ struct SurfaceParameters {
   /// musculoskeletal stage's elastic-foundation contact (see
   /// matched_foundation_stiffness).
   Eigen::VectorXd foundation_stiffness_per_node_N_m3;
+  /// foundation_springs at the nodes (the seed's) or integrated over each
+  /// element (ShellModel::add_foundation_springs).
+  FoundationIntegration foundation_integration = FoundationIntegration::kNodal;
   /// periphery_fixed: 0 clamps the boundary nodes to the bone (all six
   /// coordinates, the seed's condition); > 0 ties them to the bone in their
   /// tangent plane only, with this stiffness per unit area [N/m^3], leaving

@@ -8,7 +8,8 @@
 
 namespace arthrosim::cartilage {
 std::unique_ptr<ShellTerm> make_foundation_springs_term(const ShellModel& model, Eigen::VectorXd k_per_node_N_m3,
-                                                        BoneMotion bone, bool compressive_only);
+                                                        BoneMotion bone, bool compressive_only,
+                                                        FoundationIntegration integration);
 /// Its registration (cartilage/surface_terms.cc lists it once).
 SurfaceTermInfo foundation_springs_term();
 }  // namespace arthrosim::cartilage

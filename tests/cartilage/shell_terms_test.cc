@@ -6,6 +6,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <random>
 
@@ -103,16 +104,45 @@ TEST(ShellTerms, FollowerPressureTangentIsNonSymmetricAndConsistent) {
 }
 
 TEST(ShellTerms, FoundationSpringTangent) {
+  for (FoundationIntegration integration : {FoundationIntegration::kNodal, FoundationIntegration::kConsistent}) {
+    Fixture f;
+    ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+    // Moving, rotated bone (the anchors translate and turn); a modulus that
+    // varies from node to node (k = K / h of a varying thickness).
+    const BoneMotion bone = steady_bone(Eigen::Vector3d::UnitX(), 0.3, Eigen::Vector3d(0, 0, 1e-4));
+    Eigen::VectorXd k(m.num_nodes());
+    for (int i = 0; i < m.num_nodes(); ++i) k(i) = 7e8 * (1 + 0.5 * std::sin(1.3 * i));
+    m.add_foundation_springs(k, bone, /*compressive_only=*/true, integration);
+    // Push the nodes towards the bone so most springs are compressed, some not.
+    Eigen::VectorXd q = deformed(m, 0.02, 3);
+    for (int i = 0; i < m.num_nodes(); ++i) q.segment<3>(6 * i) -= 2e-5 * m.reference_director(i);
+    const Eigen::VectorXd v = Eigen::VectorXd::Zero(m.num_dofs());
+    EXPECT_LT(fd_error(m, 0.5, q, v, 0), kFdTol) << "consistent " << (integration == FoundationIntegration::kConsistent);
+  }
+}
+
+// Under a uniform deflection d (every node pushed by d along its director
+// towards a bone at rest) the element-consistent foundation gives every node
+// exactly the nodal springs' force k d A_i n_i (sum_g N_k dA_g = A_k), so the
+// total equals k d times the vector area; they differ only where the
+// deflection varies (ShellVerification.StiffFoundationSpreading...).
+// Tolerance 1e-12 relative: the two sums differ in round-off only.
+TEST(ShellTerms, ConsistentFoundationEqualsNodalSpringsUnderAUniformDeflection) {
   Fixture f;
-  ShellModel m(f.mesh, f.directors, f.thickness, f.material);
-  // Moving, rotated bone (the anchors translate and turn).
-  const BoneMotion bone = steady_bone(Eigen::Vector3d::UnitX(), 0.3, Eigen::Vector3d(0, 0, 1e-4));
-  m.add_foundation_springs(7e8, bone);
-  // Push the nodes towards the bone so most springs are compressed.
-  Eigen::VectorXd q = deformed(m, 0.02, 3);
-  for (int i = 0; i < m.num_nodes(); ++i) q.segment<3>(6 * i) -= 2e-5 * m.reference_director(i);
-  const Eigen::VectorXd v = Eigen::VectorXd::Zero(m.num_dofs());
-  EXPECT_LT(fd_error(m, 0.5, q, v, 0), kFdTol);
+  const double k = 7e8, d = 1e-5;
+  Eigen::VectorXd F[2];
+  int which = 0;
+  for (FoundationIntegration integration : {FoundationIntegration::kNodal, FoundationIntegration::kConsistent}) {
+    ShellModel m(f.mesh, f.directors, f.thickness, f.material);
+    m.add_foundation_springs(k, BoneMotion::fixed(), true, integration);
+    Eigen::VectorXd q = m.reference_state();
+    for (int i = 0; i < m.num_nodes(); ++i) q.segment<3>(6 * i) -= d * m.reference_director(i).normalized();
+    numerics::EvalRequest r;
+    r.q = &q;
+    m.evaluate(r, F[which++], nullptr, nullptr);
+  }
+  ASSERT_GT(F[0].norm(), 0.0);
+  EXPECT_LT((F[0] - F[1]).cwiseAbs().maxCoeff(), 1e-12 * F[0].cwiseAbs().maxCoeff());
 }
 
 // periphery_fixed with the normal left to the foundation: the tie's tangent
