@@ -18,6 +18,7 @@ a line load spreads 18 % too wide at lambda h = 1.2, 4.9 % at 0.6).
       [--variants seed,tibia15,both]
 
   seed     femur 4 mm (3,588 shells, the seed's count), tibial plateaus 3 mm (the scene)
+  tibia2   femur 4 mm, tibial plateaus 2 mm
   tibia15  femur 4 mm, tibial plateaus 1.5 mm
   both     femur 2 mm (14,421 shells), tibial plateaus 1.5 mm
 
@@ -37,6 +38,7 @@ import yaml
 
 VARIANTS = {
     "seed": ["femur=4"],
+    "tibia2": ["femur=4", "tibia_medial=2", "tibia_lateral=2"],
     "tibia15": ["femur=4", "tibia_medial=1.5", "tibia_lateral=1.5"],
     "both": ["femur=2", "tibia_medial=1.5", "tibia_lateral=1.5"],
 }
@@ -69,6 +71,8 @@ def main():
     ap.add_argument("--window", action="store_true", help="1.21-1.33 s only")
     ap.add_argument("--bin", default="build/bin")
     ap.add_argument("--variants", default="seed,tibia15,both")
+    ap.add_argument("--foundation", choices=["scene", "nodal", "consistent"], default="scene",
+                    help="the gait scenario's foundation_integration (default: as in the scene)")
     a = ap.parse_args()
     root = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
     scene = yaml.safe_load(open(os.path.join(root, "data/scenes/lenhart2015_gait.yaml")))
@@ -78,6 +82,8 @@ def main():
     scene["surface"]["scenarios"] = {"gait": gait}
     scene.pop("post", None)
     scene["outputs"] = ["surface"]
+    if a.foundation != "scene":
+        gait["foundation_integration"] = a.foundation
     if a.window:
         scene["trial.end_s"] = 1.33
         gait["end_time_s"] = 0.11
@@ -86,7 +92,7 @@ def main():
         if name not in VARIANTS:
             sys.exit("unknown variant %r; expected any of %s" % (name, ", ".join(VARIANTS)))
         scene["prepare"]["surface_edge_length_mm"] = VARIANTS[name]
-        d = os.path.abspath(os.path.join(a.out, name))
+        d = os.path.abspath(os.path.join(a.out, name if a.foundation == "scene" else name + "_" + a.foundation))
         os.makedirs(d, exist_ok=True)
         path = os.path.join(d, "scene.yaml")
         with open(path, "w") as f:
