@@ -39,6 +39,13 @@ void TangentAssembler::add_element(int e, const Matrix24& Ke) {
     for (int l = 0; l < 24; ++l) v[idx[24 * l + m]] += Ke(l, m);
 }
 
+void TangentAssembler::add_element_block3(int e, int a, int oa, int b, int ob, const Eigen::Matrix3d& B) {
+  const int* idx = model_.element_value_indices(e);
+  double* v = K_.valuePtr();
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) v[idx[24 * (6 * a + oa + i) + 6 * b + ob + j]] += B(i, j);
+}
+
 void TangentAssembler::add_block3(int a, int oa, int b, int ob, const Eigen::Matrix3d& B) {
   double* v = K_.valuePtr();
   for (int j = 0; j < 3; ++j)

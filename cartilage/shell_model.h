@@ -80,6 +80,9 @@ class TangentAssembler {
   /// Adds a 3x3 block coupling coordinates [6a+oa, 6a+oa+3) and [6b+ob, 6b+ob+3)
   /// (a, b must share an element or be equal; oa, ob in {0, 3}).
   void add_block3(int a, int oa, int b, int ob, const Eigen::Matrix3d& B);
+  /// The same for corners a, b (0..3) of element e, through the element's
+  /// cached value indices (no pattern search).
+  void add_element_block3(int e, int a, int oa, int b, int ob, const Eigen::Matrix3d& B);
   Eigen::SparseMatrix<double>& matrix() { return K_; }
 
  private:

@@ -75,8 +75,8 @@ class FoundationSpringsTerm final : public ShellTerm {
         if (!K) continue;
         for (int a = 0; a < 4; ++a)
           for (int b = 0; b < 4; ++b)
-            K->add_block3(node[a], 0, node[b], 0,
-                          (ctx.kq * kdA * g.N[a] * g.N[b]) * normal[node[a]] * normal[node[b]].transpose());
+            K->add_element_block3(e, a, 0, b, 0,
+                                  (ctx.kq * kdA * g.N[a] * g.N[b]) * normal[node[a]] * normal[node[b]].transpose());
       }
     }
   }
