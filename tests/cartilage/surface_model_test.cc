@@ -104,6 +104,21 @@ TEST(SurfaceModel, BuildsExactlyTheListedEffects) {
   EXPECT_EQ(model->built_terms(), expected);
 }
 
+// foundation_integration reaches the term: springs at the nodes (one per
+// node) or the Gauss points of every element (four per element), recorded
+// as such in the ledger.
+TEST(SurfaceModel, FoundationIntegrationChoosesNodesOrGaussPoints) {
+  const SurfaceInput s = plate_input(Eigen::Matrix3d::Identity(), 0.0);
+  for (FoundationIntegration integration : {FoundationIntegration::kNodal, FoundationIntegration::kConsistent}) {
+    SurfaceParameters par;
+    par.foundation_integration = integration;
+    common::EffectLedger ledger("test");
+    auto model = build_surface_model(s, par, {"foundation_springs"}, BoneMotion::fixed(), &ledger);
+    EXPECT_EQ(ledger.count("foundation_springs"),
+              integration == FoundationIntegration::kNodal ? model->num_nodes() : 4 * model->num_elements());
+  }
+}
+
 // osmotic_ramp_s: the osmotic pressure's nodal forces (the residual of the
 // undeformed plate, where internal forces vanish) are 0 at t = 0, the
 // smoothstep's 1/2 at half the ramp, s(1/4) = 0.15625 at a quarter and the
