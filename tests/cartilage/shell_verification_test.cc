@@ -491,7 +491,8 @@ TEST(ShellVerification, BeamOnElasticFoundationSpreadsALineLoad) {
 // same foundation. An independent check of these figures (to 4 digits): a Timoshenko beam
 // of linear elements with one-point shear integration on lumped / consistent
 // foundation springs (the strip's cylindrical bending) gives 1.1833 / 1.0642
-// at lambda h = 1.2 and 1.0486 / 1.0164 at 0.6.
+// at lambda h = 1.2 and 1.0486 / 1.0164 at 0.6
+// (scripts/foundation_beam_model.py).
 TEST(ShellVerification, StiffFoundationSpreadingNeedsTheBendingLengthResolved) {
   const double t = 1e-3, b = 4e-3, E = 400e6, K = 10e6 * 0.55 / (1.45 * 0.1), k = K / 1.5e-3;
   const double I = b * t * t * t / 12;
