@@ -121,7 +121,10 @@ TEST(ShellBenchmarks, PinchedCylinder) {
 // and 1.056 (y = 0). The outward and inward load points move equally (the
 // problem's symmetry about the plane x = y): 1e-9 relative, round-off. The
 // reactions balance the loads and the uz support of the hole carries nothing
-// (the loads have no z component).
+// (the loads have no z component), to round-off: as for the pinched cylinder
+// each reaction is a difference of internal forces of size E t R = 2.73e7 N
+// (E = 6.825e13 Pa, t = 4e-5 m, R = 0.01 m), so its floor is eps E t R =
+// 6.1e-9 N, times 4 (observed: up to 2.0e-9 N, depending on the CPU).
 TEST(ShellBenchmarks, PinchedHemisphere) {
   const SurfaceStageOptions o = scene_options("pinched_hemisphere", "pinched_hemisphere");
   ASSERT_EQ(run_surface_stage(o).status, SurfaceStageStatus::kCompleted);
@@ -133,9 +136,10 @@ TEST(ShellBenchmarks, PinchedHemisphere) {
   EXPECT_NEAR(u_in / u_out, 1.0, 1e-9);
   const Eigen::Vector3d Ry = reaction(o.out, s, "0_sym_y"), Rx = reaction(o.out, s, "1_sym_x"),
                         Rz = reaction(o.out, s, "2_hole");
-  EXPECT_NEAR(Ry(1), 1.0, 1e-9);  // balances the inward load -1 along y
-  EXPECT_NEAR(Rx(0), -1.0, 1e-9);
-  EXPECT_NEAR(Rz(2), 0.0, 1e-9);
+  const double floor_N = 4 * std::numeric_limits<double>::epsilon() * 6.825e13 * 4e-5 * 0.01;
+  EXPECT_NEAR(Ry(1), 1.0, floor_N);  // balances the inward load -1 along y
+  EXPECT_NEAR(Rx(0), -1.0, floor_N);
+  EXPECT_NEAR(Rz(2), 0.0, floor_N);
 }
 
 // Masks in a local frame (skew boundary conditions): the pinched hemisphere
