@@ -319,7 +319,20 @@ struct H5File::Impl {
     size_t n = 1;
     bool overflow = false;
     for (auto v : dims) overflow = overflow || v < 0 || __builtin_mul_overflow(n, static_cast<size_t>(v), &n);
-    if (n == 0 && !overflow) return 0;
+    if (n == 0 && !overflow) {
+      // An empty dataset stores nothing, but its other dimensions still size
+      // what the callers build and loop over (a 0 x 2^35 matrix): the stages
+      // index with int, so a dimension beyond that range is refused too.
+      for (auto v : dims) {
+        if (v > std::numeric_limits<std::int32_t>::max()) {
+          std::ostringstream s;
+          s << "dataset " << norm << ": dims " << dims_text(dims) << " have a dimension over "
+            << std::numeric_limits<std::int32_t>::max() << ", the largest the readers index";
+          fail(s.str());
+        }
+      }
+      return 0;
+    }
     size_t needed = 0;
     overflow = overflow || __builtin_mul_overflow(n, min_bytes_per_element, &needed);
     Hid plist(H5Dget_create_plist(dset), H5Pclose);
@@ -588,6 +601,7 @@ void H5File::write_tensor3(const std::string& name, const std::array<std::int64_
 Eigen::MatrixXd H5File::read_matrix(const std::string& name) const {
   std::vector<std::int64_t> d;
   auto buf = impl_->read_numeric<double>(name, 2, &d);
+  if (buf.empty()) return Eigen::MatrixXd(d[0], d[1]);
   return Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(buf.data(), d[0], d[1]);
 }
 Eigen::VectorXd H5File::read_vector(const std::string& name) const {
@@ -598,6 +612,7 @@ Eigen::VectorXd H5File::read_vector(const std::string& name) const {
 Eigen::MatrixXi H5File::read_matrix_int(const std::string& name) const {
   std::vector<std::int64_t> d;
   auto buf = impl_->read_numeric<int>(name, 2, &d);
+  if (buf.empty()) return Eigen::MatrixXi(d[0], d[1]);
   return Eigen::Map<Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(buf.data(), d[0], d[1]);
 }
 Eigen::VectorXi H5File::read_vector_int(const std::string& name) const {
