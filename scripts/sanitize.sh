@@ -6,6 +6,7 @@
 #   scripts/sanitize.sh --fuzz-seconds 300   # fuzz longer
 #   scripts/sanitize.sh --no-fuzz            # sanitizer suite only
 #   scripts/sanitize.sh --no-suite --only mesh_ply --fuzz-seconds 600
+#   scripts/sanitize.sh --no-suite --fuzz-seed 0 --fuzz-seconds 300   # new random inputs
 #
 # 1. Configures ./build-sanitize once (clang 14, -DARTHROSIM_SANITIZE=address,undefined,
 #    -DARTHROSIM_FUZZ=ON, build type Sanitize = -O1, assertions on) and builds
@@ -15,16 +16,21 @@
 #    replay of every committed fuzz corpus).
 # 3. Fuzzes every target for a bounded time from its committed corpus
 #    (tests/fuzz/corpus/<target>; new inputs go to build-sanitize/fuzz-corpus,
-#    never into the repository). A crash, sanitizer report, leak, out-of-memory
-#    (> 2 GB RSS), an input running longer than 10 s, or an exception other
-#    than common::InputError fails the run; the input is kept in
-#    build-sanitize/fuzz-artifacts/ and its reproduction command is printed.
+#    never into the repository). The mutation seed is fixed (1; --fuzz-seed N,
+#    0 = a random seed each run): from the same corpus a run tries the same
+#    inputs in the same order, as far as its time allows, so CI on a clean
+#    clone repeats itself and a failure it finds is found again. A crash,
+#    sanitizer report, leak, out-of-memory (> 2 GB RSS), an input running
+#    longer than 10 s, or an exception other than common::InputError fails the
+#    run; the input is kept in build-sanitize/fuzz-artifacts/ and its
+#    reproduction command is printed.
 # Extra cmake arguments for the first configure: ARTHROSIM_SANITIZE_CMAKE_ARGS.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
 build=${ARTHROSIM_SANITIZE_BUILD:-build-sanitize}
 fuzz_seconds=10
+fuzz_seed=1
 run_suite=1
 run_fuzz=1
 only=""
@@ -32,11 +38,12 @@ jobs=$(nproc)
 while [ $# -gt 0 ]; do
   case "$1" in
     --fuzz-seconds) fuzz_seconds=$2; shift 2 ;;
+    --fuzz-seed) fuzz_seed=$2; shift 2 ;;
     --no-fuzz) run_fuzz=0; shift ;;
     --no-suite) run_suite=0; shift ;;
     --only) only=$2; shift 2 ;;
     --jobs) jobs=$2; shift 2 ;;
-    -h|--help) sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "sanitize.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -99,7 +106,7 @@ if [ "$run_fuzz" = 1 ]; then
     [ -f "$root/tests/fuzz/dict/$name.dict" ] && dict=(-dict="$root/tests/fuzz/dict/$name.dict")
     # -close_fd_mask=3: the readers' own diagnostics (urdfdom prints to the
     # console) are muted; libFuzzer and sanitizer reports still go to the log.
-    if "$build/fuzz/fuzz_$name" -max_total_time="$fuzz_seconds" -timeout=10 -rss_limit_mb=2048 \
+    if "$build/fuzz/fuzz_$name" -max_total_time="$fuzz_seconds" -seed="$fuzz_seed" -timeout=10 -rss_limit_mb=2048 \
         -close_fd_mask=3 -print_final_stats=1 -artifact_prefix="$artifacts/$name-" "${dict[@]}" \
         "$work/$name" "$root/tests/fuzz/corpus/$name" > "$logs/$name.log" 2>&1; then
       echo ok > "$logs/$name.status"
@@ -137,7 +144,7 @@ if [ "$run_fuzz" = 1 ]; then
       done
     fi
   done
-  echo "sanitize.sh: fuzzing $(( $(date +%s) - t_fuzz0 )) s (${#targets[@]} targets, ${fuzz_seconds} s each, $jobs at a time)"
+  echo "sanitize.sh: fuzzing $(( $(date +%s) - t_fuzz0 )) s (${#targets[@]} targets, ${fuzz_seconds} s each, $jobs at a time, seed $fuzz_seed)"
   [ "$failed" = 0 ] || exit 1
 fi
 echo "sanitize.sh: total $(( $(date +%s) - t0 )) s"
