@@ -86,8 +86,8 @@ std::string read_error(const std::function<void()>& read) {
 // or the OOM killer, not an InputError). Now refused naming the dataset;
 // stored datasets, compressed or not, read as before.
 TEST(Hdf5Fuzz, DatasetsTheFileDoesNotStoreAreInputErrors) {
-  const common::H5File f(std::string(ARTHROSIM_SOURCE_DIR) + "/tests/common/data/hdf5_sparse.h5",
-                         common::H5File::Mode::kRead);
+  const std::string path = ARTHROSIM_SOURCE_DIR "/tests/common/data/hdf5_sparse.h5";
+  const common::H5File f(path, common::H5File::Mode::kRead);
   const std::string vector = read_error([&] { f.read_vector("sparse_vector"); });
   EXPECT_NE(vector.find("dataset /sparse_vector: dims (1099511627776) need 8796093022208 bytes, but the file "
                         "stores 0 (a truncated or never written dataset)"),
