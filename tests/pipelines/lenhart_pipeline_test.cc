@@ -72,7 +72,10 @@ double series_max(const std::string& summary, const std::string& label) {
 }  // namespace
 
 // The scene's every stage, 3 stage-1 frames (1.21-1.23 s, right heel strike)
-// and 3 surface steps per walk (2 seating steps + 1; ~30 s on 2 cores).
+// and 3 surface steps per walk (2 seating steps + 1). About 230 s, most of it
+// the walk's second seating step, where the contact engages at once: 84
+// Newton iterations over 3 augmentations, 130-150 s (a 0.04-s seating over
+// 4 steps takes 93 iterations, so a longer ramp does not help).
 TEST(RealSubjectPipeline, EveryStageRunsOnTheRealKneeInAShortWindow) {
   const std::string out = work_dir() + "/run";
   fs::remove_all(out);
